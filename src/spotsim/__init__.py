@@ -1,0 +1,30 @@
+"""spotsim: multi-point contact simulation of the self-centring grasp of space modules.
+
+    import spotsim
+    scenario = spotsim.load_scenario("config/single_arm_case_I.yaml")
+    result = spotsim.simulate(scenario)
+    print(result.grasp["residual_offset_mm"])
+"""
+
+from .errors import ModelError, ScenarioError, SimulationError, SpotsimError
+from .model import Model, build_model
+from .results import write_results
+from .run import Result, simulate
+from .scenario import Scenario, from_dict, load_scenario, replace, to_yaml
+
+__all__ = [
+    "Model",
+    "ModelError",
+    "Result",
+    "Scenario",
+    "ScenarioError",
+    "SimulationError",
+    "SpotsimError",
+    "build_model",
+    "from_dict",
+    "load_scenario",
+    "replace",
+    "simulate",
+    "to_yaml",
+    "write_results",
+]

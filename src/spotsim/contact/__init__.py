@@ -1,0 +1,1 @@
+"""The multi-point contact model of paper Sec. 3.1, one module per stage."""

@@ -1,0 +1,34 @@
+"""Hertz normal force with Zhang damping (paper Sec. 3.1.3, Eq. 11-13)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: Power of the Hertz law for sphere contact (paper: alpha = 1.5).
+HERTZ_EXPONENT = 1.5
+
+
+def hertz_stiffness(E1: float, nu1: float, E2: float, nu2: float, r1: float, r2: float) -> float:
+    """Eq. (13): K = 4/3 E1 E2 / (E1 (1 - nu2^2) + E2 (1 - nu1^2)) sqrt(r1 r2 / (r1 + r2)), N/m^1.5."""
+    return 4.0 / 3.0 * E1 * E2 / (E1 * (1 - nu2**2) + E2 * (1 - nu1**2)) * np.sqrt(r1 * r2 / (r1 + r2))
+
+
+def damping_factor(restitution: float) -> float:
+    """Zhang et al. factor 6 (1 - c_r) / ((2 c_r - 1)^2 + 3) of Eq. (12): 0 at c_r = 1, 1 at 0.5."""
+    return 6.0 * (1.0 - restitution) / ((2.0 * restitution - 1.0) ** 2 + 3.0)
+
+
+def indentation(phi):
+    """[reading] Local indentation delta = phi / 2 (printed as "phi1 2"), m."""
+    return 0.5 * phi
+
+
+def normal_force(delta, delta_dot, delta_dot_minus, K: float, factor: float):
+    """Eq. (11)-(12): magnitude of F_n = K delta^a + lambda delta^a delta_dot, never pulling.
+
+    delta: (k,) indentation, m.  delta_dot: (k,) its rate, m/s (> 0 approaching).
+    delta_dot_minus: (k,) approach speed at each pair's contact onset, m/s, already floored.
+    lambda = factor K / delta_dot_minus. Returns (k,) N, clamped at 0.
+    """
+    elastic = K * delta**HERTZ_EXPONENT
+    return np.maximum(elastic * (1.0 + factor * delta_dot / delta_dot_minus), 0.0)

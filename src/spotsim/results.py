@@ -1,0 +1,97 @@
+"""Writing a run's results: summary.json last and atomically, so a half-written run never
+looks complete."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from .run import Result
+from .scenario import to_yaml
+
+SUMMARY = "summary.json"
+
+
+def _atomic_write(path: Path, text: str) -> None:
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
+    try:
+        with os.fdopen(fd, "w") as f:
+            f.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def clear_summary(out_dir: Path) -> None:
+    """Remove a previous run's summary before a new run writes into the same directory."""
+    (Path(out_dir) / SUMMARY).unlink(missing_ok=True)
+
+
+def write_results(result: Result, out_dir: str | Path, figures: bool = True) -> Path:
+    """Write summary.json, timeseries.npz/.csv, scenario.yaml and figures/ into `out_dir`."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    clear_summary(out)
+    ts = result.timeseries
+    with open(out / ".timeseries.npz.tmp", "wb") as f:
+        np.savez_compressed(f, **ts)
+    os.replace(out / ".timeseries.npz.tmp", out / "timeseries.npz")
+    _atomic_write(out / "timeseries.csv", _csv(ts))
+    _atomic_write(out / "scenario.yaml", to_yaml(result.scenario))
+    if figures and len(ts["t"]) > 1:
+        plot_figures(ts, out / "figures", result.scenario.name)
+    _atomic_write(out / SUMMARY, json.dumps(result.summary, indent=2) + "\n")
+    return out
+
+
+def _csv(ts: dict) -> str:
+    import io
+
+    columns, header = [], []
+    axes = {3: "xyz", 4: ("qx", "qy", "qz", "qw"), 2: ("upper", "lower")}
+    for name, arr in ts.items():
+        arr = np.asarray(arr)
+        if arr.ndim == 1:
+            columns.append(arr)
+            header.append(name)
+        else:
+            labels = axes.get(arr.shape[1], [str(i) for i in range(arr.shape[1])])
+            if name.startswith("finger"):
+                labels = [f.removeprefix("ee_finger_") for f in ("ee_finger_upper", "ee_finger_lower")]
+            for i in range(arr.shape[1]):
+                columns.append(arr[:, i])
+                header.append(f"{name}_{labels[i]}")
+    buf = io.StringIO()
+    w = csv.writer(buf)
+    w.writerow(header)
+    for row in zip(*columns):
+        w.writerow([f"{x:.9g}" if isinstance(x, (float, np.floating)) else int(x) for x in row])
+    return buf.getvalue()
+
+
+def plot_figures(ts: dict, fig_dir: Path, title: str) -> None:
+    """The paper's Fig. 11 (offset of O_b from O_a per axis) and Fig. 12 (combined force)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig_dir.mkdir(parents=True, exist_ok=True)
+    for name, key, unit, label in (("offset", "offset_mm", "mm", "offset of $O_b$ from $O_a$"),
+                                   ("contact_force", "force_N", "N", "combined contact force")):
+        fig, axes = plt.subplots(3, 1, sharex=True, figsize=(7, 6))
+        for i, ax in enumerate(axes):
+            ax.plot(ts["t"], ts[key][:, i], lw=1)
+            ax.set_ylabel(f"{'xyz'[i]} ({unit})")
+            ax.grid(alpha=0.3)
+        axes[0].set_title(f"{title}: {label}")
+        axes[-1].set_xlabel("time (s)")
+        fig.tight_layout()
+        fig.savefig(fig_dir / f"{name}.png", dpi=110)
+        plt.close(fig)

@@ -1,0 +1,358 @@
+"""Strict YAML scenarios: frozen dataclasses, every problem reported in one pass.
+
+Keys carry their units (`dt_s`, `offset_mm`, `roll_deg`). A key with a default may be left
+out; the resolved scenario (`spotsim validate`) shows every value used. Problems read
+`file: key.path = value: rule`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import typing
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from .errors import ScenarioError
+
+# ----------------------------------------------------------------------------- rules
+
+
+def _positive(x):
+    return None if x > 0 else "must be > 0"
+
+
+def _non_negative(x):
+    return None if x >= 0 else "must be >= 0"
+
+
+def _open_unit(x):
+    return None if 0 < x <= 1 else "must be in (0, 1]"
+
+
+def _fraction(x):
+    return None if 0 < x < 1 else "must be in (0, 1)"
+
+
+def _poisson(x):
+    return None if 0 <= x < 0.5 else "must be in [0, 0.5)"
+
+
+def _bevel(x):
+    return None if 0 < x < 90 else "must be in (0, 90) deg"
+
+
+def _crossing(x):
+    return None if 0 <= x <= 180 else "must be in [0, 180] deg"
+
+
+def _choice(*options):
+    def rule(x):
+        return None if x in options else f"must be one of {', '.join(options)}"
+    return rule
+
+
+def _each(rule):
+    def check(xs):
+        for x in xs:
+            msg = rule(x)
+            if msg:
+                return f"every entry {msg}"
+        return None
+    return check
+
+
+def key(default=dataclasses.MISSING, rule=None, doc=""):
+    """A scenario key: its default (none: required), a rule returning an error or None, a doc."""
+    meta = {"rule": rule, "doc": doc}
+    if isinstance(default, (list, tuple)):
+        return field(default_factory=lambda d=tuple(default): d, metadata=meta)
+    return field(default=default, metadata=meta)
+
+
+# ----------------------------------------------------------------------------- schema
+
+
+@dataclass(frozen=True, kw_only=True)
+class Simulation:
+    dt_s: float = key(rule=_positive, doc="recorded step; the paper's is 1 ms")
+    substeps: int = key(10, _positive, "dynamics steps per recorded step (dynamics at dt_s/substeps)")
+    duration_s: float = key(rule=_positive, doc="time-out: a grasp not complete by then is incomplete")
+    integrator: str = key("symplectic_euler", _choice("symplectic_euler"), "time integrator")
+    gravity_m_s2: tuple[float, float, float] = key((0.0, 0.0, 0.0), doc="gravity in world, m/s^2")
+
+
+@dataclass(frozen=True, kw_only=True)
+class Arm:
+    model: str = key("z1", _choice("z1"), "6-DOF arm from example-robot-data")
+    joint_angles_rad: tuple[float, float, float, float, float, float] = key(
+        doc="the arm's self-locked joint angles during the grasp")
+
+
+@dataclass(frozen=True, kw_only=True)
+class EndEffector:
+    closing_speed_m_s: float = key(rule=_positive, doc="finger closing speed (Table 3)")
+    grasp_load_N: float = key(20.0, _positive, "force at which a finger stalls")
+    start_gap_mm: float = key(9.0, _positive, "finger travel from start to touching a centred groove")
+    resume_fraction: float = key(0.5, _fraction, "a stalled finger resumes closing below this share of the grasp load")
+
+
+@dataclass(frozen=True, kw_only=True)
+class Inertia:
+    ixx: float = key(rule=_positive)
+    iyy: float = key(rule=_positive)
+    izz: float = key(rule=_positive)
+    ixy: float = key(0.0)
+    ixz: float = key(0.0)
+    iyz: float = key(0.0)
+
+
+@dataclass(frozen=True, kw_only=True)
+class Module:
+    mass_kg: float = key(rule=_positive, doc="target module mass (Table 1)")
+    inertia_kg_m2: Inertia = key(doc="inertia tensor about the centroid, in O_b axes (Table 1)")
+    com_mm: tuple[float, float, float] = key((50.0, 0.0, 0.0), doc="centroid in the groove frame O_b")
+    initial_offset_mm: tuple[float, float, float] = key(doc="O_b relative to O_a, in O_a, at start")
+    initial_rpy_deg: tuple[float, float, float] = key((0.0, 0.0, 0.0), doc="roll, pitch, yaw of O_b in O_a")
+
+
+@dataclass(frozen=True, kw_only=True)
+class Geometry:
+    """The double V-groove and finger dimensions; the XACRO arguments of the same names."""
+
+    upper_bevel_deg: float = key(45.0, _bevel, "upper groove flank angle to its mid-plane")
+    lower_bevel_deg: float = key(45.0, _bevel, "lower groove flank angle to its mid-plane")
+    groove_angle_deg: float = key(90.0, _crossing, "angle between the two groove axes")
+    bevel_edge_length_mm: float = key(44.0, _positive, "length of each flank along its groove axis")
+    upper_depth_mm: float = key(13.0, _positive, "upper V depth, mouth to root")
+    lower_depth_mm: float = key(13.0, _positive, "lower V depth, mouth to root")
+    adapter_half_thickness_mm: float = key(16.0, _positive, "O_b to each groove mouth along z_b")
+    finger_length_mm: float = key(20.0, _positive, "finger flank length along the ridge")
+    finger_slant_mm: float = key(8.0, _positive, "finger flank width up the slope")
+    finger_tip_half_width_mm: float = key(2.0, _positive, "truncated ridge half-width")
+    finger_mass_kg: float = key(0.05, _positive, "mass of each finger")
+    ee_mount_offset_mm: float = key(120.0, _positive, "flange to gripper body, clearing the Z1 stock gripper")
+    grasp_offset_mm: float = key(80.0, _positive, "gripper body to the grasp frame O_a")
+    ee_body_mass_kg: float = key(0.3, _positive, "gripper body mass")
+    face_thickness_mm: float = key(1.0, _positive, "thickness of the box behind each contact face")
+    module_body_size_mm: float = key(80.0, _positive, "module body edge (visual only)")
+
+
+@dataclass(frozen=True, kw_only=True)
+class Contact:
+    broad_phase: str = key("coal", _choice("coal", "none"), "coal culling, or the paper's all-pairs search")
+    skin_mm: float = key(1.0, _non_negative, "extra coal security margin beyond the contact reach")
+    restitution: float = key(0.8, _open_unit, "coefficient of restitution c_r (not in the paper)")
+    approach_speed_floor_m_s: float = key(1e-2, _positive, "floor on each pair's onset approach speed")
+    youngs_modulus_finger_Pa: float = key(7e10, _positive, "E1 (Table 1)")
+    youngs_modulus_groove_Pa: float = key(7e10, _positive, "E2 (Table 1)")
+    poisson_finger: float = key(0.25, _poisson, "nu1 (Table 1)")
+    poisson_groove: float = key(0.25, _poisson, "nu2 (Table 1)")
+    sphere_radius_finger_mm: float = key(0.7, _positive, "master sphere radius (Sec. 3.2)")
+    sphere_radius_groove_mm: float = key(0.8, _positive, "slave sphere radius (Sec. 3.2)")
+
+
+@dataclass(frozen=True, kw_only=True)
+class Friction:
+    mu_k: float = key(0.26, _positive, "kinetic friction coefficient (Table 2)")
+    mu_s: float = key(0.30, _positive, "static friction coefficient (Table 2)")
+    bristle_stiffness_N_m: float = key(3e4, _positive, "k_b (Table 2)")
+    bristle_damping_N_s_m: float = key(80.0, _non_negative, "c_b (Table 2)")
+    velocity_deadband_m_s: float = key(1e-3, _positive, "v_d (Table 2)")
+
+
+@dataclass(frozen=True, kw_only=True)
+class Completion:
+    hold_s: float = key(0.02, _positive, "how long every criterion must hold")
+    max_contact_speed_m_s: float = key(1e-4, _positive, "relative speed at every active contact below this")
+    max_net_force_N: float = key(0.5, _positive, "net contact force on the module below this (equilibrium)")
+
+
+@dataclass(frozen=True, kw_only=True)
+class Scenario:
+    name: str = key(doc="scenario name, used in results")
+    simulation: Simulation = key()
+    arm: Arm = key()
+    end_effector: EndEffector = key()
+    module: Module = key()
+    description: str = key("", doc="free text")
+    geometry: Geometry = key(Geometry())
+    contact: Contact = key(Contact())
+    friction: Friction = key(Friction())
+    completion: Completion = key(Completion())
+
+
+# ------------------------------------------------------------------------ mechanics
+
+#: Mechanism tolerance claimed by the paper (Sec. 2.3): outside it a run warns, not fails.
+TOLERANCE_OFFSET_MM = 10.0
+TOLERANCE_DEG = {"roll": 30.0, "pitch": 62.0, "yaw": 30.0}
+
+
+def _fmt(value) -> str:
+    return yaml.safe_dump(value, default_flow_style=True, width=1000).strip().removesuffix("...").strip()
+
+
+def _convert(tp, value, path, problems, where):
+    """Convert one YAML value to type `tp`, appending problems; returns the value or None."""
+    def bad(rule):
+        problems.append(f"{where}: {path} = {_fmt(value)}: {rule}")
+        return None
+
+    if dataclasses.is_dataclass(tp):
+        return _build(tp, value, path, problems, where)
+    origin = typing.get_origin(tp)
+    if origin is tuple:
+        args = typing.get_args(tp)
+        if not isinstance(value, (list, tuple)) or len(value) != len(args):
+            return bad(f"must be a list of {len(args)} numbers")
+        items = [_convert(a, v, f"{path}[{i}]", problems, where) for i, (a, v) in enumerate(zip(args, value))]
+        return None if any(x is None for x in items) else tuple(items)
+    if tp is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            return bad("must be a number")
+        if not math.isfinite(value):
+            return bad("must be finite")
+        return float(value)
+    if tp is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            return bad("must be an integer")
+        return value
+    if tp is str:
+        if not isinstance(value, str):
+            return bad("must be a string")
+        return value
+    raise TypeError(tp)
+
+
+def _build(cls, data, path, problems, where):
+    prefix = f"{path}." if path else ""
+    if not isinstance(data, dict):
+        problems.append(f"{where}: {path or '<top>'} = {_fmt(data)}: must be a mapping")
+        return None
+    hints = typing.get_type_hints(cls)
+    names = [f.name for f in dataclasses.fields(cls)]
+    for k in data:
+        if k not in names:
+            problems.append(f"{where}: {prefix}{k} = {_fmt(data[k])}: unknown key "
+                            f"(valid: {', '.join(names)})")
+    values, ok = {}, True
+    for f in dataclasses.fields(cls):
+        p = f"{prefix}{f.name}"
+        if f.name not in data:
+            if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
+                problems.append(f"{where}: {p} = (missing): required key")
+                ok = False
+            continue
+        v = _convert(hints[f.name], data[f.name], p, problems, where)
+        if v is None:
+            ok = False
+            continue
+        rule = f.metadata.get("rule")
+        msg = rule(v) if rule else None
+        if msg:
+            problems.append(f"{where}: {p} = {_fmt(data[f.name])}: {msg}")
+            ok = False
+        values[f.name] = v
+    return cls(**values) if ok else None
+
+
+def _cross_checks(s: Scenario, where: str) -> list[str]:
+    problems = []
+    if s.friction.mu_k > s.friction.mu_s:
+        problems.append(f"{where}: friction.mu_k = {_fmt(s.friction.mu_k)}: must not exceed "
+                        f"friction.mu_s = {_fmt(s.friction.mu_s)}")
+    g = s.geometry
+    for side in ("upper", "lower"):
+        depth = getattr(g, f"{side}_depth_mm")
+        if depth > g.adapter_half_thickness_mm:
+            problems.append(f"{where}: geometry.{side}_depth_mm = {_fmt(depth)}: must not exceed "
+                            f"geometry.adapter_half_thickness_mm = {_fmt(g.adapter_half_thickness_mm)}")
+    return problems
+
+
+def tolerance_warnings(s: Scenario) -> list[str]:
+    """Initial misalignments outside the mechanism's claimed tolerance (Sec. 2.3)."""
+    warnings = []
+    x, y, _ = s.module.initial_offset_mm
+    for axis, val in (("x", x), ("y", y)):
+        if abs(val) > TOLERANCE_OFFSET_MM:
+            warnings.append(f"module.initial_offset_mm {axis} = {val} mm is outside the claimed "
+                            f"+-{TOLERANCE_OFFSET_MM} mm tolerance")
+    for (name, limit), val in zip(TOLERANCE_DEG.items(), s.module.initial_rpy_deg):
+        if abs(val) > limit:
+            warnings.append(f"module.initial_rpy_deg {name} = {val} deg is outside the claimed "
+                            f"+-{limit} deg tolerance")
+    return warnings
+
+
+def set_override(raw: dict, assignment: str) -> None:
+    """Apply one `key.path=value` override to a raw scenario mapping (value parsed as YAML)."""
+    if "=" not in assignment:
+        raise ScenarioError([f"--set: {assignment}: must read key.path=value"])
+    path, text = assignment.split("=", 1)
+    parts = path.strip().split(".")
+    try:
+        value = yaml.safe_load(text)
+    except yaml.YAMLError as e:
+        raise ScenarioError([f"--set: {path} = {text}: not a YAML value ({e})"]) from e
+    node = raw
+    for part in parts[:-1]:
+        if not isinstance(node.get(part), dict):
+            node[part] = {}
+        node = node[part]
+    node[parts[-1]] = value
+
+
+def from_dict(raw: Any, where: str = "<scenario>") -> Scenario:
+    """Validate a raw mapping into a Scenario, or raise ScenarioError with every problem."""
+    problems: list[str] = []
+    scenario = _build(Scenario, raw, "", problems, where)
+    if scenario is not None:
+        problems += _cross_checks(scenario, where)
+    if problems:
+        raise ScenarioError(problems)
+    return scenario
+
+
+def load_scenario(path: str | Path, overrides: list[str] = ()) -> Scenario:
+    """Read, override (`key.path=value`) and validate a YAML scenario file."""
+    path = Path(path)
+    try:
+        raw = yaml.safe_load(path.read_text())
+    except OSError as e:
+        raise ScenarioError([f"{path}: cannot read: {e.strerror}"]) from e
+    except yaml.YAMLError as e:
+        raise ScenarioError([f"{path}: not valid YAML: {e}"]) from e
+    if raw is None:
+        raw = {}
+    for assignment in overrides:
+        set_override(raw, assignment) if isinstance(raw, dict) else None
+    return from_dict(raw, str(path))
+
+
+def to_dict(s) -> dict:
+    """A Scenario (or part of one) as plain YAML-ready data."""
+    out = {}
+    for f in dataclasses.fields(s):
+        v = getattr(s, f.name)
+        out[f.name] = to_dict(v) if dataclasses.is_dataclass(v) else (list(v) if isinstance(v, tuple) else v)
+    return out
+
+
+def to_yaml(s: Scenario) -> str:
+    return yaml.safe_dump(to_dict(s), sort_keys=False)
+
+
+def replace(s: Scenario, **changes) -> Scenario:
+    """A copy of `s` with `section={'key': value}` or `key=value` changes, validated again."""
+    raw = to_dict(s)
+    for name, value in changes.items():
+        if isinstance(value, dict):
+            raw.setdefault(name, {}).update(value)
+        else:
+            raw[name] = value
+    return from_dict(raw, f"<{s.name}>")

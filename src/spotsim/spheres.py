@@ -1,0 +1,129 @@
+"""Virtual sphere layers on planar contact faces (paper Sec. 3.1.1, Eq. 1-5).
+
+A face is a convex planar polygon given by its vertices in its body frame. Its layer is a
+regular grid of step r over the face, each point lifted by r along the outward normal so
+that every sphere is tangent to the face.
+"""
+
+from __future__ import annotations
+
+import io
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import ModelError
+
+#: Points this close outside a face edge (in units of the grid step) still count as inside,
+#: so that grid points landing on an edge are not lost to round-off.
+EDGE_TOLERANCE = 1e-9
+
+
+@dataclass(frozen=True)
+class Face:
+    """A planar contact face: `vertices_L` (k, 3) in the frame of link `link`, m."""
+
+    name: str
+    link: str
+    vertices_L: np.ndarray
+    box_size: np.ndarray
+    T_LC: np.ndarray  # (4, 4) pose of the face's box in the link frame
+
+
+@dataclass(frozen=True)
+class SphereLayer:
+    """The spheres of one face, in the face's body frame.
+
+    centres: (m, 3) sphere centres, m.  normal: (3,) outward unit normal.
+    origin, t1, t2: the grid's reference vertex N_0 and in-plane basis (Eq. 3-4).
+    grid_ij: (m, 2) grid indices of each sphere; index_map: (ni, nj) sphere index or -1.
+    """
+
+    radius: float
+    centres: np.ndarray
+    normal: np.ndarray
+    origin: np.ndarray
+    t1: np.ndarray
+    t2: np.ndarray
+    grid_ij: np.ndarray
+    index_map: np.ndarray
+
+
+def to_body_frame(N_W: np.ndarray, R_WB: np.ndarray, p_WB: np.ndarray) -> np.ndarray:
+    """Eq. (1): vertices (k, 3) from the inertial frame into the body frame, N^b = R^T (N - T)."""
+    return (np.asarray(N_W) - p_WB) @ R_WB
+
+
+def face_basis(vertices: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Eq. (2)-(3): outward unit normal n and in-plane basis t1, t2 = n x t1 of a face.
+
+    The vertices are ordered counter-clockwise seen from outside the face.
+    """
+    N1, N2, N3 = vertices[0], vertices[1], vertices[2]
+    n = np.cross(N2 - N1, N3 - N1)
+    if np.linalg.norm(n) == 0.0 or np.linalg.norm(N2 - N1) == 0.0:
+        raise ModelError("degenerate contact face: its first three vertices are collinear")
+    n = n / np.linalg.norm(n)
+    t1 = (N2 - N1) / np.linalg.norm(N2 - N1)
+    return n, t1, np.cross(n, t1)
+
+
+def sphere_layer(vertices: np.ndarray, radius: float) -> SphereLayer:
+    """Eq. (2)-(5): the sphere layer of radius `radius` (m) on a convex planar face."""
+    vertices = np.asarray(vertices, dtype=float)
+    n, t1, t2 = face_basis(vertices)
+    N0 = vertices[0]
+    uv = np.stack([(vertices - N0) @ t1, (vertices - N0) @ t2], axis=1) / radius
+    i = np.arange(np.ceil(uv[:, 0].min() - EDGE_TOLERANCE), np.floor(uv[:, 0].max() + EDGE_TOLERANCE) + 1)
+    j = np.arange(np.ceil(uv[:, 1].min() - EDGE_TOLERANCE), np.floor(uv[:, 1].max() + EDGE_TOLERANCE) + 1)
+    I, J = np.meshgrid(i, j, indexing="ij")
+    ij = np.stack([I.ravel(), J.ravel()], axis=1)
+    # inside a convex polygon: on the inner side of every edge (counter-clockwise order)
+    edges = np.roll(uv, -1, axis=0) - uv
+    rel = ij[:, None, :] - uv[None, :, :]
+    cross = edges[None, :, 0] * rel[:, :, 1] - edges[None, :, 1] * rel[:, :, 0]
+    inside = np.all(cross >= -EDGE_TOLERANCE * np.linalg.norm(edges, axis=1), axis=1)
+    ij = ij[inside]
+    points = N0 + radius * (ij[:, :1] * t1 + ij[:, 1:] * t2)  # Eq. (4)
+    centres = points + radius * n  # Eq. (5)
+    i0, j0 = int(i[0]), int(j[0])
+    grid_ij = (ij - [i0, j0]).astype(np.int64)
+    index_map = -np.ones((len(i), len(j)), dtype=np.int64)
+    index_map[grid_ij[:, 0], grid_ij[:, 1]] = np.arange(len(grid_ij))
+    origin = N0 + radius * (i0 * t1 + j0 * t2)
+    return SphereLayer(radius, centres, n, origin, t1, t2, grid_ij, index_map)
+
+
+def box_top_face(size: np.ndarray, T_LC: np.ndarray) -> np.ndarray:
+    """Corners (4, 3), counter-clockwise from outside, of the +z face of a box collision.
+
+    size: (3,) box edge lengths, m.  T_LC: (4, 4) pose of the box in its link frame.
+    """
+    sx, sy, sz = 0.5 * np.asarray(size)
+    corners = np.array([[-sx, -sy, sz], [sx, -sy, sz], [sx, sy, sz], [-sx, sy, sz]])
+    return corners @ T_LC[:3, :3].T + T_LC[:3, 3]
+
+
+def contact_faces(urdf: str, marker: str = "_flank_") -> list[Face]:
+    """The contact faces of a URDF: every box collision whose name contains `marker`.
+
+    Read with yourdfpy, which keeps collision names (Pinocchio renames them).
+    """
+    import yourdfpy
+
+    try:
+        robot = yourdfpy.URDF.load(io.BytesIO(urdf.encode()), load_meshes=False,
+                                   build_scene_graph=False, load_collision_meshes=False)
+    except Exception as e:
+        raise ModelError(f"cannot parse URDF with yourdfpy: {e}") from e
+    faces = []
+    for link in robot.robot.links:
+        for col in link.collisions:
+            if not col.name or marker not in col.name:
+                continue
+            if col.geometry.box is None:
+                raise ModelError(f"contact face {col.name} on {link.name} must be a box collision")
+            T = np.eye(4) if col.origin is None else np.asarray(col.origin)
+            size = np.asarray(col.geometry.box.size, dtype=float)
+            faces.append(Face(col.name, link.name, box_top_face(size, T), size, T))
+    return faces
