@@ -141,7 +141,13 @@ def simulate(scenario: Scenario, *, model: Model | None = None, progress: bool =
     try:
         for _ in range(n_records):
             for _ in range(sim.substeps):
-                c = step(model, data, h, integrator)
+                try:
+                    c = step(model, data, h, integrator)
+                except ValueError as e:  # coal rejects bounds that overflowed
+                    status = DIVERGED
+                    reason = str(e).strip().splitlines()[-1].removeprefix("message: ")
+                    message = f"state left the representable range at t = {data.t:.4f} s (coal: {reason})"
+                    break
                 steps += 1
                 n = len(c.key)
                 rec.substep(data, n)
