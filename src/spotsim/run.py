@@ -37,8 +37,16 @@ class Result:
         return self.summary["grasps"][0]
 
 
+def refresh_kinematics(model: Model, data) -> None:
+    """Joint placements and velocities of the current (q, v): a step leaves those of its start."""
+    pin.forwardKinematics(model.pin_model, data.pin_data, data.q, data.v)
+
+
 def module_momentum_W(model: Model, data) -> tuple[np.ndarray, np.ndarray]:
-    """Linear momentum and angular momentum about the world origin of the module, world frame."""
+    """Linear momentum and angular momentum about the world origin of the module, world frame.
+
+    Reads the kinematics in data.pin_data: call refresh_kinematics first.
+    """
     j = model.module_joint
     h_local = model.pin_model.inertias[j] * data.pin_data.v[j]
     h_world = data.pin_data.oMi[j].act(h_local)
@@ -84,6 +92,7 @@ class Recorder:
         self.max_pairs = max(self.max_pairs, n_pairs)
 
     def sample(self, data):
+        """Record the state; data.pin_data must hold the kinematics of (q, v)."""
         m, r = self.model, self.rows
         oMb = data.pin_data.oMi[m.module_joint]
         aMb = m.oMa.actInv(oMb)
@@ -125,6 +134,7 @@ def simulate(scenario: Scenario, *, model: Model | None = None, progress: bool =
     integrator = make_integrator(sim.integrator)
     data = make_data(model)
     rec = Recorder(model)
+    refresh_kinematics(model, data)
     p0, L0 = module_momentum_W(model, data)
     J, JL = np.zeros(3), np.zeros(3)
     mass = model.pin_model.inertias[model.module_joint].mass
@@ -173,6 +183,7 @@ def simulate(scenario: Scenario, *, model: Model | None = None, progress: bool =
                     break
             if status == DIVERGED:
                 break
+            refresh_kinematics(model, data)
             rec.sample(data)
             p, L = module_momentum_W(model, data)
             p_max, L_max = max(p_max, np.linalg.norm(p)), max(L_max, np.linalg.norm(L))
@@ -266,12 +277,16 @@ def _summary(s, model, data, rec, series, status, message, wall, steps, h, drift
 
 
 def initial_contacts(model: Model) -> int:
-    """Sphere pairs already in contact at the start (they should be none)."""
-    from .step import contact_forces, kinematics, sphere_pairs
+    """Sphere pairs already in contact at the start, by the literal all-pairs search.
+
+    The literal search finds pairs at any depth, where the grid search only looks as deep
+    as a run may go before it is declared diverged.
+    """
+    from .step import kinematics, literal_pairs
 
     data = make_data(model)
     kinematics(model, data)
-    return len(contact_forces(model, data, sphere_pairs(model, data), 1e-3).key)
+    return len(literal_pairs(model, data)[0])
 
 
 def check_start(model: Model, source: str) -> None:

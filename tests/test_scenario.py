@@ -1,0 +1,131 @@
+"""Strict scenarios: every shipped config validates; broken ones fail with one clear line each."""
+
+import subprocess
+import sys
+
+import pytest
+import yaml
+
+import spotsim
+from conftest import CASE_I, CONFIGS
+from spotsim.cli import main
+from spotsim.scenario import Geometry, from_dict, to_dict, xacro_defaults_agree
+
+
+@pytest.mark.parametrize("path", CONFIGS, ids=lambda p: p.name)
+def test_every_shipped_config_validates(path, capsys):
+    """`spotsim validate` accepts each YAML in config/ and prints a scenario that reloads equal."""
+    assert main(["validate", str(path)]) == 0
+    printed = capsys.readouterr().out
+    assert from_dict(yaml.safe_load(printed)) == spotsim.load_scenario(path)
+
+
+BROKEN = {
+    "unknown key": ({"contact": {"restitutoin": 0.8}}, "contact.restitutoin = 0.8: unknown key"),
+    "wrong type": ({"end_effector": {"closing_speed_m_s": "fast"}},
+                   "end_effector.closing_speed_m_s = fast: must be a number"),
+    "non-finite": ({"simulation": {"duration_s": float("nan")}}, "simulation.duration_s = .nan: must be finite"),
+    "negative mass": ({"module": {"mass_kg": -2.768}}, "module.mass_kg = -2.768: must be > 0"),
+    "negative radius": ({"contact": {"sphere_radius_groove_mm": -0.8}},
+                        "contact.sphere_radius_groove_mm = -0.8: must be > 0"),
+    "zero step": ({"simulation": {"dt_s": 0.0}}, "simulation.dt_s = 0.0: must be > 0"),
+    "restitution above 1": ({"contact": {"restitution": 1.7}}, "contact.restitution = 1.7: must be in (0, 1]"),
+    "restitution zero": ({"contact": {"restitution": 0.0}}, "contact.restitution = 0.0: must be in (0, 1]"),
+    "mu_k above mu_s": ({"friction": {"mu_k": 0.4}}, "friction.mu_k = 0.4: must not exceed friction.mu_s = 0.3"),
+    "wrong list length": ({"module": {"initial_offset_mm": [0, -3]}},
+                          "module.initial_offset_mm = [0, -3]: must be a list of 3 numbers"),
+    "bad choice": ({"contact": {"broad_phase": "bvh"}}, "contact.broad_phase = bvh: must be one of coal, none"),
+    "joint limit": ({"arm": {"joint_angles_rad": [0, -1.0, -1.0, 0, 0, 0]}},
+                    "arm.joint_angles_rad[1] = -1.0: must be within the joint2 limits"),
+    "interpenetration": ({"end_effector": {"start_gap_mm": 1.0}},
+                         "module.initial_offset_mm = [0.0, -3.0, 0.0]: fingers and groove interpenetrate"),
+}
+
+
+def merged(change):
+    raw = yaml.safe_load(CASE_I.read_text())
+    for section, values in change.items():
+        raw[section] = {**raw.get(section, {}), **values}
+    return raw
+
+
+@pytest.mark.parametrize("name", BROKEN)
+def test_broken_config_gives_one_clear_error_and_exit_2(name, tmp_path, capsys):
+    """Each broken config is rejected before anything runs: one `file: key = value: rule` line."""
+    change, expected = BROKEN[name]
+    path = tmp_path / "broken.yaml"
+    path.write_text(yaml.safe_dump(merged(change)))
+    assert main(["run", str(path), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1, err
+    assert err[0].startswith(f"{path}: ") and expected in err[0]
+    assert not (tmp_path / "out" / "summary.json").exists()
+
+
+def test_missing_key_is_reported(tmp_path, capsys):
+    """A required key left out is named in the error."""
+    raw = yaml.safe_load(CASE_I.read_text())
+    del raw["end_effector"]["closing_speed_m_s"]
+    path = tmp_path / "missing.yaml"
+    path.write_text(yaml.safe_dump(raw))
+    assert main(["validate", str(path)]) == 2
+    assert "end_effector.closing_speed_m_s = (missing): required key" in capsys.readouterr().err
+
+
+def test_all_problems_are_reported_in_one_pass(tmp_path, capsys):
+    """Several problems in one file are all listed, each on its own line."""
+    raw = merged({"contact": {"restitution": 2.0, "bogus": 1}, "module": {"mass_kg": -1}})
+    path = tmp_path / "many.yaml"
+    path.write_text(yaml.safe_dump(raw))
+    assert main(["validate", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert all(s in err for s in ("contact.restitution", "contact.bogus", "module.mass_kg"))
+
+
+def test_set_overrides_are_validated_like_the_file(capsys):
+    """`--set` changes a key with the same validation as the file."""
+    assert main(["validate", str(CASE_I), "--set", "contact.restitution=0.5"]) == 0
+    assert yaml.safe_load(capsys.readouterr().out)["contact"]["restitution"] == 0.5
+    assert main(["validate", str(CASE_I), "--set", "contact.restitution=-1"]) == 2
+    assert "contact.restitution = -1: must be in (0, 1]" in capsys.readouterr().err
+    assert main(["validate", str(CASE_I), "--set", "contact.nonsense=1"]) == 2
+
+
+def test_misalignment_outside_the_tolerance_warns_but_validates(capsys):
+    """An initial offset beyond +-10 mm is a warning, not an error: studies go there on purpose."""
+    assert main(["validate", str(CASE_I), "--set", "module.initial_offset_mm=[0, -11, 0]",
+                 "--set", "end_effector.start_gap_mm=20"]) == 0
+    assert "outside the claimed +-10.0 mm tolerance" in capsys.readouterr().err
+
+
+def test_cli_reports_bad_input_without_a_traceback(tmp_path):
+    """The installed command exits 2 on a bad file and prints no traceback."""
+    path = tmp_path / "bad.yaml"
+    path.write_text("name: x\nsimulation: [1, 2]\n")
+    proc = subprocess.run([sys.executable, "-m", "spotsim.cli", "validate", str(path)],
+                          capture_output=True, text=True)
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    assert "simulation = [1, 2]: must be a mapping" in proc.stderr
+
+
+def test_unreadable_and_invalid_yaml_files(tmp_path, capsys):
+    """A missing file and a file that is not YAML each give one clear line and exit 2."""
+    assert main(["validate", str(tmp_path / "nope.yaml")]) == 2
+    assert "cannot read" in capsys.readouterr().err
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("name: [unclosed\n")
+    assert main(["validate", str(bad)]) == 2
+    assert "not valid YAML" in capsys.readouterr().err
+
+
+def test_xacro_defaults_match_the_documented_geometry_defaults():
+    """The scene XACRO's argument defaults equal the scenario's Geometry defaults (one truth)."""
+    assert xacro_defaults_agree() == []
+
+
+def test_scenario_round_trips_through_python(case_I):
+    """A scenario built in Python from another's dict, with one change, validates again."""
+    changed = spotsim.replace(case_I, end_effector={"closing_speed_m_s": 0.018})
+    assert changed.end_effector.closing_speed_m_s == 0.018
+    assert to_dict(changed)["module"] == to_dict(case_I)["module"]
+    assert isinstance(case_I.geometry, Geometry)
