@@ -17,9 +17,6 @@ from .detection import NORMAL_EPS, penetration
 #: round-off between the two formulas so that the search never drops a pair the kernel keeps.
 SEARCH_SLACK = 1e-12
 
-#: Master spheres are tested against slave spheres in chunks of this many, bounding the
-#: all-pairs search's memory to chunk x |S2| pairs.
-ALL_PAIRS_CHUNK = 64
 
 
 @dataclass(frozen=True)
@@ -149,19 +146,49 @@ def grid_search(face_pairs, master: LayerSet, maps, R_W, p_W, r1: float, radius:
     return rows[r_idx[found]], slave[found]
 
 
-def all_pairs(master: LayerSet, slave: LayerSet, C1_W, N1_W, C2_W, N2_W):
-    """The paper's literal search: every master sphere against every slave sphere.
+def face_slices(layers: LayerSet) -> list[slice]:
+    """The contiguous run of spheres of each face of a stacked layer set."""
+    starts = np.flatnonzero(np.r_[True, np.diff(layers.face) != 0, True])
+    return [slice(a, b) for a, b in zip(starts[:-1], starts[1:])]
 
-    C*_W, N*_W: (n, 3) world centres and normals of all spheres of each set.
-    Returns (master index, slave index) of the pairs in contact, sorted by (master, slave).
+
+def all_pairs(master: LayerSet, slave: LayerSet, C1_W, N1_W, C2_W, N2_W):
+    """The paper's literal search: every master sphere against every slave sphere, Eq. (6)-(10).
+
+    C*_W, N*_W: (n, 3) world centres and normals of all spheres of each set. The spheres of
+    one face share its normal, so the pairs are evaluated a block of two faces at a time
+    (one common normal per block); no pair is skipped.
+    Returns (master index, slave index) of the pairs in contact (a superset by SEARCH_SLACK;
+    the shared kernel `penetration` decides).
     """
     found_m, found_s = [], []
-    n2 = len(C2_W)
-    for start in range(0, len(C1_W), ALL_PAIRS_CHUNK):
-        rows = np.arange(start, min(start + ALL_PAIRS_CHUNK, len(C1_W)))
-        m = np.repeat(rows, n2)
-        s = np.tile(np.arange(n2), rows.size)
-        _, _, hit = penetration(C1_W[m], N1_W[m], master.radius, C2_W[s], N2_W[s], slave.radius)
-        found_m.append(m[hit])
-        found_s.append(s[hit])
+    R = master.radius + slave.radius
+    for b in face_slices(slave):
+        # coordinates relative to a point of the slave face keep |c1 - c2|^2, expanded below,
+        # free of cancellation: centres are within centimetres of it
+        origin = C2_W[b.start]
+        C2 = C2_W[b] - origin
+        C2_sq = np.einsum("ij,ij->i", C2, C2)
+        for a in face_slices(master):
+            dn = N2_W[b.start] - N1_W[a.start]
+            norm = np.linalg.norm(dn)
+            if norm <= NORMAL_EPS:
+                continue  # faces facing the same way: Eq. (6) undefined, no pair
+            n_c = dn / norm
+            C1 = C1_W[a] - origin
+            chi = (C1 @ n_c)[:, None] - (C2 @ n_c)[None, :]  # Eq. (9)
+            w = C1 @ C2.T
+            w *= -2.0
+            w += np.einsum("ij,ij->i", C1, C1)[:, None]
+            w += C2_sq[None, :] - R * R  # Eq. (10)
+            # phi = -chi + sqrt(chi^2 - w) > 0 with a real root  <=>  chi^2 >= w and
+            # (chi < 0 or w < 0): the same test without a square root
+            hit = chi * chi - w >= -SEARCH_SLACK * R
+            hit &= (chi < SEARCH_SLACK) | (w < SEARCH_SLACK * R)
+            i, j = np.nonzero(hit)
+            found_m.append(i + a.start)
+            found_s.append(j + b.start)
+    if not found_m:
+        empty = np.zeros(0, dtype=np.int64)
+        return empty, empty
     return np.concatenate(found_m), np.concatenate(found_s)
