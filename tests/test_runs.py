@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import spotsim
-from conftest import CASE_I, CONFIGS, ROOT
+from conftest import CONFIGS, ROOT
 from spotsim.cli import main
 
 #: The issue's bound: a tenfold reduction of the 3 mm start (the paper reports 0.128-0.131 mm).

@@ -1,8 +1,6 @@
 """The culled search (coal broad phase + grid-local search) against the paper's all-pairs search."""
 
 import numpy as np
-import pinocchio as pin
-import pytest
 
 from conftest import restore
 from spotsim.step import (broad_phase, candidate_pairs, contact_forces, kinematics, literal_pairs,

@@ -176,9 +176,6 @@ def simulate(scenario: Scenario, *, model: Model | None = None, progress: bool =
                     status = DIVERGED
                     message = f"state became non-finite at t = {data.t:.4f} s"
                     break
-                speed = float(c.speed.max()) if n else 0.0
-                data.phase.update(data.t, n, data.drive.stalled, speed,
-                                  float(np.linalg.norm(data.module_force_W)))
                 if data.phase.phase == COMPLETE:
                     break
             if status == DIVERGED:
@@ -214,7 +211,8 @@ def _progress(total: int, enabled: bool):
         return None
     from tqdm import tqdm
 
-    return tqdm(total=total, unit="ms", desc="simulating", leave=False)
+    # disable=None: no bar when stderr is not a terminal (CI logs, pipes)
+    return tqdm(total=total, unit="ms", desc="simulating", leave=False, disable=None)
 
 
 def _why_incomplete(data) -> str:

@@ -329,8 +329,9 @@ def load_scenario(path: str | Path, overrides: list[str] = ()) -> Scenario:
         raise ScenarioError([f"{path}: not valid YAML: {e}"]) from e
     if raw is None:
         raw = {}
-    for assignment in overrides:
-        set_override(raw, assignment) if isinstance(raw, dict) else None
+    if isinstance(raw, dict):  # anything else is reported by from_dict as not a mapping
+        for assignment in overrides:
+            set_override(raw, assignment)
     return from_dict(raw, str(path))
 
 

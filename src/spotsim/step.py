@@ -1,26 +1,23 @@
-"""One simulation step as the paper's Fig. 5 reads, and the run loop around it.
+"""One simulation step as the paper's Fig. 5 reads it.
 
 kinematics -> broad phase -> sphere pairs -> forces -> wrenches -> dynamics -> integrate ->
 grasp phase. Each stage is a function of (model, data, ...); `Data` holds all that changes.
+The run loop around the step is in `run.py`.
 """
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass, field
 
 import numpy as np
 import pinocchio as pin
 
 from .contact.detection import contact_point, penetration
-from .contact.friction import SLIPPING, STICKING, bristle_step
+from .contact.friction import bristle_step
 from .contact.normal import indentation, normal_force
 from .contact.search import all_pairs, grid_search
-from .grasp import COMPLETE, FingerDrive, GraspPhase
-from .integrators import make_integrator
+from .grasp import FingerDrive, GraspPhase
 from .model import Model
-
-COMPLETED, INCOMPLETE, DIVERGED, INTERRUPTED = "completed", "incomplete", "diverged", "interrupted"
 
 
 @dataclass
@@ -225,4 +222,12 @@ def step(model: Model, data: Data, h: float, integrator) -> Contacts:
     data.q, data.v = integrator.step(m, data.q, data.v, a, h, prescribed)
     data.t += h
     data.contacts = contacts
+    grasp_phase(data, contacts)
     return contacts
+
+
+def grasp_phase(data: Data, c: Contacts) -> None:
+    """Advance the grasp phase on this step's contacts (approach -> self-centring -> complete)."""
+    speed = float(c.speed.max()) if len(c.key) else 0.0
+    data.phase.update(data.t, len(c.key), data.drive.stalled, speed,
+                      float(np.linalg.norm(data.module_force_W)))

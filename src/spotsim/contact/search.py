@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .detection import NORMAL_EPS, penetration
+from .detection import NORMAL_EPS
 
 #: The grid search keeps pairs whose penetration, computed in face coordinates, exceeds
 #: -SEARCH_SLACK (m); the shared kernel `penetration` then decides. The slack absorbs the
