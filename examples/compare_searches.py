@@ -45,7 +45,7 @@ def main() -> None:
 
     model = spotsim.build_model(spotsim.load_scenario(ROOT / "config" / "single_arm_case_I.yaml"))
     data = make_data(model)
-    integrator = make_integrator("symplectic_euler")
+    integrator = make_integrator("symplectic_euler", model.pin_model)
     h = model.scenario.simulation.dt_s / model.scenario.simulation.substeps
     checked = same = pairs = 0
     worst, t_culled, t_all, k = 0.0, 0.0, 0.0, 0

@@ -34,7 +34,7 @@ def recorded_states(model_I):
     slides: the states the culled search must get exactly right.
     """
     data = make_data(model_I)
-    integrator = make_integrator("symplectic_euler")
+    integrator = make_integrator("symplectic_euler", model_I.pin_model)
     h = model_I.scenario.simulation.dt_s / model_I.scenario.simulation.substeps
     states, next_t = [], 0.0
     while data.t < 0.75:

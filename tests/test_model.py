@@ -8,11 +8,19 @@ from spotsim.errors import ModelError
 from spotsim.model import check_inertias
 
 
-def test_locked_arm_is_reduced_away(model_I):
-    """Only the two finger joints and the module's free-flyer remain: nq = 2 + 7, nv = 2 + 6."""
+def test_locked_arm_and_driven_fingers_are_reduced_away(model_I):
+    """Only the module's free-flyer remains: the arm is locked and the fingers are driven."""
     m = model_I.pin_model
-    assert (m.nq, m.nv) == (9, 8)
-    assert set(m.names[1:]) == {"ee_finger_upper", "ee_finger_lower", "tm_free_flyer"}
+    assert (m.nq, m.nv) == (7, 6)
+    assert list(m.names[1:]) == ["tm_free_flyer"]
+
+
+def test_fingers_open_along_the_closing_axis(model_I):
+    """The upper finger opens along +z_a and the lower one along -z_a (in the world: O_a is fixed)."""
+    R = model_I.oMa.rotation
+    axes = {f.name: f.axis_J for f in model_I.fingers}  # parent joint: the fixed world
+    assert np.allclose(axes["ee_finger_upper"], R @ [0, 0, 1], atol=1e-12)
+    assert np.allclose(axes["ee_finger_lower"], R @ [0, 0, -1], atol=1e-12)
 
 
 def test_module_carries_table_1_mass_and_inertia(model_I):

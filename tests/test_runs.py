@@ -60,6 +60,16 @@ def test_forces_vanish_before_contact_and_are_finite_after(cases):
     assert np.all(ts["force_N"][before] == 0) and np.all(np.isfinite(ts["force_N"]))
 
 
+#: Linear momentum is kept to round-off by the world-frame centroid update.
+MOMENTUM_ROUND_OFF = 1e-12
+
+
+@pytest.mark.parametrize("case", ["I", "II", "III"])
+def test_module_momentum_balances_the_contact_impulse(cases, case):
+    """The module's linear momentum changes by exactly the impulse of the contact forces."""
+    assert cases[case].summary["momentum"]["linear_drift_rel"] <= MOMENTUM_ROUND_OFF
+
+
 @pytest.mark.parametrize("path", CONFIGS, ids=lambda p: p.name)
 def test_every_shipped_config_smoke_runs(path, tmp_path):
     """Each config runs 0.3 s through the CLI and writes the whole results contract."""

@@ -44,6 +44,15 @@ def test_broad_phase_culls_far_face_pairs(model_I, recorded_states):
     assert 0 < len(kept) < len(model_I.face_pairs)
 
 
+def test_broad_phase_keeps_nothing_while_the_fingers_are_open(model_I):
+    """At the start the fingers are 9 mm from the groove: coal culls every face pair."""
+    from spotsim.step import make_data
+
+    data = make_data(model_I)
+    kinematics(model_I, data)
+    assert broad_phase(model_I, data) == []
+
+
 def test_action_equals_reaction_about_any_point(model_I, recorded_states):
     """The wrenches on the finger bodies and on the module sum to zero about any point."""
     rng = np.random.default_rng(3)

@@ -1,8 +1,11 @@
 """Scenario -> Model: the Pinocchio scene, its contact faces, sphere layers and parameters.
 
 Everything here is fixed for a run. The arm is self-locked during the grasp (paper Sec. 4.1),
-so its joints are reduced away with `pin.buildReducedModel`: the scene keeps the two finger
-joints (prescribed motion) and the module's free-flyer.
+so its joints are reduced away with `pin.buildReducedModel`. The fingers' prismatic joints are
+reduced away too: their drive prescribes their motion, so they carry no dynamic degree of
+freedom. Their mass joins the body they are mounted on, their faces slide along their joint
+axes by the drive's opening, and their contact loads act on that body. The scene keeps one
+free-flyer per free body: here the module's.
 """
 
 from __future__ import annotations
@@ -50,12 +53,17 @@ class ContactParams:
 
 @dataclass(frozen=True)
 class Finger:
-    """A finger joint: indices into q and v, and its opening at first touch of a centred groove, m."""
+    """A finger moved by its drive along its prismatic axis, on the body of joint `parent_joint`.
+
+    axis_J: (3,) its opening direction in that joint's frame. drive: index of its drive.
+    opening_touch, opening_start: openings (m) at first touch of a centred groove and at start;
+    the master spheres' centres are given at opening 0.
+    """
 
     name: str
-    joint: int
-    iq: int
-    iv: int
+    parent_joint: int
+    axis_J: np.ndarray
+    drive: int
     opening_touch: float
     opening_start: float
 
@@ -68,6 +76,9 @@ class Model:
     geom_model: pin.GeometryModel
     module_joint: int
     fingers: tuple[Finger, ...]
+    master_finger: np.ndarray  # (|S1|,) the finger each master sphere is on
+    master_axis_J: np.ndarray  # (|S1|, 3) that finger's opening axis, in the sphere's joint frame
+    finger_geoms: tuple[tuple[int, int], ...]  # (geometry object, finger) of each finger patch
     oMa: pin.SE3  # grasp frame O_a in world (the arm is locked and fixed)
     contact_joints: tuple[int, ...]  # joints carrying contact faces
     master: LayerSet
@@ -110,6 +121,7 @@ def check_inertias(model: pin.Model, joints=None) -> None:
 
 
 def _lock_arm(full: pin.Model, s: Scenario) -> tuple[pin.Model, list[str]]:
+    """Reduce away the arm's joints (at the scenario's angles) and the fingers' (at opening 0)."""
     names = ARM_JOINTS[s.arm.model]
     q_ref = pin.neutral(full)
     problems = []
@@ -122,6 +134,7 @@ def _lock_arm(full: pin.Model, s: Scenario) -> tuple[pin.Model, list[str]]:
                             f"must be within the {name} limits [{lo:.4f}, {hi:.4f}] rad")
         q_ref[full.idx_qs[j]] = angle
         lock.append(j)
+    lock += [full.getJointId(name) for name in FINGER_JOINTS]
     return pin.buildReducedModel(full, lock, q_ref), problems
 
 
@@ -138,8 +151,7 @@ def build_model(s: Scenario, source: str = "<scenario>") -> Model:
         raise ScenarioError([f"{source}: {p}" for p in problems])
     model.gravity = pin.Motion(np.array(s.simulation.gravity_m_s2), np.zeros(3))
     module_joint = model.getJointId(MODULE_JOINT)
-    finger_joints = [model.getJointId(n) for n in FINGER_JOINTS]
-    check_inertias(model, joints={module_joint, *finger_joints})
+    check_inertias(model, joints={module_joint})
 
     c = s.contact
     r1, r2 = c.sphere_radius_finger_mm * 1e-3, c.sphere_radius_groove_mm * 1e-3
@@ -158,8 +170,8 @@ def build_model(s: Scenario, source: str = "<scenario>") -> Model:
                               s.friction.bristle_damping_N_s_m, s.friction.velocity_deadband_m_s),
         broad_phase=c.broad_phase,
     )
-    master, slave, pairs, maps, geom, contact_joints = _contact_layers(model, urdf, finger_joints,
-                                                                  module_joint, params)
+    master, master_finger, finger_geoms, slave, pairs, maps, geom, contact_joints = _contact_layers(
+        model, urdf, module_joint, params)
 
     oMa = model.frames[model.getFrameId(GRASP_FRAME, pin.BODY)].placement
     if model.frames[model.getFrameId(GRASP_FRAME, pin.BODY)].parentJoint != 0:
@@ -172,26 +184,37 @@ def build_model(s: Scenario, source: str = "<scenario>") -> Model:
     q0[iq:iq + 7] = pin.SE3ToXYZQUAT(jMb)
 
     fingers = []
-    for name, j in zip(FINGER_JOINTS, finger_joints):
-        touch = _opening_at_touch(model, j, master, slave, oMa, module_joint, params)
+    for k, name in enumerate(FINGER_JOINTS):
+        frame = model.frames[model.getFrameId(name, pin.BODY)]
+        axis_J = frame.placement.rotation[:, 2]  # prismatic finger joints open along their local z
+        touch = _opening_at_touch(model, frame.parentJoint, axis_J, master, master_finger == k,
+                                  slave, oMa, module_joint, params)
         start = touch + s.end_effector.start_gap_mm * 1e-3
-        q0[model.idx_qs[j]] = start
-        fingers.append(Finger(name, j, model.idx_qs[j], model.idx_vs[j], touch, start))
-    return Model(s, urdf, model, geom, module_joint, tuple(fingers), oMa, contact_joints,
-                 master, slave, tuple(pairs), maps, params, q0, np.zeros(model.nv))
+        fingers.append(Finger(name, frame.parentJoint, axis_J, 0, touch, start))
+    axes = np.array([f.axis_J for f in fingers])
+    return Model(s, urdf, model, geom, module_joint, tuple(fingers), master_finger,
+                 axes[master_finger], finger_geoms, oMa,
+                 contact_joints, master, slave, tuple(pairs), maps, params, q0, np.zeros(model.nv))
 
 
-def _contact_layers(model, urdf, finger_joints, module_joint, params):
-    """Sphere layers of every contact face, stacked by role, and the coal face patches."""
+def _contact_layers(model, urdf, module_joint, params):
+    """Sphere layers of every contact face, stacked by role, and the coal face patches.
+
+    Finger faces are placed at opening 0 on the joint the finger is mounted on.
+    """
     faces = contact_faces(urdf)
     geom = pin.GeometryModel()
     roles = {"master": [], "slave": []}
+    finger_of_face, finger_geoms = [], []
     for face in faces:
         frame = model.frames[model.getFrameId(face.link, pin.BODY)]
         j, jMl = frame.parentJoint, frame.placement
-        role = "master" if j in finger_joints else "slave" if j == module_joint else None
+        role = "master" if face.link in FINGER_JOINTS else "slave" if j == module_joint else None
         if role is None:
             raise ModelError(f"contact face {face.name} is on {face.link}, neither a finger nor the module")
+        if role == "master":
+            finger_of_face.append(FINGER_JOINTS.index(face.link))
+            finger_geoms.append((len(geom.geometryObjects), finger_of_face[-1]))
         verts_J = face.vertices_L @ jMl.rotation.T + jMl.translation
         layer = sphere_layer(verts_J, params.r1 if role == "master" else params.r2)
         T = face.T_LC
@@ -209,6 +232,7 @@ def _contact_layers(model, urdf, finger_joints, module_joint, params):
         return LayerSet(radius, centres, normals, joint, face)
 
     master, slave = stack(roles["master"], params.r1), stack(roles["slave"], params.r2)
+    master_finger = np.asarray(finger_of_face)[master.face]
     starts_m = np.cumsum([0] + [len(e[2].centres) for e in roles["master"]])
     starts_s = np.cumsum([0] + [len(e[2].centres) for e in roles["slave"]])
     shapes = np.array([e[2].index_map.shape for e in roles["slave"]])
@@ -223,16 +247,17 @@ def _contact_layers(model, urdf, finger_joints, module_joint, params):
         for b, (gid_s, _, _) in enumerate(roles["slave"]):
             geom.addCollisionPair(pin.CollisionPair(gid_m, gid_s))
             pairs.append(FacePair(slice(starts_m[a], starts_m[a + 1]), jm, grids[b], len(pairs)))
-    contact_joints = tuple(sorted({*finger_joints, module_joint}))
-    return master, slave, pairs, maps, geom, contact_joints
+    contact_joints = tuple(sorted({*master.joint.tolist(), *slave.joint.tolist()}))
+    return master, master_finger, tuple(finger_geoms), slave, pairs, maps, geom, contact_joints
 
 
-def _opening_at_touch(model, finger_joint, master, slave, oMa, module_joint, params):
+def _opening_at_touch(model, parent_joint, axis_J, master, on_finger, slave, oMa, module_joint, params):
     """The finger opening (m) at which its sphere layer first touches a centred groove's.
 
     For each of the finger's faces opposed to a groove face (normals anti-parallel), the
     sphere envelopes touch when the face planes are 2 (r1 + r2) apart; the finger moves
-    along its joint axis, so that distance is linear in the opening.
+    along its axis, so that distance is linear in the opening.
+    on_finger: (|S1|,) bool, the master spheres of this finger (given at opening 0).
     """
     q = pin.neutral(model)
     jMb = model.jointPlacements[module_joint].inverse() * oMa
@@ -240,11 +265,10 @@ def _opening_at_touch(model, finger_joint, master, slave, oMa, module_joint, par
     q[iq:iq + 7] = pin.SE3ToXYZQUAT(jMb)
     data = model.createData()
     pin.forwardKinematics(model, data, q)
-    oMf, oMm = data.oMi[finger_joint], data.oMi[module_joint]
-    axis_W = oMf.rotation[:, 2]  # prismatic finger joints open along their local z
+    oMf, oMm = data.oMi[parent_joint], data.oMi[module_joint]
+    axis_W = oMf.rotation @ axis_J
     best = None
-    sel = master.joint == finger_joint
-    for fm in np.unique(master.face[sel]):
+    for fm in np.unique(master.face[on_finger]):
         k = np.flatnonzero(master.face == fm)[0]
         n_f = oMf.rotation @ master.normals_J[k]
         x_f = oMf.act(master.centres_J[k] - params.r1 * master.normals_J[k])
@@ -258,5 +282,5 @@ def _opening_at_touch(model, finger_joint, master, slave, oMa, module_joint, par
             opening = (2 * (params.r1 + params.r2) - dist0) / (axis_W @ n_g)
             best = opening if best is None else max(best, opening)
     if best is None:
-        raise ModelError(f"finger {model.names[finger_joint]} has no face opposed to a groove face")
+        raise ModelError("a finger has no face opposed to a groove face")
     return best

@@ -108,7 +108,7 @@ class Recorder:
         r["module_omega_rad_s"].append(oMb.rotation @ nu.angular)
         r["force_N"].append(self.force_a)
         r["torque_Nm"].append(self.torque_a)
-        r["finger_opening_mm"].append([data.q[f.iq] * 1e3 for f in m.fingers])
+        r["finger_opening_mm"].append(data.opening * 1e3)
         r["finger_load_N"].append(data.finger_load.copy())
         r["pairs_slipping"].append(states[SLIPPING])
         r["pairs_sticking"].append(states[STICKING])
@@ -131,7 +131,7 @@ def simulate(scenario: Scenario, *, model: Model | None = None, progress: bool =
     sim = scenario.simulation
     h = sim.dt_s / sim.substeps
     n_records = int(round(sim.duration_s / sim.dt_s))
-    integrator = make_integrator(sim.integrator)
+    integrator = make_integrator(sim.integrator, model.pin_model)
     data = make_data(model)
     rec = Recorder(model)
     refresh_kinematics(model, data)
@@ -221,7 +221,7 @@ def _why_incomplete(data) -> str:
         return f"no contact by the time-out t = {t:.3f} s: the fingers never reached the groove"
     c = data.contacts
     speed = float(c.speed.max()) if len(c.key) else 0.0
-    unmet = [k for k, ok in data.phase.criteria(data.drive.stalled, speed,
+    unmet = [k for k, ok in data.phase.criteria(data.drives[0].stalled, speed,
                                                 float(np.linalg.norm(data.module_force_W))).items() if not ok]
     if not len(c.key):
         unmet.insert(0, "contact lost")

@@ -52,7 +52,10 @@ class Data:
     mem_key: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     mem_s: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     mem_vminus: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    drive: FingerDrive = None
+    drives: list = None  # FingerDrive of each end-effector
+    opening: np.ndarray = None  # (n_fingers,) each finger's opening, m
+    opening_rate: np.ndarray = None  # (n_fingers,) its rate during the current step, m/s
+    C1_J: np.ndarray = None  # (|S1|, 3) master sphere centres at the current openings
     finger_load: np.ndarray = None
     contacts: Contacts = None
     f_ext: list = None
@@ -76,15 +79,19 @@ def make_data(model: Model) -> Data:
     return Data(0.0, model.q0.copy(), model.v0.copy(), pdata, gdata, manager, phase,
                 np.tile(np.eye(3), (nj, 1, 1)), np.zeros((nj, 3)), np.zeros((nj, 3)),
                 np.zeros((nj, 3)), finger_load=np.zeros(n_f),
-                drive=FingerDrive(ee.closing_speed_m_s, ee.grasp_load_N, ee.resume_fraction))
+                drives=[FingerDrive(ee.closing_speed_m_s, ee.grasp_load_N, ee.resume_fraction)],
+                opening=np.array([f.opening_start for f in model.fingers]),
+                opening_rate=np.zeros(n_f))
 
 
 # ------------------------------------------------------------------------------ stages
 
 
 def kinematics(model: Model, data: Data) -> None:
-    """Placements and world velocities of the bodies that carry contact faces."""
+    """Placements and world velocities of the bodies that carry contact faces, and the finger
+    spheres' centres at the current openings."""
     pin.forwardKinematics(model.pin_model, data.pin_data, data.q, data.v)
+    data.C1_J = model.master.centres_J + data.opening[model.master_finger, None] * model.master_axis_J
     for j in model.contact_joints:
         M = data.pin_data.oMi[j]
         nu = data.pin_data.v[j]
@@ -99,6 +106,11 @@ def broad_phase(model: Model, data: Data):
     if data.manager is None:
         return model.face_pairs
     pin.updateGeometryPlacements(model.pin_model, data.pin_data, model.geom_model, data.geom_data)
+    for g, k in model.finger_geoms:  # finger patches slide along their axes by the opening
+        f = model.fingers[k]
+        M = data.geom_data.oMg[g]
+        M.translation = M.translation + data.R_W[f.parent_joint] @ f.axis_J * data.opening[k]
+        data.geom_data.oMg[g] = M
     data.manager.update(False)
     pin.computeCollisions(data.manager, False)
     results = data.geom_data.collisionResults
@@ -108,13 +120,13 @@ def broad_phase(model: Model, data: Data):
 def candidate_pairs(model: Model, data: Data, face_pairs) -> tuple[np.ndarray, np.ndarray]:
     """(master, slave) sphere pairs in contact: a local grid search inside each face pair."""
     p = model.params
-    return grid_search(face_pairs, model.master, model.slave_maps, data.R_W, data.p_W,
-                       p.r1, p.r2, p.cutoff)
+    return grid_search(face_pairs, data.C1_J, model.master.normals_J, model.slave_maps, data.R_W,
+                       data.p_W, p.r1, p.r2, p.cutoff)
 
 
 def literal_pairs(model: Model, data: Data) -> tuple[np.ndarray, np.ndarray]:
     """The paper's search: every master sphere against every slave sphere (reference)."""
-    C1, N1 = model.master.to_world(data.R_W, data.p_W)
+    C1, N1 = model.master.to_world(data.R_W, data.p_W, data.C1_J)
     C2, N2 = model.slave.to_world(data.R_W, data.p_W)
     return all_pairs(model.master, model.slave, C1, N1, C2, N2)
 
@@ -144,7 +156,7 @@ def contact_forces(model: Model, data: Data, c: Contacts, h: float) -> Contacts:
         return c
     jm, js = M.joint[c.master], S.joint[c.slave]
     Rm, Rs = data.R_W[jm], data.R_W[js]
-    c1 = np.einsum("kij,kj->ki", Rm, M.centres_J[c.master]) + data.p_W[jm]
+    c1 = np.einsum("kij,kj->ki", Rm, data.C1_J[c.master]) + data.p_W[jm]
     c2 = np.einsum("kij,kj->ki", Rs, S.centres_J[c.slave]) + data.p_W[js]
     n1 = np.einsum("kij,kj->ki", Rm, M.normals_J[c.master])
     n2 = np.einsum("kij,kj->ki", Rs, S.normals_J[c.slave])
@@ -154,7 +166,9 @@ def contact_forces(model: Model, data: Data, c: Contacts, h: float) -> Contacts:
         c = Contacts(c.master[keep], c.slave[keep], c.key[keep])
         jm, js, c1, c2, n_c, phi = jm[keep], js[keep], c1[keep], c2[keep], n_c[keep], phi[keep]
     point = contact_point(c1, c2, p.r1, p.r2, n_c, phi)
-    v_A = data.vo_W[jm] + np.cross(data.w_W[jm], point - data.p_W[jm])
+    finger = model.master_finger[c.master]
+    slide_W = np.einsum("kij,kj->ki", Rm, model.master_axis_J[c.master]) * data.opening_rate[finger, None]
+    v_A = data.vo_W[jm] + np.cross(data.w_W[jm], point - data.p_W[jm]) + slide_W
     v_B = data.vo_W[js] + np.cross(data.w_W[js], point - data.p_W[js])
     v_rel = v_A - v_B
     delta = indentation(phi)
@@ -180,7 +194,8 @@ def contact_forces(model: Model, data: Data, c: Contacts, h: float) -> Contacts:
 def wrenches(model: Model, data: Data, c: Contacts) -> list:
     """One wrench per body (Eq. 18-21): +f_i on the finger, -f_i on the module, at p_i.
 
-    Returned as Pinocchio external forces, each in its joint's local frame.
+    A finger's wrench acts on the body it is mounted on. Returned as Pinocchio external forces,
+    each in its joint's local frame. Also sets each finger's load along its opening axis.
     """
     nj = model.pin_model.njoints
     if len(c.key) == 0:
@@ -201,9 +216,11 @@ def wrenches(model: Model, data: Data, c: Contacts) -> list:
     mj = model.module_joint
     data.module_force_W = F[mj]
     data.module_torque_O_W = T[mj] + np.cross(data.p_W[mj], F[mj])
-    for k, finger in enumerate(model.fingers):
-        axis_W = data.R_W[finger.joint][:, 2]  # the finger opens along its joint's local z
-        data.finger_load[k] = max(F[finger.joint] @ axis_W, 0.0)
+    finger = model.master_finger[c.master]
+    for k, fg in enumerate(model.fingers):
+        on_k = finger == k
+        axis_W = data.R_W[fg.parent_joint] @ fg.axis_J
+        data.finger_load[k] = max(float(c.force_W[on_k].sum(axis=0) @ axis_W), 0.0)
     return f_ext
 
 
@@ -217,9 +234,12 @@ def step(model: Model, data: Data, h: float, integrator) -> Contacts:
     data.f_ext = wrenches(model, data, contacts)
     m = model.pin_model
     a = pin.aba(m, data.pin_data, data.q, data.v, np.zeros(m.nv), data.f_ext)
-    rate = data.drive.opening_rate(data.finger_load)
-    prescribed = {f.iv: rate for f in model.fingers}
-    data.q, data.v = integrator.step(m, data.q, data.v, a, h, prescribed)
+    data.q, data.v = integrator.step(m, data.q, data.v, a, h)
+    # the drives set the fingers' rate for the coming step from this step's loads
+    for k, drive in enumerate(data.drives):
+        mine = [i for i, f in enumerate(model.fingers) if f.drive == k]
+        data.opening_rate[mine] = drive.opening_rate(data.finger_load[mine])
+    data.opening += h * data.opening_rate
     data.t += h
     data.contacts = contacts
     grasp_phase(data, contacts)
@@ -229,5 +249,5 @@ def step(model: Model, data: Data, h: float, integrator) -> Contacts:
 def grasp_phase(data: Data, c: Contacts) -> None:
     """Advance the grasp phase on this step's contacts (approach -> self-centring -> complete)."""
     speed = float(c.speed.max()) if len(c.key) else 0.0
-    data.phase.update(data.t, len(c.key), data.drive.stalled, speed,
+    data.phase.update(data.t, len(c.key), data.drives[0].stalled, speed,
                       float(np.linalg.norm(data.module_force_W)))

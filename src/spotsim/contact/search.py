@@ -39,11 +39,15 @@ class LayerSet:
         groups = tuple((j, slice(r[0], r[-1] + 1) if r[-1] - r[0] + 1 == len(r) else r) for j, r in groups)
         object.__setattr__(self, "groups", groups)
 
-    def to_world(self, R_W, p_W):
-        """World centres and normals (n, 3) given each joint's rotation R_W[j] and origin p_W[j]."""
-        C, N = np.empty_like(self.centres_J), np.empty_like(self.normals_J)
+    def to_world(self, R_W, p_W, centres_J=None):
+        """World centres and normals (n, 3) given each joint's rotation R_W[j] and origin p_W[j].
+
+        centres_J: the centres to use instead of `self.centres_J` (fingers that have moved).
+        """
+        centres_J = self.centres_J if centres_J is None else centres_J
+        C, N = np.empty_like(centres_J), np.empty_like(self.normals_J)
         for j, rows in self.groups:
-            C[rows] = self.centres_J[rows] @ R_W[j].T + p_W[j]
+            C[rows] = centres_J[rows] @ R_W[j].T + p_W[j]
             N[rows] = self.normals_J[rows] @ R_W[j].T
         return C, N
 
@@ -74,7 +78,7 @@ class FacePair:
     geom_pair: int
 
 
-def grid_search(face_pairs, master: LayerSet, maps, R_W, p_W, r1: float, radius: float, cutoff: float):
+def grid_search(face_pairs, C1_J, N1_J, maps, R_W, p_W, r1: float, radius: float, cutoff: float):
     """Sphere pairs in contact (Eq. 6-10) inside the given face pairs, found locally.
 
     The slave spheres of a face lie on a regular grid of step `radius`, `radius` above its
@@ -83,7 +87,7 @@ def grid_search(face_pairs, master: LayerSet, maps, R_W, p_W, r1: float, radius:
     computed. Inside the window, the common normal is the face pair's, so Eq. (8) is
     evaluated in face coordinates.
     maps: (n_faces, ni, nj) global slave index of each grid node, -1 where there is none.
-    master: the master spheres (centres in their joint frames). R_W, p_W: joint poses.
+    C1_J, N1_J: (|S1|, 3) master centres and normals in their joints' frames. R_W, p_W: joint poses.
     r1, radius: master and slave sphere radii, m.
     Returns (master index, slave index) arrays of the pairs (a superset by SEARCH_SLACK).
     """
@@ -95,13 +99,13 @@ def grid_search(face_pairs, master: LayerSet, maps, R_W, p_W, r1: float, radius:
         g, R, p = fp.slave, R_W[fp.slave.joint], p_W[fp.slave.joint]
         basis = np.stack([R @ g.t1_J, R @ g.t2_J, R @ g.n_J], axis=1)
         Rm, pm = R_W[fp.master_joint], p_W[fp.master_joint]
-        dn = basis[:, 2] - Rm @ master.normals_J[fp.master_slice.start]
+        dn = basis[:, 2] - Rm @ N1_J[fp.master_slice.start]
         if np.linalg.norm(dn) <= NORMAL_EPS:
             continue  # faces facing the same way never pair (Eq. 6 undefined)
         n = fp.master_slice.stop - fp.master_slice.start
         rows.append(np.arange(fp.master_slice.start, fp.master_slice.stop))
         # master centres in the slave face frame: basis^T (Rm c + pm - O)
-        coords.append(master.centres_J[fp.master_slice] @ (Rm.T @ basis)
+        coords.append(C1_J[fp.master_slice] @ (Rm.T @ basis)
                       + (pm - (R @ g.origin_J + p)) @ basis)
         face.append(np.full(n, g.face))
         shape.append(np.broadcast_to(g.shape, (n, 2)))
