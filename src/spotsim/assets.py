@@ -30,6 +30,51 @@ def example_robot_data_dir() -> Path:
     )
 
 
+#: example-robot-data's arm URDFs, by the `arm_model` names scenarios use.
+ARM_URDFS = {"z1": "robots/z1_description/urdf/z1.urdf", "ur3": "robots/ur_description/urdf/ur3_robot.urdf"}
+
+
+def generated_dir() -> Path:
+    """Where spotsim writes the arm descriptions it derives (a per-user cache)."""
+    path = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "spotsim" / "generated"
+    path.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+def prefixed_arm(arm: str, prefix: str) -> Path:
+    """An example-robot-data arm as a URDF fragment whose links and joints carry `prefix`.
+
+    example-robot-data ships each arm as one URDF with fixed names, so two copies in one robot
+    would clash. Only links and joints are kept (no world link, transmissions or plugins); the
+    fragment is written to `generated_dir()` and included by the robot's XACRO as
+    `$(find spotsim_generated)/<arm>_<prefix>.urdf`.
+    """
+    import xml.etree.ElementTree as ET
+
+    source = example_robot_data_dir() / ARM_URDFS[arm]
+    try:
+        root = ET.parse(source).getroot()
+    except (OSError, ET.ParseError) as e:
+        raise ModelError(f"{source}: cannot read the {arm} URDF: {e}") from e
+    out = ET.Element("robot", {"name": f"{prefix}{arm}"})
+    for el in root:
+        if el.tag == "link" and el.get("name") != "world":
+            el.set("name", prefix + el.get("name"))
+            out.append(el)
+        elif el.tag == "joint" and el.find("parent").get("link") != "world":
+            el.set("name", prefix + el.get("name"))
+            for tag in ("parent", "child"):
+                el.find(tag).set("link", prefix + el.find(tag).get("link"))
+            out.append(el)
+    path = generated_dir() / f"{arm}_{prefix}.urdf"
+    text = ET.tostring(out, encoding="unicode")
+    if not path.exists() or path.read_text() != text:
+        tmp = path.with_suffix(".tmp")
+        tmp.write_text(text)
+        os.replace(tmp, path)
+    return path
+
+
 def compile_xacro(path: Path, args: dict[str, object]) -> str:
     """Compile a XACRO file with substitution `args` into a URDF string.
 
@@ -39,7 +84,8 @@ def compile_xacro(path: Path, args: dict[str, object]) -> str:
     from xacrodoc import XacroDoc, packages
 
     packages.update_package_cache(
-        {"spotsim": str(ROOT), "example-robot-data": str(example_robot_data_dir())}
+        {"spotsim": str(ROOT), "example-robot-data": str(example_robot_data_dir()),
+         "spotsim_generated": str(generated_dir())}
     )
     try:
         doc = XacroDoc.from_file(
@@ -50,8 +96,15 @@ def compile_xacro(path: Path, args: dict[str, object]) -> str:
         raise ModelError(f"{path}: XACRO compilation failed: {e}") from e
 
 
-def xacro_arg_defaults(path: Path) -> dict[str, float]:
-    """The `<xacro:arg name=... default=...>` declarations of a XACRO file, as floats."""
+def _number_or_text(text: str):
+    try:
+        return float(text)
+    except ValueError:
+        return text
+
+
+def xacro_arg_defaults(path: Path) -> dict[str, float | str]:
+    """The `<xacro:arg name=... default=...>` declarations of a XACRO file (numbers as floats)."""
     import xml.etree.ElementTree as ET
 
     ns = "{http://www.ros.org/wiki/xacro}"
@@ -59,4 +112,4 @@ def xacro_arg_defaults(path: Path) -> dict[str, float]:
         root = ET.parse(path).getroot()
     except (OSError, ET.ParseError) as e:
         raise ModelError(f"{path}: cannot read XACRO: {e}") from e
-    return {el.get("name"): float(el.get("default")) for el in root.iter(f"{ns}arg")}
+    return {el.get("name"): _number_or_text(el.get("default")) for el in root.iter(f"{ns}arg")}

@@ -1,0 +1,86 @@
+"""The free-flying dual-arm robot's mass properties against the paper's Tables 5 and 6."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from . import assets
+
+DUAL_ARM_XACRO = assets.URDF_DIR / "dual_arm_scene.urdf.xacro"
+ARM = "ur3"
+ARM_JOINTS = ("shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint", "wrist_1_joint",
+              "wrist_2_joint", "wrist_3_joint")
+FINGERS = ("ee1_finger_upper", "ee1_finger_lower", "ee2_finger_upper", "ee2_finger_lower")
+#: Table 6: joint states of the arms during the grasps, rad.
+TABLE6 = {"arm1_": (0.556, 0.481, 1.41, 2.40e-7, 1.25, 0.555),
+          "arm2_": (-0.511, 0.998, 0.479, 4.00e-6, 1.66, -0.511)}
+
+
+@dataclass(frozen=True)
+class Body:
+    """Mass (kg) and principal moments of inertia about the centroid (kg m^2), Table 5."""
+
+    mass: float
+    inertia: tuple[float, float, float]
+
+
+TABLE5 = {1: Body(30.531, (0.533, 0.397, 0.308)), 2: Body(10.567, (0.318, 0.199, 0.190)),
+          3: Body(47.037, (3.561, 3.521, 3.450)), 4: Body(77.568, (10.459, 8.039, 13.471))}
+
+
+def locked_robot(urdf: str, angles=TABLE6) -> tuple[pin.Model, int]:
+    """The scene with both arms locked at `angles` and the fingers at opening 0, and the
+    FDR's free-flyer joint, whose body is then the whole robot."""
+    full = pin.buildModelFromXML(urdf)
+    q = pin.neutral(full)
+    lock = []
+    for prefix, values in angles.items():
+        for name, value in zip(ARM_JOINTS, values, strict=True):
+            j = full.getJointId(prefix + name)
+            q[full.idx_qs[j]] = value
+            lock.append(j)
+    lock += [full.getJointId(name) for name in FINGERS]
+    model = pin.buildReducedModel(full, lock, q)
+    return model, model.getJointId("fdr_free_flyer")
+
+
+def composite(inertia: pin.Inertia) -> tuple[float, np.ndarray, np.ndarray]:
+    """Mass, centroid (in the body frame) and inertia matrix about the centroid of a body."""
+    return inertia.mass, inertia.lever.copy(), inertia.inertia.copy()
+
+
+def fit_base(args: dict | None = None) -> dict[str, float]:
+    """The base mass and inertia (about the base origin, base axes) that give the locked robot
+    Table 5 body 3's mass and inertia about its centroid (products of inertia zero).
+
+    The base's centroid is its frame's origin. Returns the XACRO arguments base_mass_kg and
+    base_i**; raises ValueError if no physical base can do it.
+    """
+    for prefix in TABLE6:
+        assets.prefixed_arm(ARM, prefix)
+    probe = {**(args or {}), "base_mass_kg": 1e-9, "base_ixx": 1e-12, "base_iyy": 1e-12,
+             "base_izz": 1e-12, "base_ixy": 0, "base_ixz": 0, "base_iyz": 0}
+    model, j = locked_robot(assets.compile_xacro(DUAL_ARM_XACRO, probe))
+    m_r, c_r, I_r = composite(model.inertias[j])
+    target = TABLE5[3]
+    m_b = target.mass - m_r
+    c = m_r * c_r / target.mass  # the robot's centroid, with the base's at the origin
+
+    def shift(m, d):
+        return m * (d @ d * np.eye(3) - np.outer(d, d))
+
+    I_b = np.diag(target.inertia) - I_r - shift(m_r, c_r - c) - shift(m_b, -c)
+    eig = np.linalg.eigvalsh(I_b)
+    if m_b <= 0 or eig.min() <= 0 or 2 * eig.max() > eig.sum():
+        raise ValueError(f"no physical base gives Table 5 body 3: base mass {m_b:.3f} kg, "
+                         f"inertia eigenvalues {eig}")
+    return {"base_mass_kg": m_b, "base_ixx": I_b[0, 0], "base_iyy": I_b[1, 1], "base_izz": I_b[2, 2],
+            "base_ixy": I_b[0, 1], "base_ixz": I_b[0, 2], "base_iyz": I_b[1, 2]}
+
+
+def principal_about_centroid(inertia: pin.Inertia) -> np.ndarray:
+    """Diagonal of a body's inertia about its centroid, in its frame's axes, kg m^2."""
+    return np.diag(inertia.inertia).copy()
