@@ -1,0 +1,35 @@
+"""Welding a grasped module to the robot: one composite body with the same momentum.
+
+After the first grasp TM-1 and the robot move as one body (paper Sec. 5.1, body 4). The weld
+is a model change: the module's free-flyer is replaced by a fixed joint at its pose in the
+grasp frame, and the composite gets the velocity that keeps the pair's linear and angular
+momentum exactly (a perfectly plastic joining).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+
+
+def world_momentum(M_WB: pin.SE3, inertia: pin.Inertia, v_B: pin.Motion) -> pin.Force:
+    """Spatial momentum of a body (inertia and twist in its frame B) in world, about the origin."""
+    return M_WB.act(inertia * v_B)
+
+
+def merged_twist(M_WA: pin.SE3, inertia_A: pin.Inertia, v_A: pin.Motion,
+                 M_WB: pin.SE3, inertia_B: pin.Inertia, v_B: pin.Motion) -> tuple[pin.Inertia, pin.Motion]:
+    """Composite inertia (in A's frame) and the twist of A's frame that keep A's and B's momentum.
+
+    Y = Y_A + Y_B in world; the composite twist is Y^-1 (h_A + h_B). Returned in A's frame, the
+    frame the composite keeps.
+    """
+    Y_W = M_WA.act(inertia_A) + M_WB.act(inertia_B)
+    h_W = world_momentum(M_WA, inertia_A, v_A) + world_momentum(M_WB, inertia_B, v_B)
+    V_W = pin.Motion(np.linalg.solve(Y_W.matrix(), h_W.vector))
+    return M_WA.actInv(Y_W), M_WA.actInv(V_W)
+
+
+def composite_about_centroid(inertia: pin.Inertia) -> tuple[float, np.ndarray]:
+    """Mass and inertia matrix about the centroid (frame axes) of a body, kg and kg m^2."""
+    return inertia.mass, inertia.inertia.copy()
