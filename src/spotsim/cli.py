@@ -77,14 +77,19 @@ def main(argv=None) -> int:
     clear_summary(out)
     result = simulate(scenario, model=model, progress=not args.quiet, source=str(path))
     write_results(result, out, figures=not args.no_figures)
-    s, g = result.summary, result.grasp
+    s = result.summary
     print(f"{s['scenario']}: {s['status']} - {s['message']}")
-    if g["residual_offset_mm"] is not None:
-        x, y, z = g["residual_offset_mm"]
-        print(f"  residual offset [{x:.4f}, {y:.4f}, {z:.4f}] mm, e = {g['residual_offset_norm_mm']:.4f} mm")
-    print(f"  first contact {g['contact_onset_s']} s; peak force "
-          f"{json.dumps([round(f, 3) for f in g['peak_force_N']])} N; "
-          f"wall time {s['wall_time_s']:.2f} s for {s['sim_time_s']:.3f} s simulated")
+    for g in s["grasps"]:
+        print(f"  {g['end_effector']} on {g['module']}: first contact {g['contact_onset_s']} s, "
+              f"complete {g['completed_s']} s")
+        if g["residual_offset_mm"] is not None:
+            x, y, z = g["residual_offset_mm"]
+            print(f"    residual offset [{x:.4f}, {y:.4f}, {z:.4f}] mm, e = {g['residual_offset_norm_mm']:.4f} mm")
+        print(f"    peak force {json.dumps([round(f, 3) for f in g['peak_force_N']])} N")
+        if "robot_centroid_displacement_mm" in g:
+            print(f"    robot centroid displacement "
+                  f"{json.dumps([round(d, 4) for d in g['robot_centroid_displacement_mm']])} mm")
+    print(f"  wall time {s['wall_time_s']:.2f} s for {s['sim_time_s']:.3f} s simulated")
     print(f"  results in {out}")
     return EXIT[s["status"]]
 

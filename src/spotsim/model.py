@@ -1,16 +1,17 @@
 """Scenario -> Model: the Pinocchio scene, its contact faces, sphere layers and parameters.
 
-Everything here is fixed for a run. The arm is self-locked during the grasp (paper Sec. 4.1),
-so its joints are reduced away with `pin.buildReducedModel`. The fingers' prismatic joints are
-reduced away too: their drive prescribes their motion, so they carry no dynamic degree of
-freedom. Their mass joins the body they are mounted on, their faces slide along their joint
-axes by the drive's opening, and their contact loads act on that body. The scene keeps one
-free-flyer per free body: here the module's.
+Everything here is fixed for a run (a weld builds a new Model). The arms are self-locked
+during the grasp (paper Sec. 4.1), so their joints are reduced away with
+`pin.buildReducedModel`. The fingers' prismatic joints are reduced away too: their drive
+prescribes their motion, so they carry no dynamic degree of freedom. Their mass joins the body
+they are mounted on, their faces slide along their joint axes by the drive's opening, and
+their contact loads act on that body. The scene keeps one free-flyer per free body: the
+module(s) and, on the free-flying robot, the robot.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 
 import coal
 import numpy as np
@@ -22,18 +23,29 @@ from .contact.friction import BristleParams
 from .contact.normal import damping_factor, hertz_stiffness
 from .contact.search import FacePair, LayerSet, SlaveGrid
 from .errors import ModelError, ScenarioError
-from .scenario import Scenario
+from .scenario import DualArmScenario, Scenario
 from .spheres import contact_faces, sphere_layer
 
-SCENE_XACRO = assets.URDF_DIR / "single_arm_scene.urdf.xacro"
-ARM_JOINTS = {"z1": ["joint1", "joint2", "joint3", "joint4", "joint5", "joint6"]}
-#: Joints of the arm's own hardware that the grasp never moves (the Z1 stock gripper).
-ARM_FIXED_JOINTS = {"z1": {"jointGripper": 0.0}}
-GRASP_FRAME = "ee_grasp"
-FINGER_JOINTS = ("ee_finger_upper", "ee_finger_lower")
-MODULE_JOINT = "tm_free_flyer"
 #: Smallest eigenvalue a body's inertia may have, kg m^2, below which it is not positive definite.
 MIN_INERTIA_EIGENVALUE = 1e-12
+FINGER_NAMES = ("finger_upper", "finger_lower")
+
+
+@dataclass(frozen=True)
+class SceneSpec:
+    """What a scenario's scene is made of, by name: the XACRO, the joints to lock, the
+    end-effectors (name, link prefix), the modules (name, link prefix, scenario section, the
+    end-effector it starts at) and the grasp sequence (end-effector, module)."""
+
+    xacro: object
+    args: dict
+    locked: dict  # joint name -> angle, rad; names listed in `checked` are limit-checked
+    checked: dict  # joint name -> scenario key path, for limit errors
+    end_effectors: tuple[tuple[str, str], ...]
+    modules: tuple[tuple[str, str, object, int], ...]
+    grasps: tuple[tuple[int, int], ...]
+    robot_joint: str | None = None
+    welded: tuple[int, ...] = ()  # modules fixed to their end-effector (grasp done)
 
 
 @dataclass(frozen=True)
@@ -55,9 +67,9 @@ class ContactParams:
 class Finger:
     """A finger moved by its drive along its prismatic axis, on the body of joint `parent_joint`.
 
-    axis_J: (3,) its opening direction in that joint's frame. drive: index of its drive.
-    opening_touch, opening_start: openings (m) at first touch of a centred groove and at start;
-    the master spheres' centres are given at opening 0.
+    axis_J: (3,) its opening direction in that joint's frame. drive: index of its drive (its
+    end-effector). opening_touch, opening_start: openings (m) at first touch of a centred
+    groove and at start; the master spheres' centres are given at opening 0.
     """
 
     name: str
@@ -69,17 +81,40 @@ class Finger:
 
 
 @dataclass(frozen=True)
+class EndEffector:
+    """An end-effector's grasp frame O_a: its joint and placement in that joint's frame."""
+
+    name: str
+    joint: int
+    placement: pin.SE3
+
+
+@dataclass(frozen=True)
+class ModuleBody:
+    """A target module: its free-flyer joint (0 once welded) and its groove frame O_b's
+    placement in that joint's frame."""
+
+    name: str
+    prefix: str
+    joint: int
+    placement: pin.SE3
+
+
+@dataclass(frozen=True)
 class Model:
-    scenario: Scenario
+    scenario: object
+    spec: SceneSpec
     urdf: str
     pin_model: pin.Model
     geom_model: pin.GeometryModel
-    module_joint: int
+    end_effectors: tuple[EndEffector, ...]
+    modules: tuple[ModuleBody, ...]
+    grasps: tuple[tuple[int, int], ...]  # (end-effector, module) in the order they are grasped
+    robot_joint: int  # the free-flying robot's joint, 0 for a fixed base
     fingers: tuple[Finger, ...]
     master_finger: np.ndarray  # (|S1|,) the finger each master sphere is on
     master_axis_J: np.ndarray  # (|S1|, 3) that finger's opening axis, in the sphere's joint frame
     finger_geoms: tuple[tuple[int, int], ...]  # (geometry object, finger) of each finger patch
-    oMa: pin.SE3  # grasp frame O_a in world (the arm is locked and fixed)
     contact_joints: tuple[int, ...]  # joints carrying contact faces
     master: LayerSet
     slave: LayerSet
@@ -88,16 +123,68 @@ class Model:
     params: ContactParams
     q0: np.ndarray
     v0: np.ndarray
+    free_joints: tuple[int, ...] = field(default=())
+
+    @property
+    def module_joint(self) -> int:
+        """The first grasp's module joint (single-arm scenes have one)."""
+        return self.modules[self.grasps[0][1]].joint
+
+    @property
+    def oMa(self) -> pin.SE3:
+        """The first end-effector's grasp frame in world, for a fixed base."""
+        ee = self.end_effectors[self.grasps[0][0]]
+        assert ee.joint == 0, "the grasp frame moves with a free-flying robot: use grasp_frame()"
+        return ee.placement
 
 
-def xacro_args(s: Scenario) -> dict[str, float]:
-    """The scene XACRO's arguments from a scenario's geometry and module sections."""
-    args = {f.name: getattr(s.geometry, f.name) for f in fields(s.geometry)}
-    m = s.module
-    args.update(module_mass_kg=m.mass_kg, module_com_x_mm=m.com_mm[0],
-                module_com_y_mm=m.com_mm[1], module_com_z_mm=m.com_mm[2])
-    args.update({f"module_{k.name}": getattr(m.inertia_kg_m2, k.name) for k in fields(m.inertia_kg_m2)})
+def geometry_args(s) -> dict:
+    return {f.name: getattr(s.geometry, f.name) for f in fields(s.geometry)}
+
+
+def module_args(prefix: str, m) -> dict:
+    """XACRO arguments of one module, named with the scene's prefix convention."""
+    args = {f"{prefix}mass_kg": m.mass_kg, f"{prefix}com_x_mm": m.com_mm[0],
+            f"{prefix}com_y_mm": m.com_mm[1], f"{prefix}com_z_mm": m.com_mm[2]}
+    args.update({f"{prefix}{k.name}": getattr(m.inertia_kg_m2, k.name) for k in fields(m.inertia_kg_m2)})
     return args
+
+
+def scene_spec(s, welded: dict | None = None) -> SceneSpec:
+    """The scene of a scenario. welded: module index -> (xyz, rpy) of its O_b in its
+    end-effector's grasp frame, for modules already grasped."""
+    welded = welded or {}
+    if isinstance(s, Scenario):
+        args = {**geometry_args(s), **module_args("module_", s.module)}
+        arm = [f"joint{i}" for i in range(1, 7)]
+        locked = {**dict(zip(arm, s.arm.joint_angles_rad, strict=True)), "jointGripper": 0.0,
+                  "ee_finger_upper": 0.0, "ee_finger_lower": 0.0}
+        checked = {name: f"arm.joint_angles_rad[{i}]" for i, name in enumerate(arm)}
+        return SceneSpec(assets.URDF_DIR / "single_arm_scene.urdf.xacro", args, locked, checked,
+                         (("EE", "ee_"),), (("TM", "tm_", s.module, 0),), ((0, 0),))
+    if isinstance(s, DualArmScenario):
+        from .robot import ARM_JOINTS, fit_base  # noqa: F401  (fit_base documents the base)
+
+        args = {**geometry_args(s), **module_args("tm1_", s.tm1), **module_args("tm2_", s.tm2)}
+        for k, (xyz, rpy) in welded.items():
+            prefix = ("tm1_", "tm2_")[k]
+            args.update({f"{prefix}joint_type": "fixed", f"{prefix}parent": f"ee{k + 1}_grasp",
+                         f"{prefix}xyz": " ".join(repr(float(x)) for x in xyz),
+                         f"{prefix}rpy": " ".join(repr(float(x)) for x in rpy)})
+        locked, checked = {}, {}
+        for arm, angles in (("arm1_", s.robot.arm1_joint_angles_rad), ("arm2_", s.robot.arm2_joint_angles_rad)):
+            for i, (name, angle) in enumerate(zip(ARM_JOINTS, angles, strict=True)):
+                locked[arm + name] = angle
+                checked[arm + name] = f"robot.{arm}joint_angles_rad[{i}]"
+            for finger in FINGER_NAMES:
+                locked[f"ee{arm[3]}_{finger}"] = 0.0
+        for prefix in ("arm1_", "arm2_"):
+            assets.prefixed_arm(s.robot.arm_model, prefix)
+        return SceneSpec(assets.URDF_DIR / "dual_arm_scene.urdf.xacro", args, locked, checked,
+                         (("EE-1", "ee1_"), ("EE-2", "ee2_")),
+                         (("TM-1", "tm1_", s.tm1, 0), ("TM-2", "tm2_", s.tm2, 1)),
+                         ((0, 0), (1, 1)), robot_joint="fdr_free_flyer", welded=tuple(sorted(welded)))
+    raise TypeError(f"not a scenario: {type(s).__name__}")
 
 
 def check_inertias(model: pin.Model, joints=None) -> None:
@@ -120,43 +207,26 @@ def check_inertias(model: pin.Model, joints=None) -> None:
         raise ModelError("; ".join(problems))
 
 
-def _lock_arm(full: pin.Model, s: Scenario) -> tuple[pin.Model, list[str]]:
-    """Reduce away the arm's joints (at the scenario's angles) and the fingers' (at opening 0)."""
-    names = ARM_JOINTS[s.arm.model]
+def _lock(full: pin.Model, spec: SceneSpec) -> tuple[pin.Model, list[str]]:
+    """Reduce away the locked joints (arms at the scenario's angles, fingers at opening 0)."""
     q_ref = pin.neutral(full)
-    problems = []
-    lock = []
-    for name, angle in [*zip(names, s.arm.joint_angles_rad), *ARM_FIXED_JOINTS[s.arm.model].items()]:
+    problems, lock = [], []
+    for name, angle in spec.locked.items():
         j = full.getJointId(name)
         lo, hi = full.lowerPositionLimit[full.idx_qs[j]], full.upperPositionLimit[full.idx_qs[j]]
-        if not lo <= angle <= hi and name in names:
-            problems.append(f"arm.joint_angles_rad[{names.index(name)}] = {angle}: "
-                            f"must be within the {name} limits [{lo:.4f}, {hi:.4f}] rad")
+        if name in spec.checked and not lo <= angle <= hi:
+            problems.append(f"{spec.checked[name]} = {angle}: must be within the {name} limits "
+                            f"[{lo:.4f}, {hi:.4f}] rad")
         q_ref[full.idx_qs[j]] = angle
         lock.append(j)
-    lock += [full.getJointId(name) for name in FINGER_JOINTS]
     return pin.buildReducedModel(full, lock, q_ref), problems
 
 
-def build_model(s: Scenario, source: str = "<scenario>") -> Model:
-    """Build the immutable Model of a validated scenario (raises ModelError, ScenarioError)."""
-    urdf = assets.compile_xacro(SCENE_XACRO, xacro_args(s))
-    try:
-        full = pin.buildModelFromXML(urdf)
-    except Exception as e:
-        raise ModelError(f"Pinocchio cannot build the scene: {e}") from e
-    check_inertias(full)
-    model, problems = _lock_arm(full, s)
-    if problems:
-        raise ScenarioError([f"{source}: {p}" for p in problems])
-    model.gravity = pin.Motion(np.array(s.simulation.gravity_m_s2), np.zeros(3))
-    module_joint = model.getJointId(MODULE_JOINT)
-    check_inertias(model, joints={module_joint})
-
+def contact_params(s) -> ContactParams:
     c = s.contact
     r1, r2 = c.sphere_radius_finger_mm * 1e-3, c.sphere_radius_groove_mm * 1e-3
     cutoff = cutoff_distance(r1, r2, min(r1, r2))
-    params = ContactParams(
+    return ContactParams(
         r1=r1, r2=r2,
         K=hertz_stiffness(c.youngs_modulus_finger_Pa, c.poisson_finger,
                           c.youngs_modulus_groove_Pa, c.poisson_groove, r1, r2),
@@ -170,50 +240,101 @@ def build_model(s: Scenario, source: str = "<scenario>") -> Model:
                               s.friction.bristle_damping_N_s_m, s.friction.velocity_deadband_m_s),
         broad_phase=c.broad_phase,
     )
-    master, master_finger, finger_geoms, slave, pairs, maps, geom, contact_joints = _contact_layers(
-        model, urdf, module_joint, params)
 
-    oMa = model.frames[model.getFrameId(GRASP_FRAME, pin.BODY)].placement
-    if model.frames[model.getFrameId(GRASP_FRAME, pin.BODY)].parentJoint != 0:
-        raise ModelError("the grasp frame must be fixed to the world once the arm is locked")
-    rpy = np.radians(s.module.initial_rpy_deg)
-    oMb = oMa * pin.SE3(pin.rpy.rpyToMatrix(*rpy), np.array(s.module.initial_offset_mm) * 1e-3)
+
+def _frame(model: pin.Model, name: str) -> pin.Frame:
+    return model.frames[model.getFrameId(name, pin.BODY)]
+
+
+def build_model(s, source: str = "<scenario>", welded: dict | None = None) -> Model:
+    """Build the immutable Model of a validated scenario (raises ModelError, ScenarioError).
+
+    welded: modules already grasped and welded (see `scene_spec`).
+    """
+    spec = scene_spec(s, welded)
+    urdf = assets.compile_xacro(spec.xacro, spec.args)
+    try:
+        full = pin.buildModelFromXML(urdf)
+    except Exception as e:
+        raise ModelError(f"Pinocchio cannot build the scene: {e}") from e
+    check_inertias(full)
+    model, problems = _lock(full, spec)
+    if problems:
+        raise ScenarioError([f"{source}: {p}" for p in problems])
+    model.gravity = pin.Motion(np.array(s.simulation.gravity_m_s2), np.zeros(3))
+    robot_joint = model.getJointId(spec.robot_joint) if spec.robot_joint else 0
+
+    end_effectors = []
+    for name, prefix in spec.end_effectors:
+        f = _frame(model, f"{prefix}grasp")
+        end_effectors.append(EndEffector(name, f.parentJoint, f.placement))
+    modules = []
+    for k, (name, prefix, _, _) in enumerate(spec.modules):
+        f = _frame(model, f"{prefix}module")
+        joint = 0 if k in spec.welded else f.parentJoint
+        modules.append(ModuleBody(name, prefix, joint, f.placement))
+    free = tuple(m.joint for m in modules if m.joint) + ((robot_joint,) if robot_joint else ())
+    check_inertias(model, joints=set(free))
+
+    params = contact_params(s)
+    active = [k for k in range(len(modules)) if k not in spec.welded]
+    finger_links = [f"{prefix}{finger}" for e, (_, prefix) in enumerate(spec.end_effectors)
+                    if not any(g == (e, m) for m in spec.welded for g in spec.grasps)
+                    for finger in FINGER_NAMES]
+    module_prefixes = [modules[k].prefix for k in active]
+    layers = _contact_layers(model, urdf, finger_links, module_prefixes, params)
+    master, master_finger, finger_geoms, slave, pairs, maps, geom, contact_joints = layers
+
     q0 = pin.neutral(model)
-    jMb = model.jointPlacements[module_joint].inverse() * oMb
-    iq = model.idx_qs[module_joint]
-    q0[iq:iq + 7] = pin.SE3ToXYZQUAT(jMb)
+    data = model.createData()
+    pin.forwardKinematics(model, data, q0)
+    for k in active:
+        _, _, m, e = spec.modules[k]
+        ee = end_effectors[e]
+        oMa = data.oMi[ee.joint] * ee.placement
+        rpy = np.radians(m.initial_rpy_deg)
+        oMb = oMa * pin.SE3(pin.rpy.rpyToMatrix(*rpy), np.array(m.initial_offset_mm) * 1e-3)
+        j = modules[k].joint
+        jMb = model.jointPlacements[j].inverse() * oMb * modules[k].placement.inverse()
+        q0[model.idx_qs[j]:model.idx_qs[j] + 7] = pin.SE3ToXYZQUAT(jMb)
 
     fingers = []
-    for k, name in enumerate(FINGER_JOINTS):
-        frame = model.frames[model.getFrameId(name, pin.BODY)]
-        axis_J = frame.placement.rotation[:, 2]  # prismatic finger joints open along their local z
-        touch = _opening_at_touch(model, frame.parentJoint, axis_J, master, master_finger == k,
-                                  slave, oMa, module_joint, params)
+    for link in finger_links:
+        f = _frame(model, link)
+        e = next(i for i, (_, prefix) in enumerate(spec.end_effectors) if link.startswith(prefix))
+        mod = next(m for (ee, m) in spec.grasps if ee == e)
+        axis_J = f.placement.rotation[:, 2]  # prismatic finger joints open along their local z
+        touch = _opening_at_touch(model, f.parentJoint, axis_J, master, master_finger == len(fingers),
+                                  slave, end_effectors[e], modules[mod], params)
         start = touch + s.end_effector.start_gap_mm * 1e-3
-        fingers.append(Finger(name, frame.parentJoint, axis_J, 0, touch, start))
-    axes = np.array([f.axis_J for f in fingers])
-    return Model(s, urdf, model, geom, module_joint, tuple(fingers), master_finger,
-                 axes[master_finger], finger_geoms, oMa,
-                 contact_joints, master, slave, tuple(pairs), maps, params, q0, np.zeros(model.nv))
+        fingers.append(Finger(link, f.parentJoint, axis_J, e, touch, start))
+    axes = np.array([f.axis_J for f in fingers]) if fingers else np.zeros((0, 3))
+    return Model(s, spec, urdf, model, geom, tuple(end_effectors), tuple(modules), spec.grasps,
+                 robot_joint, tuple(fingers), master_finger, axes[master_finger] if len(master_finger)
+                 else np.zeros((0, 3)), finger_geoms, contact_joints, master, slave, tuple(pairs), maps,
+                 params, q0, np.zeros(model.nv), free)
 
 
-def _contact_layers(model, urdf, module_joint, params):
-    """Sphere layers of every contact face, stacked by role, and the coal face patches.
+def _contact_layers(model, urdf, finger_links, module_prefixes, params):
+    """Sphere layers of the active contact faces, stacked by role, and the coal face patches.
 
-    Finger faces are placed at opening 0 on the joint the finger is mounted on.
+    Master faces: those on `finger_links`, placed at opening 0 on the joint the finger is
+    mounted on. Slave faces: those on links of the modules named by `module_prefixes`.
     """
-    faces = contact_faces(urdf)
     geom = pin.GeometryModel()
     roles = {"master": [], "slave": []}
     finger_of_face, finger_geoms = [], []
-    for face in faces:
-        frame = model.frames[model.getFrameId(face.link, pin.BODY)]
+    for face in contact_faces(urdf):
+        if face.link in finger_links:
+            role = "master"
+        elif any(face.link.startswith(p) for p in module_prefixes):
+            role = "slave"
+        else:
+            continue  # an idle or welded pair of faces: no contact work
+        frame = _frame(model, face.link)
         j, jMl = frame.parentJoint, frame.placement
-        role = "master" if face.link in FINGER_JOINTS else "slave" if j == module_joint else None
-        if role is None:
-            raise ModelError(f"contact face {face.name} is on {face.link}, neither a finger nor the module")
         if role == "master":
-            finger_of_face.append(FINGER_JOINTS.index(face.link))
+            finger_of_face.append(finger_links.index(face.link))
             finger_geoms.append((len(geom.geometryObjects), finger_of_face[-1]))
         verts_J = face.vertices_L @ jMl.rotation.T + jMl.translation
         layer = sphere_layer(verts_J, params.r1 if role == "master" else params.r2)
@@ -222,7 +343,7 @@ def _contact_layers(model, urdf, module_joint, params):
         gid = geom.addGeometryObject(pin.GeometryObject(face.name, j, placement, coal.Box(*face.box_size)))
         roles[role].append((gid, j, layer))
     if not roles["master"] or not roles["slave"]:
-        raise ModelError("the scene needs contact faces on both the fingers and the module")
+        raise ModelError("the scene needs contact faces on both the fingers and a module")
 
     def stack(entries, radius):
         centres = np.concatenate([e[2].centres for e in entries])
@@ -251,8 +372,8 @@ def _contact_layers(model, urdf, module_joint, params):
     return master, master_finger, tuple(finger_geoms), slave, pairs, maps, geom, contact_joints
 
 
-def _opening_at_touch(model, parent_joint, axis_J, master, on_finger, slave, oMa, module_joint, params):
-    """The finger opening (m) at which its sphere layer first touches a centred groove's.
+def _opening_at_touch(model, parent_joint, axis_J, master, on_finger, slave, ee, module, params):
+    """The finger opening (m) at which its sphere layer first touches its groove, centred.
 
     For each of the finger's faces opposed to a groove face (normals anti-parallel), the
     sphere envelopes touch when the face planes are 2 (r1 + r2) apart; the finger moves
@@ -260,19 +381,22 @@ def _opening_at_touch(model, parent_joint, axis_J, master, on_finger, slave, oMa
     on_finger: (|S1|,) bool, the master spheres of this finger (given at opening 0).
     """
     q = pin.neutral(model)
-    jMb = model.jointPlacements[module_joint].inverse() * oMa
-    iq = model.idx_qs[module_joint]
-    q[iq:iq + 7] = pin.SE3ToXYZQUAT(jMb)
     data = model.createData()
     pin.forwardKinematics(model, data, q)
-    oMf, oMm = data.oMi[parent_joint], data.oMi[module_joint]
+    oMa = data.oMi[ee.joint] * ee.placement
+    jMb = model.jointPlacements[module.joint].inverse() * oMa * module.placement.inverse()
+    iq = model.idx_qs[module.joint]
+    q[iq:iq + 7] = pin.SE3ToXYZQUAT(jMb)
+    pin.forwardKinematics(model, data, q)
+    oMf, oMm = data.oMi[parent_joint], data.oMi[module.joint]
     axis_W = oMf.rotation @ axis_J
+    on_module = slave.joint == module.joint
     best = None
     for fm in np.unique(master.face[on_finger]):
         k = np.flatnonzero(master.face == fm)[0]
         n_f = oMf.rotation @ master.normals_J[k]
         x_f = oMf.act(master.centres_J[k] - params.r1 * master.normals_J[k])
-        for fs in np.unique(slave.face):
+        for fs in np.unique(slave.face[on_module]):
             i = np.flatnonzero(slave.face == fs)[0]
             n_g = oMm.rotation @ slave.normals_J[i]
             if n_f @ n_g > -1 + 1e-9 or abs(axis_W @ n_g) < 1e-9:
@@ -284,3 +408,18 @@ def _opening_at_touch(model, parent_joint, axis_J, master, on_finger, slave, oMa
     if best is None:
         raise ModelError("a finger has no face opposed to a groove face")
     return best
+
+
+def grasp_frame(model: Model, data: pin.Data, ee: int) -> pin.SE3:
+    """End-effector `ee`'s grasp frame O_a in world, from the kinematics in `data`."""
+    e = model.end_effectors[ee]
+    return data.oMi[e.joint] * e.placement
+
+
+def groove_frame(model: Model, data: pin.Data, k: int) -> pin.SE3:
+    """Module `k`'s groove frame O_b in world (a welded module rides on its end-effector)."""
+    m = model.modules[k]
+    if m.joint:
+        return data.oMi[m.joint] * m.placement
+    f = _frame(model.pin_model, f"{m.prefix}module")
+    return data.oMi[f.parentJoint] * f.placement

@@ -42,7 +42,7 @@ def write_results(result: Result, out_dir: str | Path, figures: bool = True) -> 
     with open(out / ".timeseries.npz.tmp", "wb") as f:
         np.savez_compressed(f, **ts)
     os.replace(out / ".timeseries.npz.tmp", out / "timeseries.npz")
-    _atomic_write(out / "timeseries.csv", _csv(ts))
+    _atomic_write(out / "timeseries.csv", _csv(ts, result.summary.get("fingers", [])))
     _atomic_write(out / "scenario.yaml", to_yaml(result.scenario))
     if figures and len(ts["t"]) > 1:
         plot_figures(ts, out / "figures", result.scenario.name)
@@ -50,7 +50,7 @@ def write_results(result: Result, out_dir: str | Path, figures: bool = True) -> 
     return out
 
 
-def _csv(ts: dict) -> str:
+def _csv(ts: dict, fingers: list[str]) -> str:
     import io
 
     columns, header = [], []
@@ -63,7 +63,7 @@ def _csv(ts: dict) -> str:
         else:
             labels = axes.get(arr.shape[1], [str(i) for i in range(arr.shape[1])])
             if name.startswith("finger"):
-                labels = [f.removeprefix("ee_finger_") for f in ("ee_finger_upper", "ee_finger_lower")]
+                labels = fingers
             for i in range(arr.shape[1]):
                 columns.append(arr[:, i])
                 header.append(f"{name}_{labels[i]}")

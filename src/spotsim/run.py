@@ -1,4 +1,4 @@
-"""The run loop: step the scene, watch the grasp, record, and report."""
+"""The run loop: step the scene through its grasp sequence, weld, record, and report."""
 
 from __future__ import annotations
 
@@ -11,8 +11,8 @@ import pinocchio as pin
 from .contact.friction import SLIPPING, STICKING
 from .grasp import COMPLETE, PHASES, SELF_CENTRING
 from .integrators import make_integrator
-from .model import Model, build_model
-from .scenario import Scenario, tolerance_warnings
+from .model import Model, build_model, grasp_frame, groove_frame
+from .scenario import tolerance_warnings
 from .step import make_data, step
 
 COMPLETED, INCOMPLETE, DIVERGED, INTERRUPTED = "completed", "incomplete", "diverged", "interrupted"
@@ -22,7 +22,7 @@ COMPLETED, INCOMPLETE, DIVERGED, INTERRUPTED = "completed", "incomplete", "diver
 class Result:
     """What a run produced: `summary` (the summary.json contract) and `timeseries` arrays."""
 
-    scenario: Scenario
+    scenario: object
     model: Model
     summary: dict
     timeseries: dict[str, np.ndarray] = field(repr=False)
@@ -33,7 +33,7 @@ class Result:
 
     @property
     def grasp(self) -> dict:
-        """The (single-arm) grasp's entry of the summary."""
+        """The first grasp's entry of the summary (the only one of a single-arm run)."""
         return self.summary["grasps"][0]
 
 
@@ -42,89 +42,173 @@ def refresh_kinematics(model: Model, data) -> None:
     pin.forwardKinematics(model.pin_model, data.pin_data, data.q, data.v)
 
 
-def module_momentum_W(model: Model, data) -> tuple[np.ndarray, np.ndarray]:
-    """Linear momentum and angular momentum about the world origin of the module, world frame.
+def body_momentum_W(model: Model, data, j: int) -> pin.Force:
+    """Spatial momentum of the body of joint j, world axes, about the world origin.
 
     Reads the kinematics in data.pin_data: call refresh_kinematics first.
     """
-    j = model.module_joint
-    h_local = model.pin_model.inertias[j] * data.pin_data.v[j]
-    h_world = data.pin_data.oMi[j].act(h_local)
-    return h_world.linear.copy(), h_world.angular.copy()
+    return data.pin_data.oMi[j].act(model.pin_model.inertias[j] * data.pin_data.v[j])
+
+
+def free_momentum_W(model: Model, data) -> tuple[np.ndarray, np.ndarray, float, float]:
+    """Total linear and angular momentum (about the world origin) of the free bodies, and the
+    largest single body's linear and angular momentum magnitudes."""
+    P, L, p_max, l_max = np.zeros(3), np.zeros(3), 0.0, 0.0
+    for j in model.free_joints:
+        h = body_momentum_W(model, data, j)
+        P, L = P + h.linear, L + h.angular
+        p_max, l_max = max(p_max, np.linalg.norm(h.linear)), max(l_max, np.linalg.norm(h.angular))
+    return P, L, p_max, l_max
+
+
+def centroid_W(model: Model, data, joints) -> tuple[np.ndarray, float]:
+    """Centroid (world) and mass of the bodies of `joints`."""
+    m = sum(model.pin_model.inertias[j].mass for j in joints)
+    c = sum(model.pin_model.inertias[j].mass * data.pin_data.oMi[j].act(model.pin_model.inertias[j].lever)
+            for j in joints)
+    return c / m, m
 
 
 class Recorder:
-    """Samples the state at every recorded step and keeps per-substep peaks."""
+    """Samples the state at every recorded step and keeps per-grasp peaks over every substep.
+
+    The model may change (a weld): quantities are recorded by name, per module and per
+    end-effector of the first model.
+    """
 
     def __init__(self, model: Model):
-        self.model = model
+        self.first = model
+        self.fingers = [f.name for f in model.fingers]
+        self.last_opening = {f.name: f.opening_start for f in model.fingers}
         self.rows: dict[str, list] = {k: [] for k in (
             "t", "module_pos_m", "module_quat_xyzw", "offset_mm", "rpy_deg", "module_vel_m_s",
             "module_omega_rad_s", "force_N", "torque_Nm", "finger_opening_mm", "finger_load_N",
-            "pairs_slipping", "pairs_sticking", "phase", "max_penetration_um")}
-        self.peak_force = np.zeros(3)
-        self.peak_torque = np.zeros(3)
-        self.peak_force_norm = 0.0
-        self.peak_torque_norm = 0.0
-        self.max_pairs = 0
+            "pairs_slipping", "pairs_sticking", "phase", "grasp", "max_penetration_um")}
+        if model.robot_joint:
+            for k in ("robot_centroid_m", "base_pos_m", "base_quat_xyzw", "system_centroid_m"):
+                self.rows[k] = []
+            for mod in model.modules:
+                self.rows[f"{mod.name}_pos_m"] = []
+                self.rows[f"{mod.name}_quat_xyzw"] = []
+            for ee in model.end_effectors:
+                self.rows[f"{ee.name}_pos_m"] = []
+        self.peaks = [dict(force=np.zeros(3), torque=np.zeros(3), force_norm=0.0, torque_norm=0.0, pairs=0)
+                      for _ in model.grasps]
         self.force_a = np.zeros(3)
         self.torque_a = np.zeros(3)
 
-    def wrench_in_a(self, data):
-        """Combined contact force on the module and torque about its centroid, in O_a axes."""
-        m = self.model
-        oMb = data.pin_data.oMi[m.module_joint]
-        r_G = oMb.act(m.pin_model.inertias[m.module_joint].lever)
-        F_W = data.module_force_W
-        tau_G = data.module_torque_O_W - np.cross(r_G, F_W)
-        R = m.oMa.rotation
+    def wrench_in_a(self, model: Model, data):
+        """Combined contact force on the active module and torque about its centroid, O_a axes."""
+        ee, k = model.grasps[data.active]
+        j = model.modules[k].joint
+        r_G = data.pin_data.oMi[j].act(model.pin_model.inertias[j].lever)
+        F_W = data.module_force_W(model)
+        tau_G = data.module_torque_O_W(model) - np.cross(r_G, F_W)
+        R = grasp_frame(model, data.pin_data, ee).rotation
         return R.T @ F_W, R.T @ tau_G
 
-    def substep(self, data, n_pairs):
+    def substep(self, model: Model, data, n_pairs: int) -> None:
         if n_pairs == 0:
             self.force_a, self.torque_a = np.zeros(3), np.zeros(3)
             return
-        self.force_a, self.torque_a = self.wrench_in_a(data)
-        self.peak_force = np.maximum(self.peak_force, np.abs(self.force_a))
-        self.peak_torque = np.maximum(self.peak_torque, np.abs(self.torque_a))
-        self.peak_force_norm = max(self.peak_force_norm, float(np.linalg.norm(self.force_a)))
-        self.peak_torque_norm = max(self.peak_torque_norm, float(np.linalg.norm(self.torque_a)))
-        self.max_pairs = max(self.max_pairs, n_pairs)
+        self.force_a, self.torque_a = self.wrench_in_a(model, data)
+        p = self.peaks[data.active]
+        p["force"] = np.maximum(p["force"], np.abs(self.force_a))
+        p["torque"] = np.maximum(p["torque"], np.abs(self.torque_a))
+        p["force_norm"] = max(p["force_norm"], float(np.linalg.norm(self.force_a)))
+        p["torque_norm"] = max(p["torque_norm"], float(np.linalg.norm(self.torque_a)))
+        p["pairs"] = max(p["pairs"], n_pairs)
 
-    def sample(self, data):
+    def sample(self, model: Model, data) -> None:
         """Record the state; data.pin_data must hold the kinematics of (q, v)."""
-        m, r = self.model, self.rows
-        oMb = data.pin_data.oMi[m.module_joint]
-        aMb = m.oMa.actInv(oMb)
-        nu = data.pin_data.v[m.module_joint]
+        r = self.rows
+        ee, k = model.grasps[data.active]
+        oMa, oMb = grasp_frame(model, data.pin_data, ee), groove_frame(model, data.pin_data, k)
+        aMb = oMa.actInv(oMb)
+        j = model.modules[k].joint
+        nu = data.pin_data.v[j]
+        R_j = data.pin_data.oMi[j].rotation
         c = data.contacts
         states = np.bincount(c.state, minlength=3) if c is not None and len(c.key) else np.zeros(3, int)
+        names = [f.name for f in model.fingers]
+        for i, name in enumerate(names):
+            self.last_opening[name] = data.opening[i]
         r["t"].append(data.t)
         r["module_pos_m"].append(oMb.translation.copy())
         r["module_quat_xyzw"].append(pin.SE3ToXYZQUAT(oMb)[3:])
         r["offset_mm"].append(aMb.translation * 1e3)
         r["rpy_deg"].append(np.degrees(pin.rpy.matrixToRpy(aMb.rotation)))
-        r["module_vel_m_s"].append(oMb.rotation @ nu.linear)
-        r["module_omega_rad_s"].append(oMb.rotation @ nu.angular)
+        r["module_vel_m_s"].append(R_j @ nu.linear)
+        r["module_omega_rad_s"].append(R_j @ nu.angular)
         r["force_N"].append(self.force_a)
         r["torque_Nm"].append(self.torque_a)
-        r["finger_opening_mm"].append(data.opening * 1e3)
-        r["finger_load_N"].append(data.finger_load.copy())
+        r["finger_opening_mm"].append([self.last_opening[n] * 1e3 for n in self.fingers])
+        r["finger_load_N"].append([data.finger_load[names.index(n)] if n in names else 0.0 for n in self.fingers])
         r["pairs_slipping"].append(states[SLIPPING])
         r["pairs_sticking"].append(states[STICKING])
         r["phase"].append(PHASES.index(data.phase.phase))
+        r["grasp"].append(data.active)
         r["max_penetration_um"].append(c.phi.max() * 1e6 if c is not None and len(c.key) else 0.0)
+        if model.robot_joint:
+            base = data.pin_data.oMi[model.robot_joint]
+            r["robot_centroid_m"].append(centroid_W(model, data, [model.robot_joint])[0])
+            r["base_pos_m"].append(base.translation.copy())
+            r["base_quat_xyzw"].append(pin.SE3ToXYZQUAT(base)[3:])
+            r["system_centroid_m"].append(centroid_W(model, data, model.free_joints)[0])
+            for i, mod in enumerate(model.modules):
+                M = groove_frame(model, data.pin_data, i)
+                r[f"{mod.name}_pos_m"].append(M.translation.copy())
+                r[f"{mod.name}_quat_xyzw"].append(pin.SE3ToXYZQUAT(M)[3:])
+            for i, e in enumerate(model.end_effectors):
+                r[f"{e.name}_pos_m"].append(grasp_frame(model, data.pin_data, i).translation.copy())
 
     def arrays(self) -> dict[str, np.ndarray]:
         return {k: np.asarray(v) for k, v in self.rows.items()}
 
 
-def simulate(scenario: Scenario, *, model: Model | None = None, progress: bool = False,
-             source: str = "<scenario>") -> Result:
-    """Run a scenario to completion, divergence or its time-out; never raises on physics.
+def weld(model: Model, data, source: str):
+    """Weld the active grasp's module to its end-effector and return the new (model, data).
 
-    progress: show a progress bar (tqdm) on stderr. Ctrl-C ends the run with status
-    `interrupted` and keeps what was recorded.
+    The module's free-flyer is replaced by a fixed joint at its current pose in the grasp
+    frame, and the composite body gets the twist that keeps the pair's linear and angular
+    momentum: Y_new^-1 (h_robot + h_module), with Y_new the new model's composite inertia.
+    """
+    ee, k = model.grasps[data.active]
+    refresh_kinematics(model, data)
+    aMb = grasp_frame(model, data.pin_data, ee).actInv(groove_frame(model, data.pin_data, k))
+    welded = {i: pose for i, pose in getattr(model, "_welded_poses", {}).items()}
+    welded[k] = (aMb.translation, pin.rpy.matrixToRpy(aMb.rotation))
+    new = build_model(model.scenario, source, welded=welded)
+    object.__setattr__(new, "_welded_poses", welded)
+    new_data = make_data(new)
+    pm, nm = model.pin_model, new.pin_model
+    # configurations by joint name; the robot's twist from the momentum of robot + module
+    for j in range(1, nm.njoints):
+        old = pm.getJointId(nm.names[j])
+        new_data.q[nm.idx_qs[j]:nm.idx_qs[j] + nm.nqs[j]] = data.q[pm.idx_qs[old]:pm.idx_qs[old] + pm.nqs[old]]
+        new_data.v[nm.idx_vs[j]:nm.idx_vs[j] + nm.nvs[j]] = data.v[pm.idx_vs[old]:pm.idx_vs[old] + pm.nvs[old]]
+    r_old, m_old = model.robot_joint, model.modules[k].joint
+    h_W = body_momentum_W(model, data, r_old) + body_momentum_W(model, data, m_old)
+    r_new = new.robot_joint
+    h_r = data.pin_data.oMi[r_old].actInv(h_W)  # the robot's frame is kept by the weld
+    iv = nm.idx_vs[r_new]
+    new_data.v[iv:iv + 6] = np.linalg.solve(nm.inertias[r_new].matrix(), h_r.vector)
+    new_data.t = data.t
+    new_data.phases, new_data.active = data.phases, data.active + 1
+    new_data.drives = data.drives
+    names = [f.name for f in model.fingers]
+    for i, f in enumerate(new.fingers):
+        new_data.opening[i] = data.opening[names.index(f.name)]
+        new_data.opening_rate[i] = 0.0
+    return new, new_data
+
+
+def simulate(scenario, *, model: Model | None = None, progress: bool = False,
+             source: str = "<scenario>") -> Result:
+    """Run a scenario's grasps in sequence to completion, divergence or time-out.
+
+    Never raises on physics. progress: a progress bar (tqdm) on stderr. Ctrl-C ends the run
+    with status `interrupted` and keeps what was recorded.
     """
     model = model or build_model(scenario, source)
     check_start(model, source)
@@ -135,16 +219,15 @@ def simulate(scenario: Scenario, *, model: Model | None = None, progress: bool =
     data = make_data(model)
     rec = Recorder(model)
     refresh_kinematics(model, data)
-    p0, L0 = module_momentum_W(model, data)
+    P0, L0, p_max, l_max = free_momentum_W(model, data)
     J, JL = np.zeros(3), np.zeros(3)
-    mass = model.pin_model.inertias[model.module_joint].mass
     g_W = np.array(sim.gravity_m_s2)
-    gravity = bool(np.any(g_W))
     drift_lin = drift_ang = 0.0
-    p_max, L_max = np.linalg.norm(p0), np.linalg.norm(L0)
     max_phi = min(model.params.r1, model.params.r2)
     status, message = INCOMPLETE, ""
-    rec.sample(data)
+    starts = [0.0]  # when each grasp's drive started
+    welds = []
+    rec.sample(model, data)
     bar = _progress(n_records, progress)
     wall0 = time.perf_counter()
     steps = 0
@@ -160,13 +243,14 @@ def simulate(scenario: Scenario, *, model: Model | None = None, progress: bool =
                     break
                 steps += 1
                 n = len(c.key)
-                rec.substep(data, n)
-                # momentum balance of the module: the impulse of the contact forces and gravity
-                if n or gravity:
-                    r_G = data.pin_data.oMi[model.module_joint].act(
-                        model.pin_model.inertias[model.module_joint].lever)
-                    J += h * (data.module_force_W + mass * g_W)
-                    JL += h * (data.module_torque_O_W + np.cross(r_G, mass * g_W))
+                rec.substep(model, data, n)
+                # impulse of the external forces on the free bodies: the contact forces from
+                # fixed bodies (a fixed base) and gravity
+                for j in model.free_joints:
+                    m_j = model.pin_model.inertias[j].mass
+                    J += h * (data.joint_force_W[j] + m_j * g_W)
+                    r_G = data.pin_data.oMi[j].act(model.pin_model.inertias[j].lever)
+                    JL += h * (data.joint_torque_O_W[j] + np.cross(r_G, m_j * g_W))
                 if n and c.phi.max() > max_phi:
                     status = DIVERGED
                     message = (f"penetration {c.phi.max() * 1e3:.3f} mm exceeds the sphere radius "
@@ -176,24 +260,33 @@ def simulate(scenario: Scenario, *, model: Model | None = None, progress: bool =
                     status = DIVERGED
                     message = f"state became non-finite at t = {data.t:.4f} s"
                     break
-                if data.phase.phase == COMPLETE:
+                if data.phase.phase == COMPLETE or data.t - starts[-1] > scenario.completion.phase_timeout_s:
                     break
             if status == DIVERGED:
                 break
             refresh_kinematics(model, data)
-            rec.sample(data)
-            p, L = module_momentum_W(model, data)
-            p_max, L_max = max(p_max, np.linalg.norm(p)), max(L_max, np.linalg.norm(L))
-            drift_lin = max(drift_lin, np.linalg.norm(p - p0 - J))
+            rec.sample(model, data)
+            P, L, p_b, l_b = free_momentum_W(model, data)
+            p_max, l_max = max(p_max, p_b), max(l_max, l_b)
+            drift_lin = max(drift_lin, np.linalg.norm(P - P0 - J))
             drift_ang = max(drift_ang, np.linalg.norm(L - L0 - JL))
             if bar is not None:
                 bar.update(1)
             if data.phase.phase == COMPLETE:
-                status = COMPLETED
-                message = f"grasp complete at t = {data.t:.4f} s"
+                if data.active + 1 == len(model.grasps):
+                    status = COMPLETED
+                    message = f"{'all grasps' if len(model.grasps) > 1 else 'grasp'} complete at t = {data.t:.4f} s"
+                    break
+                model, data = weld(model, data, source)
+                welds.append(data.t)
+                integrator = make_integrator(sim.integrator, model.pin_model)
+                starts.append(data.t)
+                refresh_kinematics(model, data)
+            elif data.t - starts[-1] > scenario.completion.phase_timeout_s:
+                message = _why_incomplete(model, data, "the phase time-out")
                 break
         else:
-            message = _why_incomplete(data)
+            message = _why_incomplete(model, data, "the time-out")
     except KeyboardInterrupt:
         status, message = INTERRUPTED, f"interrupted by the user at t = {data.t:.4f} s"
     finally:
@@ -201,8 +294,8 @@ def simulate(scenario: Scenario, *, model: Model | None = None, progress: bool =
             bar.close()
     wall = time.perf_counter() - wall0
     series = rec.arrays()
-    summary = _summary(scenario, model, data, rec, series, status, message, wall, steps, h,
-                       drift_lin / max(p_max, 1e-300), drift_ang / max(L_max, 1e-300))
+    summary = _summary(scenario, model, data, rec, series, status, message, wall, steps, h, starts,
+                       welds, drift_lin / max(p_max, 1e-300), drift_ang / max(l_max, 1e-300))
     return Result(scenario, model, summary, series)
 
 
@@ -215,39 +308,57 @@ def _progress(total: int, enabled: bool):
     return tqdm(total=total, unit="ms", desc="simulating", leave=False, disable=None)
 
 
-def _why_incomplete(data) -> str:
+def _why_incomplete(model: Model, data, limit: str) -> str:
     t = data.t
+    ee, k = model.grasps[data.active]
+    who = f"{model.end_effectors[ee].name} on {model.modules[k].name}"
     if data.phase.phase != SELF_CENTRING:
-        return f"no contact by the time-out t = {t:.3f} s: the fingers never reached the groove"
+        return f"{who}: no contact by {limit} t = {t:.3f} s: the fingers never reached the groove"
     c = data.contacts
     speed = float(c.speed.max()) if len(c.key) else 0.0
-    unmet = [k for k, ok in data.phase.criteria(data.drives[0].stalled, speed,
-                                                float(np.linalg.norm(data.module_force_W))).items() if not ok]
+    criteria = data.phase.criteria(data.drives[ee].stalled, speed, float(np.linalg.norm(data.module_force_W(model))))
+    unmet = [name for name, ok in criteria.items() if not ok]
     if not len(c.key):
         unmet.insert(0, "contact lost")
-    return (f"self-centring did not complete by the time-out t = {t:.3f} s; "
+    return (f"{who}: self-centring did not complete by {limit} t = {t:.3f} s; "
             f"unmet at the end: {'; '.join(unmet) or 'criteria not held for hold_s'}")
 
 
-def _summary(s, model, data, rec, series, status, message, wall, steps, h, drift_lin, drift_ang):
-    times = data.phase.times
-    completed = times.get(COMPLETE)
-    offset = series["offset_mm"][-1] if completed is not None else None
-    grasp = {
-        "end_effector": "EE",
-        "module": "TM",
-        "contact_onset_s": times.get(SELF_CENTRING),
-        "completed_s": completed,
-        "residual_offset_mm": None if offset is None else [float(x) for x in offset],
-        "residual_offset_norm_mm": None if offset is None else float(np.linalg.norm(offset)),
-        "residual_rpy_deg": None if completed is None else [float(x) for x in series["rpy_deg"][-1]],
-        "peak_force_N": [float(x) for x in rec.peak_force],
-        "peak_torque_Nm": [float(x) for x in rec.peak_torque],
-        "peak_force_norm_N": rec.peak_force_norm,
-        "peak_torque_norm_Nm": rec.peak_torque_norm,
-        "max_active_pairs": int(rec.max_pairs),
-        "final_offset_mm": [float(x) for x in series["offset_mm"][-1]],
-    }
+def _summary(s, model, data, rec, series, status, message, wall, steps, h, starts, welds,
+             drift_lin, drift_ang):
+    grasps = []
+    for g, (ee, k) in enumerate(model.grasps):
+        times = data.phases[g].times
+        completed = times.get(COMPLETE)
+        rows = np.flatnonzero(series["grasp"] == g)
+        last = rows[-1] if len(rows) else None
+        done = completed is not None and last is not None
+        offset = series["offset_mm"][last] if done else None
+        peak = rec.peaks[g]
+        entry = {
+            "end_effector": model.end_effectors[ee].name,
+            "module": model.modules[k].name,
+            "started_s": starts[g] if g < len(starts) else None,
+            "contact_onset_s": times.get(SELF_CENTRING),
+            "completed_s": completed,
+            "residual_offset_mm": None if offset is None else [float(x) for x in offset],
+            "residual_offset_norm_mm": None if offset is None else float(np.linalg.norm(offset)),
+            "residual_rpy_deg": None if not done else [float(x) for x in series["rpy_deg"][last]],
+            "peak_force_N": [float(x) for x in peak["force"]],
+            "peak_torque_Nm": [float(x) for x in peak["torque"]],
+            "peak_force_norm_N": peak["force_norm"],
+            "peak_torque_norm_Nm": peak["torque_norm"],
+            "max_active_pairs": int(peak["pairs"]),
+            "final_offset_mm": None if last is None else [float(x) for x in series["offset_mm"][last]],
+        }
+        if "robot_centroid_m" in series and len(rows):
+            # the FDR centroid's displacement over this grasp: from its drive's start to its
+            # completion (or the end of the record), taken within one body (the FDR in the
+            # first grasp, the FDR + TM-1 composite after the weld)
+            d = series["robot_centroid_m"][last] - series["robot_centroid_m"][rows[0]]
+            entry["robot_centroid_displacement_mm"] = [float(x) for x in d * 1e3]
+        grasps.append(entry)
+    free = bool(model.robot_joint)
     return {
         "scenario": s.name,
         "status": status,
@@ -260,16 +371,24 @@ def _summary(s, model, data, rec, series, status, message, wall, steps, h, drift
         "dynamics_dt_s": h,
         "integrator": s.simulation.integrator,
         "broad_phase": s.contact.broad_phase,
-        "phases": {"approach": 0.0, **{k: v for k, v in times.items()}},
-        "grasps": [grasp],
+        "phases": {"approach": 0.0, **data.phases[0].times} if len(model.grasps) == 1 else
+        [{"approach": starts[g] if g < len(starts) else None, **data.phases[g].times}
+         for g in range(len(model.grasps))],
+        "welds_s": welds,
+        "grasps": grasps,
         "momentum": {
             "linear_drift_rel": drift_lin,
             "angular_drift_rel": drift_ang,
-            "definition": "max over the run of |momentum - initial - impulse of the contact forces "
-                          "and gravity| of the module, relative to its largest momentum (angular "
-                          "about the world origin); the base is fixed, so momentum is not conserved",
+            "definition": (
+                "max over the run of |total momentum of the free bodies - initial|, relative to "
+                "the largest single body's momentum (angular about the world origin); the robot "
+                "floats freely, so momentum is conserved" if free else
+                "max over the run of |momentum - initial - impulse of the contact forces and "
+                "gravity| of the module, relative to its largest momentum (angular about the "
+                "world origin); the base is fixed, so momentum is not conserved"),
         },
         "spheres": {"finger": int(len(model.master.centres_J)), "groove": int(len(model.slave.centres_J))},
+        "fingers": rec.fingers,
         "warnings": tolerance_warnings(s),
     }
 
@@ -290,11 +409,14 @@ def initial_contacts(model: Model) -> int:
 def check_start(model: Model, source: str) -> None:
     """Reject a scenario whose fingers and groove interpenetrate at the start."""
     from .errors import ScenarioError
+    from .scenario import modules_of
 
     n = initial_contacts(model)
     if n:
         s = model.scenario
+        offsets = "; ".join(f"{k}.initial_offset_mm = {list(m.initial_offset_mm)}"
+                            for k, m in modules_of(s).items())
         raise ScenarioError([
-            f"{source}: module.initial_offset_mm = {list(s.module.initial_offset_mm)}: fingers and "
-            f"groove interpenetrate at the start ({n} sphere pairs); widen end_effector.start_gap_mm "
-            f"= {s.end_effector.start_gap_mm} or move the module"])
+            f"{source}: {offsets}: fingers and groove interpenetrate at the start ({n} sphere "
+            f"pairs); widen end_effector.start_gap_mm = {s.end_effector.start_gap_mm} or move "
+            f"the module"])

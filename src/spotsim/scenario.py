@@ -167,13 +167,17 @@ class Friction:
 @dataclass(frozen=True, kw_only=True)
 class Completion:
     hold_s: float = key(0.02, _positive, "how long every criterion must hold")
+    phase_timeout_s: float = key(2.0, _positive, "a grasp not complete this long after its drive starts is incomplete")
     max_contact_speed_m_s: float = key(1e-4, _positive, "relative speed at every active contact below this")
     max_net_force_N: float = key(0.5, _positive, "net contact force on the module below this (equilibrium)")
 
 
 @dataclass(frozen=True, kw_only=True)
 class Scenario:
+    """A single arm on a fixed base grasping one module (paper Sec. 4)."""
+
     name: str = key(doc="scenario name, used in results")
+    kind: str = key("single_arm", _choice("single_arm"), "single_arm or dual_arm")
     simulation: Simulation = key()
     arm: Arm = key()
     end_effector: EndEffector = key()
@@ -183,6 +187,40 @@ class Scenario:
     contact: Contact = key(Contact())
     friction: Friction = key(Friction())
     completion: Completion = key(Completion())
+
+
+TABLE6_ARM1 = (0.556, 0.481, 1.41, 2.40e-7, 1.25, 0.555)
+TABLE6_ARM2 = (-0.511, 0.998, 0.479, 4.00e-6, 1.66, -0.511)
+
+
+@dataclass(frozen=True, kw_only=True)
+class Robot:
+    arm_model: str = key("ur3", _choice("ur3"), "6-DOF arms from example-robot-data")
+    arm1_joint_angles_rad: tuple[float, float, float, float, float, float] = key(
+        TABLE6_ARM1, doc="arm 1 locked at Table 6's joint states")
+    arm2_joint_angles_rad: tuple[float, float, float, float, float, float] = key(
+        TABLE6_ARM2, doc="arm 2 locked at Table 6's joint states")
+
+
+@dataclass(frozen=True, kw_only=True)
+class DualArmScenario:
+    """The free-flying dual-arm robot grasping TM-1 with EE-1, then TM-2 with EE-2 (Sec. 5)."""
+
+    name: str = key(doc="scenario name, used in results")
+    kind: str = key(rule=_choice("dual_arm"), doc="single_arm or dual_arm")
+    simulation: Simulation = key()
+    end_effector: EndEffector = key(doc="both end-effectors")
+    tm1: Module = key(doc="target module 1 (Table 5 body 1), offset from EE-1")
+    tm2: Module = key(doc="target module 2 (Table 5 body 2), offset from EE-2")
+    description: str = key("", doc="free text")
+    robot: Robot = key(Robot())
+    geometry: Geometry = key(Geometry())
+    contact: Contact = key(Contact())
+    friction: Friction = key(Friction())
+    completion: Completion = key(Completion())
+
+
+SCENARIO_KINDS = {"single_arm": Scenario, "dual_arm": DualArmScenario}
 
 
 # ------------------------------------------------------------------------ mechanics
@@ -274,18 +312,24 @@ def _cross_checks(s: Scenario, where: str) -> list[str]:
     return problems
 
 
-def tolerance_warnings(s: Scenario) -> list[str]:
+def modules_of(s) -> dict[str, Module]:
+    """A scenario's modules by section name."""
+    return {"module": s.module} if isinstance(s, Scenario) else {"tm1": s.tm1, "tm2": s.tm2}
+
+
+def tolerance_warnings(s) -> list[str]:
     """Initial misalignments outside the mechanism's claimed tolerance (Sec. 2.3)."""
     warnings = []
-    x, y, _ = s.module.initial_offset_mm
-    for axis, val in (("x", x), ("y", y)):
-        if abs(val) > TOLERANCE_OFFSET_MM:
-            warnings.append(f"module.initial_offset_mm {axis} = {val} mm is outside the claimed "
-                            f"+-{TOLERANCE_OFFSET_MM} mm tolerance")
-    for (name, limit), val in zip(TOLERANCE_DEG.items(), s.module.initial_rpy_deg):
-        if abs(val) > limit:
-            warnings.append(f"module.initial_rpy_deg {name} = {val} deg is outside the claimed "
-                            f"+-{limit} deg tolerance")
+    for section, module in modules_of(s).items():
+        x, y, _ = module.initial_offset_mm
+        for axis, val in (("x", x), ("y", y)):
+            if abs(val) > TOLERANCE_OFFSET_MM:
+                warnings.append(f"{section}.initial_offset_mm {axis} = {val} mm is outside the claimed "
+                                f"+-{TOLERANCE_OFFSET_MM} mm tolerance")
+        for (name, limit), val in zip(TOLERANCE_DEG.items(), module.initial_rpy_deg, strict=True):
+            if abs(val) > limit:
+                warnings.append(f"{section}.initial_rpy_deg {name} = {val} deg is outside the claimed "
+                                f"+-{limit} deg tolerance")
     return warnings
 
 
@@ -307,10 +351,14 @@ def set_override(raw: dict, assignment: str) -> None:
     node[parts[-1]] = value
 
 
-def from_dict(raw: Any, where: str = "<scenario>") -> Scenario:
-    """Validate a raw mapping into a Scenario, or raise ScenarioError with every problem."""
+def from_dict(raw: Any, where: str = "<scenario>"):
+    """Validate a raw mapping into a Scenario (or DualArmScenario, by `kind`), or raise
+    ScenarioError with every problem."""
     problems: list[str] = []
-    scenario = _build(Scenario, raw, "", problems, where)
+    kind = raw.get("kind", "single_arm") if isinstance(raw, dict) else "single_arm"
+    if kind not in SCENARIO_KINDS:
+        raise ScenarioError([f"{where}: kind = {_fmt(kind)}: must be one of {', '.join(SCENARIO_KINDS)}"])
+    scenario = _build(SCENARIO_KINDS[kind], raw, "", problems, where)
     if scenario is not None:
         problems += _cross_checks(scenario, where)
     if problems:

@@ -44,7 +44,7 @@ class Data:
     pin_data: pin.Data
     geom_data: pin.GeometryData
     manager: object
-    phase: GraspPhase
+    phases: list  # GraspPhase of each grasp, in sequence order
     R_W: np.ndarray  # (njoints, 3, 3) rotation of each contact joint
     p_W: np.ndarray  # (njoints, 3) origin of each contact joint
     w_W: np.ndarray  # (njoints, 3) angular velocity in world
@@ -59,8 +59,22 @@ class Data:
     finger_load: np.ndarray = None
     contacts: Contacts = None
     f_ext: list = None
-    module_force_W: np.ndarray = field(default_factory=lambda: np.zeros(3))
-    module_torque_O_W: np.ndarray = field(default_factory=lambda: np.zeros(3))  # about world origin
+    active: int = 0  # the grasp under way
+    joint_force_W: np.ndarray = None  # (njoints, 3) contact force on each body, world
+    joint_torque_O_W: np.ndarray = None  # (njoints, 3) its moment about the world origin
+
+    @property
+    def phase(self) -> GraspPhase:
+        """The phase of the grasp under way."""
+        return self.phases[self.active]
+
+    def module_force_W(self, model: Model) -> np.ndarray:
+        """Combined contact force on the active grasp's module, world, N."""
+        return self.joint_force_W[model.modules[model.grasps[self.active][1]].joint]
+
+    def module_torque_O_W(self, model: Model) -> np.ndarray:
+        """Its moment about the world origin, N m."""
+        return self.joint_torque_O_W[model.modules[model.grasps[self.active][1]].joint]
 
 
 def make_data(model: Model) -> Data:
@@ -73,13 +87,15 @@ def make_data(model: Model) -> Data:
     if model.params.broad_phase == "coal":
         manager = pin.BroadPhaseManager_DynamicAABBTreeCollisionManager(m, model.geom_model, gdata)
     c, ee = model.scenario.completion, model.scenario.end_effector
-    phase = GraspPhase(c.hold_s, c.max_contact_speed_m_s, c.max_net_force_N)
+    phases = [GraspPhase(c.hold_s, c.max_contact_speed_m_s, c.max_net_force_N) for _ in model.grasps]
     nj = m.njoints
     n_f = len(model.fingers)
-    return Data(0.0, model.q0.copy(), model.v0.copy(), pdata, gdata, manager, phase,
+    return Data(0.0, model.q0.copy(), model.v0.copy(), pdata, gdata, manager, phases,
                 np.tile(np.eye(3), (nj, 1, 1)), np.zeros((nj, 3)), np.zeros((nj, 3)),
                 np.zeros((nj, 3)), finger_load=np.zeros(n_f),
-                drives=[FingerDrive(ee.closing_speed_m_s, ee.grasp_load_N, ee.resume_fraction)],
+                drives=[FingerDrive(ee.closing_speed_m_s, ee.grasp_load_N, ee.resume_fraction)
+                        for _ in model.end_effectors],
+                joint_force_W=np.zeros((nj, 3)), joint_torque_O_W=np.zeros((nj, 3)),
                 opening=np.array([f.opening_start for f in model.fingers]),
                 opening_rate=np.zeros(n_f))
 
@@ -199,8 +215,8 @@ def wrenches(model: Model, data: Data, c: Contacts) -> list:
     """
     nj = model.pin_model.njoints
     if len(c.key) == 0:
-        data.module_force_W = np.zeros(3)
-        data.module_torque_O_W = np.zeros(3)
+        data.joint_force_W = np.zeros((nj, 3))
+        data.joint_torque_O_W = np.zeros((nj, 3))
         data.finger_load[:] = 0.0
         return [pin.Force.Zero() for _ in range(nj)]
     joint = np.concatenate([model.master.joint[c.master], model.slave.joint[c.slave]])
@@ -213,9 +229,8 @@ def wrenches(model: Model, data: Data, c: Contacts) -> list:
     for j in model.contact_joints:
         R = data.R_W[j]
         f_ext[j] = pin.Force(R.T @ F[j], R.T @ T[j])
-    mj = model.module_joint
-    data.module_force_W = F[mj]
-    data.module_torque_O_W = T[mj] + np.cross(data.p_W[mj], F[mj])
+    data.joint_force_W = F
+    data.joint_torque_O_W = T + np.cross(data.p_W, F)
     finger = model.master_finger[c.master]
     for k, fg in enumerate(model.fingers):
         on_k = finger == k
@@ -235,19 +250,23 @@ def step(model: Model, data: Data, h: float, integrator) -> Contacts:
     m = model.pin_model
     a = pin.aba(m, data.pin_data, data.q, data.v, np.zeros(m.nv), data.f_ext)
     data.q, data.v = integrator.step(m, data.q, data.v, a, h)
-    # the drives set the fingers' rate for the coming step from this step's loads
+    # the active grasp's drive sets its fingers' rate for the coming step from this step's
+    # loads; the other end-effectors hold
+    active_ee = model.grasps[data.active][0]
     for k, drive in enumerate(data.drives):
         mine = [i for i, f in enumerate(model.fingers) if f.drive == k]
-        data.opening_rate[mine] = drive.opening_rate(data.finger_load[mine])
+        if mine:
+            data.opening_rate[mine] = drive.opening_rate(data.finger_load[mine]) if k == active_ee else 0.0
     data.opening += h * data.opening_rate
     data.t += h
     data.contacts = contacts
-    grasp_phase(data, contacts)
+    grasp_phase(model, data, contacts)
     return contacts
 
 
-def grasp_phase(data: Data, c: Contacts) -> None:
-    """Advance the grasp phase on this step's contacts (approach -> self-centring -> complete)."""
+def grasp_phase(model: Model, data: Data, c: Contacts) -> None:
+    """Advance the active grasp's phase on this step's contacts (approach -> self-centring ->
+    complete)."""
     speed = float(c.speed.max()) if len(c.key) else 0.0
-    data.phase.update(data.t, len(c.key), data.drives[0].stalled, speed,
-                      float(np.linalg.norm(data.module_force_W)))
+    data.phase.update(data.t, len(c.key), data.drives[model.grasps[data.active][0]].stalled, speed,
+                      float(np.linalg.norm(data.module_force_W(model))))
