@@ -61,6 +61,7 @@ class ContactParams:
     margin: float
     bristle: BristleParams
     broad_phase: str
+    force_point: str = "common"
 
 
 @dataclass(frozen=True)
@@ -239,6 +240,7 @@ def contact_params(s) -> ContactParams:
         bristle=BristleParams(s.friction.mu_k, s.friction.mu_s, s.friction.bristle_stiffness_N_m,
                               s.friction.bristle_damping_N_s_m, s.friction.velocity_deadband_m_s),
         broad_phase=c.broad_phase,
+        force_point=c.force_point,
     )
 
 

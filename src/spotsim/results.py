@@ -76,13 +76,17 @@ def _csv(ts: dict, fingers: list[str]) -> str:
 
 
 def plot_figures(ts: dict, fig_dir: Path, title: str) -> None:
-    """The paper's Fig. 11 (offset of O_b from O_a per axis) and Fig. 12 (combined force)."""
+    """The paper's Fig. 11 (offset of O_b from O_a per axis) and Fig. 12 (combined force); for
+    a dual-arm run also Fig. 20 (robot centroid displacement per grasp) and Fig. 21 (contact
+    forces and torques per grasp)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     fig_dir.mkdir(parents=True, exist_ok=True)
+    if "robot_centroid_m" in ts:
+        _dual_arm_figures(ts, fig_dir, title, plt)
     for name, key, unit, label in (("offset", "offset_mm", "mm", "offset of $O_b$ from $O_a$"),
                                    ("contact_force", "force_N", "N", "combined contact force")):
         fig, axes = plt.subplots(3, 1, sharex=True, figsize=(7, 6))
@@ -95,3 +99,39 @@ def plot_figures(ts: dict, fig_dir: Path, title: str) -> None:
         fig.tight_layout()
         fig.savefig(fig_dir / f"{name}.png", dpi=110)
         plt.close(fig)
+
+
+def _dual_arm_figures(ts: dict, fig_dir: Path, title: str, plt) -> None:
+    grasps = [g for g in np.unique(ts["grasp"])]
+    fig, axes = plt.subplots(1, len(grasps), figsize=(6 * len(grasps), 4), squeeze=False)
+    for ax, g in zip(axes[0], grasps, strict=True):
+        rows = ts["grasp"] == g
+        d = (ts["robot_centroid_m"][rows] - ts["robot_centroid_m"][rows][0]) * 1e3
+        for i, axis in enumerate("xyz"):
+            ax.plot(ts["t"][rows], d[:, i], lw=1, label=axis)
+        ax.set_title(f"grasp {g + 1}: robot centroid displacement")
+        ax.set_xlabel("time (s)")
+        ax.set_ylabel("displacement (mm)")
+        ax.grid(alpha=0.3)
+        ax.legend()
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(fig_dir / "robot_centroid_displacement.png", dpi=110)
+    plt.close(fig)
+
+    fig, axes = plt.subplots(2, len(grasps), figsize=(6 * len(grasps), 6), squeeze=False, sharex="col")
+    for col, g in enumerate(grasps):
+        rows = ts["grasp"] == g
+        for row, (key, unit) in enumerate((("force_N", "N"), ("torque_Nm", "N m"))):
+            ax = axes[row, col]
+            for i, axis in enumerate("xyz"):
+                ax.plot(ts["t"][rows], ts[key][rows][:, i], lw=1, label=axis)
+            ax.set_ylabel(f"contact {'force' if row == 0 else 'torque'} ({unit})")
+            ax.grid(alpha=0.3)
+            ax.legend()
+        axes[0, col].set_title(f"grasp {g + 1}")
+        axes[1, col].set_xlabel("time (s)")
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(fig_dir / "contact_forces_torques.png", dpi=110)
+    plt.close(fig)

@@ -222,6 +222,7 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
     P0, L0, p_max, l_max = free_momentum_W(model, data)
     J, JL = np.zeros(3), np.zeros(3)
     g_W = np.array(sim.gravity_m_s2)
+    gravity = bool(np.any(g_W))
     drift_lin = drift_ang = 0.0
     max_phi = min(model.params.r1, model.params.r2)
     status, message = INCOMPLETE, ""
@@ -246,11 +247,14 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
                 rec.substep(model, data, n)
                 # impulse of the external forces on the free bodies: the contact forces from
                 # fixed bodies (a fixed base) and gravity
-                for j in model.free_joints:
-                    m_j = model.pin_model.inertias[j].mass
-                    J += h * (data.joint_force_W[j] + m_j * g_W)
-                    r_G = data.pin_data.oMi[j].act(model.pin_model.inertias[j].lever)
-                    JL += h * (data.joint_torque_O_W[j] + np.cross(r_G, m_j * g_W))
+                J += h * data.external_force_W
+                JL += h * data.external_torque_O_W
+                if gravity:
+                    for j in model.free_joints:
+                        m_j = model.pin_model.inertias[j].mass
+                        r_G = data.pin_data.oMi[j].act(model.pin_model.inertias[j].lever)
+                        J += h * m_j * g_W
+                        JL += h * np.cross(r_G, m_j * g_W)
                 if n and c.phi.max() > max_phi:
                     status = DIVERGED
                     message = (f"penetration {c.phi.max() * 1e3:.3f} mm exceeds the sphere radius "

@@ -147,6 +147,9 @@ class Contact:
     skin_mm: float = key(1.0, _non_negative, "extra coal security margin beyond the contact reach")
     restitution: float = key(0.8, _open_unit, "coefficient of restitution c_r (not in the paper)")
     approach_speed_floor_m_s: float = key(1e-2, _positive, "floor on each pair's onset approach speed")
+    force_point: str = key("common", _choice("common", "sphere_centres"),
+                           "where a pair's force acts: one common point (Eq. 19-21), or each "
+                           "body's own sphere centre (a negative control that breaks angular momentum)")
     youngs_modulus_finger_Pa: float = key(7e10, _positive, "E1 (Table 1)")
     youngs_modulus_groove_Pa: float = key(7e10, _positive, "E2 (Table 1)")
     poisson_finger: float = key(0.25, _poisson, "nu1 (Table 1)")

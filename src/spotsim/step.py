@@ -29,6 +29,8 @@ class Contacts:
     key: np.ndarray
     phi: np.ndarray = None
     point_W: np.ndarray = None
+    c1_W: np.ndarray = None  # master and slave sphere centres, for the negative control
+    c2_W: np.ndarray = None
     force_W: np.ndarray = None  # on the master (finger); the slave gets the opposite
     speed: np.ndarray = None  # |relative velocity| at the contact point, m/s
     state: np.ndarray = None
@@ -62,6 +64,8 @@ class Data:
     active: int = 0  # the grasp under way
     joint_force_W: np.ndarray = None  # (njoints, 3) contact force on each body, world
     joint_torque_O_W: np.ndarray = None  # (njoints, 3) its moment about the world origin
+    external_force_W: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    external_torque_O_W: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
     @property
     def phase(self) -> GraspPhase:
@@ -201,7 +205,7 @@ def contact_forces(model: Model, data: Data, c: Contacts, h: float) -> Contacts:
     F_n = normal_force(delta, delta_dot, v_minus, p.K, p.damping_factor)
     s, F_f, state = bristle_step(s_prev, v_rel, n_c, F_n, h, p.bristle)
     data.mem_key, data.mem_s, data.mem_vminus = c.key, s, v_minus
-    c.phi, c.point_W, c.state = phi, point, state
+    c.phi, c.point_W, c.state, c.c1_W, c.c2_W = phi, point, state, c1, c2
     c.force_W = F_n[:, None] * n_c + F_f  # Eq. (18): f_i = F_n,i + F_f,i, on the master
     c.speed = np.linalg.norm(v_rel, axis=1)
     return c
@@ -217,11 +221,16 @@ def wrenches(model: Model, data: Data, c: Contacts) -> list:
     if len(c.key) == 0:
         data.joint_force_W = np.zeros((nj, 3))
         data.joint_torque_O_W = np.zeros((nj, 3))
+        data.external_force_W, data.external_torque_O_W = np.zeros(3), np.zeros(3)
         data.finger_load[:] = 0.0
         return [pin.Force.Zero() for _ in range(nj)]
     joint = np.concatenate([model.master.joint[c.master], model.slave.joint[c.slave]])
     f = np.concatenate([c.force_W, -c.force_W])
-    arm = np.concatenate([c.point_W, c.point_W]) - data.p_W[joint]
+    if model.params.force_point == "common":
+        points = np.concatenate([c.point_W, c.point_W])
+    else:  # negative control: each body's force at its own sphere's centre
+        points = np.concatenate([c.c1_W, c.c2_W])
+    arm = points - data.p_W[joint]
     tau = np.cross(arm, f)
     F = np.stack([np.bincount(joint, f[:, i], nj) for i in range(3)], axis=1)
     T = np.stack([np.bincount(joint, tau[:, i], nj) for i in range(3)], axis=1)
@@ -231,6 +240,13 @@ def wrenches(model: Model, data: Data, c: Contacts) -> list:
         f_ext[j] = pin.Force(R.T @ F[j], R.T @ T[j])
     data.joint_force_W = F
     data.joint_torque_O_W = T + np.cross(data.p_W, F)
+    # the free bodies' external load: what a fixed body (joint 0) exerts on them; forces
+    # between two free bodies are internal and are left out
+    k = len(c.key)
+    partner = np.concatenate([joint[k:], joint[:k]])
+    ext = (partner == 0) & (joint != 0)
+    data.external_force_W = f[ext].sum(axis=0)
+    data.external_torque_O_W = np.cross(points[ext], f[ext]).sum(axis=0)
     finger = model.master_finger[c.master]
     for k, fg in enumerate(model.fingers):
         on_k = finger == k

@@ -1,0 +1,92 @@
+"""The free-floating dual-arm robot grasping TM-1 then TM-2 (paper Sec. 5)."""
+
+import numpy as np
+import pytest
+
+import spotsim
+from conftest import ROOT
+
+DUAL = ROOT / "config" / "dual_arm_sequential.yaml"
+#: The issue's bound on total linear momentum drift, relative to the largest body momentum.
+LINEAR_MOMENTUM_BOUND = 1e-9
+#: The system centroid moves only by round-off: 1 nm over the run is a thousand times that.
+CENTROID_BOUND_M = 1e-9
+#: Paper's FDR centroid displacements, mm (Sec. 5.1).
+PAPER_FIRST, PAPER_SECOND = np.array([-0.637, -0.582, 0.146]), np.array([-0.173, 0.306, -0.05])
+#: The paper gives neither its robot's geometry nor its modules' placement: spotsim's
+#: displacement magnitudes are held to the paper's within a factor of five, no tighter.
+MAGNITUDE_BAND = 5.0
+
+
+@pytest.fixture(scope="module")
+def run():
+    return spotsim.simulate(spotsim.load_scenario(DUAL))
+
+
+@pytest.fixture(scope="module")
+def window():
+    """The first 0.6 s (TM-1's first impacts) with each setting a test compares."""
+    base = spotsim.load_scenario(DUAL)
+
+    def simulate(**changes):
+        s = spotsim.replace(base, simulation={"duration_s": 0.6, **changes.get("simulation", {})},
+                            contact=changes.get("contact", {}))
+        return spotsim.simulate(s).summary["momentum"]
+    return simulate
+
+
+@pytest.mark.slow
+def test_both_grasps_complete_with_sub_millimetre_offsets(run):
+    """EE-1 grasps TM-1, the weld happens once, EE-2 grasps TM-2; both end sub-millimetre."""
+    assert run.status == "completed", run.summary["message"]
+    assert len(run.summary["welds_s"]) == 1
+    for g in run.summary["grasps"]:
+        assert g["residual_offset_norm_mm"] < 1.0
+
+
+@pytest.mark.slow
+def test_total_linear_momentum_is_conserved(run):
+    """Contact forces are pairwise and the centroids advance in world: momentum stays put."""
+    assert run.summary["momentum"]["linear_drift_rel"] <= LINEAR_MOMENTUM_BOUND
+
+
+@pytest.mark.slow
+def test_system_centroid_stays_put(run):
+    """Starting at rest, the centroid of robot + modules does not move, weld included."""
+    c = run.timeseries["system_centroid_m"]
+    assert np.abs(c - c[0]).max() <= CENTROID_BOUND_M
+
+
+@pytest.mark.slow
+def test_second_grasp_disturbs_the_robot_less(run):
+    """The heavier composite moves less and is hit less hard in the second grasp."""
+    first, second = run.summary["grasps"]
+    d1, d2 = (np.linalg.norm(g["robot_centroid_displacement_mm"]) for g in (first, second))
+    assert d2 < d1
+    assert second["peak_force_norm_N"] < first["peak_force_norm_N"]
+    assert second["peak_torque_norm_Nm"] < first["peak_torque_norm_Nm"]
+
+
+@pytest.mark.slow
+def test_centroid_displacements_within_the_stated_band_of_the_paper(run):
+    """Each grasp's robot centroid displacement is within a factor of five of the paper's."""
+    for g, paper in zip(run.summary["grasps"], (PAPER_FIRST, PAPER_SECOND), strict=True):
+        ratio = np.linalg.norm(g["robot_centroid_displacement_mm"]) / np.linalg.norm(paper)
+        assert 1 / MAGNITUDE_BAND <= ratio <= MAGNITUDE_BAND
+
+
+@pytest.mark.slow
+def test_angular_momentum_error_halves_with_the_step(window):
+    """Symplectic Euler is first order in rotation: halving dt halves the angular drift."""
+    coarse = window(simulation={"substeps": 10})["angular_drift_rel"]
+    fine = window(simulation={"substeps": 20})["angular_drift_rel"]
+    assert 1.6 <= coarse / fine <= 2.5
+
+
+@pytest.mark.slow
+def test_forces_at_sphere_centres_break_angular_momentum(window):
+    """Negative control: each body's force at its own sphere centre, not one common point,
+    leaves a torque imbalance that shows up a thousandfold in angular momentum."""
+    common = window()["angular_drift_rel"]
+    centres = window(contact={"force_point": "sphere_centres"})["angular_drift_rel"]
+    assert centres > 1000 * common
