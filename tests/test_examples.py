@@ -42,3 +42,9 @@ def test_compare_searches_example_finds_them_equal():
     out = run(ROOT / "examples" / "compare_searches.py", "--until", "0.5")
     checked = re.search(r"same pairs in (\d+) of (\d+)", out)
     assert checked and checked.group(1) == checked.group(2) and int(checked.group(2)) > 0
+
+
+def test_dual_arm_example_prints_displacements_and_forces():
+    """The dual-arm example prints, per grasp, the centroid displacement and the peak force."""
+    out = run(ROOT / "examples" / "dual_arm_sequential.py", "--duration", "0.7")
+    assert "EE-1 on TM-1:" in out and "robot centroid displacement" in out and "peak contact force" in out

@@ -131,3 +131,16 @@ def test_results_are_written_atomically(case_I, tmp_path):
     spotsim.write_results(r, tmp_path, figures=False)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["scenario.yaml", "summary.json",
                                                            "timeseries.csv", "timeseries.npz"]
+
+
+SPOT = sorted((ROOT / "config").glob("spot_offset_*.yaml"))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("path", SPOT, ids=lambda p: p.name)
+def test_spot_scenarios_complete_and_keep_momentum(path):
+    """Each SPOT offset runs in full: both grasps complete sub-millimetre, momentum kept."""
+    r = spotsim.simulate(spotsim.load_scenario(path))
+    assert r.status == "completed", r.summary["message"]
+    assert all(g["residual_offset_norm_mm"] < 1.0 for g in r.summary["grasps"])
+    assert r.summary["momentum"]["linear_drift_rel"] <= 1e-9

@@ -13,7 +13,7 @@ from .grasp import COMPLETE, PHASES, SELF_CENTRING
 from .integrators import make_integrator
 from .model import Model, build_model, grasp_frame, groove_frame
 from .scenario import tolerance_warnings
-from .step import make_data, step
+from .step import StateOverflow, make_data, step
 
 COMPLETED, INCOMPLETE, DIVERGED, INTERRUPTED = "completed", "incomplete", "diverged", "interrupted"
 
@@ -237,10 +237,8 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
             for _ in range(sim.substeps):
                 try:
                     c = step(model, data, h, integrator)
-                except ValueError as e:  # coal rejects bounds that overflowed
-                    status = DIVERGED
-                    reason = str(e).strip().splitlines()[-1].removeprefix("message: ")
-                    message = f"state left the representable range at t = {data.t:.4f} s (coal: {reason})"
+                except StateOverflow as e:
+                    status, message = DIVERGED, f"{e} at t = {data.t:.4f} s"
                     break
                 steps += 1
                 n = len(c.key)

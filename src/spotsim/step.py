@@ -17,7 +17,12 @@ from .contact.friction import bristle_step
 from .contact.normal import indentation, normal_force
 from .contact.search import all_pairs, grid_search
 from .grasp import FingerDrive, GraspPhase
+from .errors import SimulationError
 from .model import Model
+
+
+class StateOverflow(SimulationError):
+    """The state grew past what the broad phase can represent: the run has diverged."""
 
 
 @dataclass
@@ -131,8 +136,12 @@ def broad_phase(model: Model, data: Data):
         M = data.geom_data.oMg[g]
         M.translation = M.translation + data.R_W[f.parent_joint] @ f.axis_J * data.opening[k]
         data.geom_data.oMg[g] = M
-    data.manager.update(False)
-    pin.computeCollisions(data.manager, False)
+    try:
+        data.manager.update(False)
+        pin.computeCollisions(data.manager, False)
+    except ValueError as e:  # coal rejects bounds that overflowed
+        reason = str(e).strip().splitlines()[-1].removeprefix("message: ")
+        raise StateOverflow(f"state left the representable range (coal: {reason})") from e
     results = data.geom_data.collisionResults
     return [fp for fp in model.face_pairs if results[fp.geom_pair].isCollision()]
 
@@ -185,6 +194,7 @@ def contact_forces(model: Model, data: Data, c: Contacts, h: float) -> Contacts:
         keep = np.flatnonzero(hit)
         c = Contacts(c.master[keep], c.slave[keep], c.key[keep])
         jm, js, c1, c2, n_c, phi = jm[keep], js[keep], c1[keep], c2[keep], n_c[keep], phi[keep]
+        Rm = Rm[keep]
     point = contact_point(c1, c2, p.r1, p.r2, n_c, phi)
     finger = model.master_finger[c.master]
     slide_W = np.einsum("kij,kj->ki", Rm, model.master_axis_J[c.master]) * data.opening_rate[finger, None]
