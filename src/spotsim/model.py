@@ -45,7 +45,12 @@ class SceneSpec:
     modules: tuple[tuple[str, str, object, int], ...]
     grasps: tuple[tuple[int, int], ...]
     robot_joint: str | None = None
-    welded: tuple[int, ...] = ()  # modules fixed to their end-effector (grasp done)
+    # modules fixed to their end-effector (grasp done): (module, xyz, rpy of O_b in O_a)
+    welded: tuple[tuple[int, tuple, tuple], ...] = ()
+
+    @property
+    def welded_modules(self) -> set[int]:
+        return {k for k, _, _ in self.welded}
 
 
 @dataclass(frozen=True)
@@ -164,7 +169,7 @@ def scene_spec(s, welded: dict | None = None) -> SceneSpec:
         return SceneSpec(assets.URDF_DIR / "single_arm_scene.urdf.xacro", args, locked, checked,
                          (("EE", "ee_"),), (("TM", "tm_", s.module, 0),), ((0, 0),))
     if isinstance(s, DualArmScenario):
-        from .robot import ARM_JOINTS, fit_base  # noqa: F401  (fit_base documents the base)
+        from .robot import ARM_JOINTS
 
         args = {**geometry_args(s), **module_args("tm1_", s.tm1), **module_args("tm2_", s.tm2)}
         for k, (xyz, rpy) in welded.items():
@@ -184,7 +189,9 @@ def scene_spec(s, welded: dict | None = None) -> SceneSpec:
         return SceneSpec(assets.URDF_DIR / "dual_arm_scene.urdf.xacro", args, locked, checked,
                          (("EE-1", "ee1_"), ("EE-2", "ee2_")),
                          (("TM-1", "tm1_", s.tm1, 0), ("TM-2", "tm2_", s.tm2, 1)),
-                         ((0, 0), (1, 1)), robot_joint="fdr_free_flyer", welded=tuple(sorted(welded)))
+                         ((0, 0), (1, 1)), robot_joint="fdr_free_flyer",
+                         welded=tuple((k, tuple(map(float, xyz)), tuple(map(float, rpy)))
+                                      for k, (xyz, rpy) in sorted(welded.items())))
     raise TypeError(f"not a scenario: {type(s).__name__}")
 
 
@@ -273,15 +280,15 @@ def build_model(s, source: str = "<scenario>", welded: dict | None = None) -> Mo
     modules = []
     for k, (name, prefix, _, _) in enumerate(spec.modules):
         f = _frame(model, f"{prefix}module")
-        joint = 0 if k in spec.welded else f.parentJoint
+        joint = 0 if k in spec.welded_modules else f.parentJoint
         modules.append(ModuleBody(name, prefix, joint, f.placement))
     free = tuple(m.joint for m in modules if m.joint) + ((robot_joint,) if robot_joint else ())
     check_inertias(model, joints=set(free))
 
     params = contact_params(s)
-    active = [k for k in range(len(modules)) if k not in spec.welded]
+    active = [k for k in range(len(modules)) if k not in spec.welded_modules]
     finger_links = [f"{prefix}{finger}" for e, (_, prefix) in enumerate(spec.end_effectors)
-                    if not any(g == (e, m) for m in spec.welded for g in spec.grasps)
+                    if not any(g == (e, m) for m in spec.welded_modules for g in spec.grasps)
                     for finger in FINGER_NAMES]
     module_prefixes = [modules[k].prefix for k in active]
     layers = _contact_layers(model, urdf, finger_links, module_prefixes, params)

@@ -176,10 +176,9 @@ def weld(model: Model, data, source: str):
     ee, k = model.grasps[data.active]
     refresh_kinematics(model, data)
     aMb = grasp_frame(model, data.pin_data, ee).actInv(groove_frame(model, data.pin_data, k))
-    welded = {i: pose for i, pose in getattr(model, "_welded_poses", {}).items()}
+    welded = {i: (xyz, rpy) for i, xyz, rpy in model.spec.welded}
     welded[k] = (aMb.translation, pin.rpy.matrixToRpy(aMb.rotation))
     new = build_model(model.scenario, source, welded=welded)
-    object.__setattr__(new, "_welded_poses", welded)
     new_data = make_data(new)
     pm, nm = model.pin_model, new.pin_model
     # configurations by joint name; the robot's twist from the momentum of robot + module
