@@ -67,6 +67,7 @@ class ContactParams:
     bristle: BristleParams
     broad_phase: str
     force_point: str = "common"
+    skin: float = 0.0  # the margin's extra beyond contact reach, m
 
 
 @dataclass(frozen=True)
@@ -130,6 +131,8 @@ class Model:
     q0: np.ndarray
     v0: np.ndarray
     free_joints: tuple[int, ...] = field(default=())
+    # (joint, farthest contact sphere from its origin, m): bounds how far its spheres move
+    sphere_reach: tuple[tuple[int, float], ...] = field(default=())
 
     @property
     def module_joint(self) -> int:
@@ -248,6 +251,7 @@ def contact_params(s) -> ContactParams:
                               s.friction.bristle_damping_N_s_m, s.friction.velocity_deadband_m_s),
         broad_phase=c.broad_phase,
         force_point=c.force_point,
+        skin=c.skin_mm * 1e-3,
     )
 
 
@@ -321,7 +325,19 @@ def build_model(s, source: str = "<scenario>", welded: dict | None = None) -> Mo
     return Model(s, spec, urdf, model, geom, tuple(end_effectors), tuple(modules), spec.grasps,
                  robot_joint, tuple(fingers), master_finger, axes[master_finger] if len(master_finger)
                  else np.zeros((0, 3)), finger_geoms, contact_joints, master, slave, tuple(pairs), maps,
-                 params, q0, np.zeros(model.nv), free)
+                 params, q0, np.zeros(model.nv), free, _sphere_reach(master, slave, fingers))
+
+
+def _sphere_reach(master, slave, fingers) -> tuple[tuple[int, float], ...]:
+    """The farthest contact sphere from each contact joint's origin, fingers at any opening
+    within their travel (start opening), m."""
+    travel = max((f.opening_start for f in fingers), default=0.0)
+    reach = {}
+    for layers, extra in ((master, travel), (slave, 0.0)):
+        for j in np.unique(layers.joint):
+            r = np.linalg.norm(layers.centres_J[layers.joint == j], axis=1).max() + extra
+            reach[int(j)] = max(reach.get(int(j), 0.0), float(r))
+    return tuple(sorted(reach.items()))
 
 
 def _contact_layers(model, urdf, finger_links, module_prefixes, params):

@@ -69,6 +69,8 @@ class Data:
     active: int = 0  # the grasp under way
     joint_force_W: np.ndarray = None  # (njoints, 3) contact force on each body, world
     joint_torque_O_W: np.ndarray = None  # (njoints, 3) its moment about the world origin
+    near_pairs: list = None  # face pairs coal kept at its last run
+    travel: float = np.inf  # bound on any two spheres' relative motion since then, m
     external_force_W: np.ndarray = field(default_factory=lambda: np.zeros(3))
     external_torque_O_W: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
@@ -165,7 +167,11 @@ def sphere_pairs(model: Model, data: Data) -> Contacts:
     if model.params.broad_phase == "none":
         m_idx, s_idx = literal_pairs(model, data)
     else:
-        m_idx, s_idx = candidate_pairs(model, data, broad_phase(model, data))
+        # Verlet skin: a face pair coal left out was at least the margin apart, and stays
+        # beyond contact reach until the spheres have moved the skin relative to each other
+        if data.travel > model.params.skin:
+            data.near_pairs, data.travel = broad_phase(model, data), 0.0
+        m_idx, s_idx = candidate_pairs(model, data, data.near_pairs)
     key = m_idx * len(model.slave.centres_J) + s_idx
     order = np.argsort(key, kind="stable")
     return Contacts(m_idx[order], s_idx[order], key[order])
@@ -285,9 +291,28 @@ def step(model: Model, data: Data, h: float, integrator) -> Contacts:
             data.opening_rate[mine] = drive.opening_rate(data.finger_load[mine]) if k == active_ee else 0.0
     data.opening += h * data.opening_rate
     data.t += h
+    data.travel += h * travel_rate(model, data)
     data.contacts = contacts
     grasp_phase(model, data, contacts)
     return contacts
+
+
+def travel_rate(model: Model, data: Data) -> float:
+    """A bound on how fast any two contact spheres approach each other, m/s: the sum over the
+    contact bodies of |v_O| + |omega| reach, plus the fastest finger slide. Uses the
+    velocities of the step just taken (R_W, vo_W, w_W from its kinematics)."""
+    rate = float(np.abs(data.opening_rate).max()) if len(data.opening_rate) else 0.0
+    nu = data.v
+    m = model.pin_model
+    for j, reach in model.sphere_reach:
+        if j == 0:
+            continue
+        iv = m.idx_vs[j]
+        if m.nvs[j] == 6:  # free-flyer: v = (v_O, omega) in its frame; norms are frame-free
+            rate += float(np.linalg.norm(nu[iv:iv + 3]) + np.linalg.norm(nu[iv + 3:iv + 6]) * reach)
+        else:
+            rate += float(np.linalg.norm(data.vo_W[j]) + np.linalg.norm(data.w_W[j]) * reach)
+    return rate
 
 
 def grasp_phase(model: Model, data: Data, c: Contacts) -> None:
