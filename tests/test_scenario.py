@@ -129,3 +129,33 @@ def test_scenario_round_trips_through_python(case_I):
     assert changed.end_effector.closing_speed_m_s == 0.018
     assert to_dict(changed)["module"] == to_dict(case_I)["module"]
     assert isinstance(case_I.geometry, Geometry)
+
+
+DUAL = CASE_I.parent / "dual_arm_sequential.yaml"
+
+DUAL_BROKEN = {
+    "unknown kind": ({"kind": "triple_arm"}, "kind = triple_arm: must be one of single_arm, dual_arm"),
+    "missing module": ({"tm2": None}, "tm2 = (missing): required key"),
+    "arm beyond its limit": ({"robot": {"arm1_joint_angles_rad": [0, 0, 4.0, 0, 0, 0]}},
+                             "robot.arm1_joint_angles_rad[2] = 4.0: must be within the arm1_elbow_joint limits"),
+    "interpenetration": ({"end_effector": {"start_gap_mm": 1.0}}, "fingers and groove interpenetrate"),
+}
+
+
+@pytest.mark.parametrize("name", DUAL_BROKEN)
+def test_broken_dual_arm_config_gives_one_clear_error(name, tmp_path, capsys):
+    """Dual-arm scenarios are as strict as single-arm ones: one line, exit 2, nothing run."""
+    change, expected = DUAL_BROKEN[name]
+    raw = yaml.safe_load(DUAL.read_text())
+    for key, value in change.items():
+        if value is None:
+            del raw[key]
+        elif isinstance(value, dict):
+            raw[key] = {**raw.get(key, {}), **value}
+        else:
+            raw[key] = value
+    path = tmp_path / "broken.yaml"
+    path.write_text(yaml.safe_dump(raw))
+    assert main(["validate", str(path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and expected in err[0], err
