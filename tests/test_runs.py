@@ -144,3 +144,25 @@ def test_spot_scenarios_complete_and_keep_momentum(path):
     assert r.status == "completed", r.summary["message"]
     assert all(g["residual_offset_norm_mm"] < 1.0 for g in r.summary["grasps"])
     assert r.summary["momentum"]["linear_drift_rel"] <= 1e-9
+
+
+@pytest.mark.parametrize("config", ["single_arm_case_III.yaml", "dual_arm_sequential.yaml"])
+def test_plot_regenerates_every_figure(config, tmp_path, capsys):
+    """`spotsim plot` writes each figure of a run's kind from its results directory alone."""
+    from spotsim.results import FIGURES_DUAL, FIGURES_SINGLE
+
+    out = tmp_path / "out"
+    main(["run", str(ROOT / "config" / config), "--out", str(out), "--quiet", "--no-figures",
+          "--set", "simulation.duration_s=0.6"])
+    assert not (out / "figures").exists()
+    assert main(["plot", str(out)]) == 0
+    expected = FIGURES_DUAL if config.startswith("dual") else FIGURES_SINGLE
+    for name in expected:
+        png = out / "figures" / name
+        assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 10_000
+
+
+def test_plot_of_a_bad_directory_is_a_clear_error(tmp_path, capsys):
+    """A directory without results gives one clear line and exit 2."""
+    assert main(["plot", str(tmp_path)]) == 2
+    assert "not a spotsim results directory" in capsys.readouterr().err

@@ -1,4 +1,4 @@
-"""`spotsim` command line: a thin layer over the library.
+"""`spotsim` command line (run, validate, plot): a thin layer over the library.
 
 Exit codes: 0 completed (or valid), 2 bad input, 3 incomplete, 4 diverged, 130 interrupted.
 """
@@ -29,6 +29,8 @@ def _parser() -> argparse.ArgumentParser:
     val = sub.add_parser("validate", help="print the resolved scenario, or every problem in it")
     val.add_argument("config")
     val.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE")
+    plot = sub.add_parser("plot", help="regenerate the figures of a run's results directory")
+    plot.add_argument("result_dir")
     return p
 
 
@@ -51,6 +53,16 @@ def _load(path: Path, overrides):
 
 def main(argv=None) -> int:
     args = _parser().parse_args(argv)
+    if args.command == "plot":
+        from .results import replot
+
+        try:
+            for figure in replot(args.result_dir):
+                print(figure)
+        except SpotsimError as e:
+            print(e, file=sys.stderr)
+            return 2
+        return 0
     path = _config_path(getattr(args, "config", None))
     try:
         scenario, model = _load(path, args.set)

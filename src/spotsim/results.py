@@ -87,8 +87,21 @@ def plot_figures(ts: dict, fig_dir: Path, title: str) -> None:
     fig_dir.mkdir(parents=True, exist_ok=True)
     if "robot_centroid_m" in ts:
         _dual_arm_figures(ts, fig_dir, title, plt)
-    for name, key, unit, label in (("offset", "offset_mm", "mm", "offset of $O_b$ from $O_a$"),
-                                   ("contact_force", "force_N", "N", "combined contact force")):
+    fig, ax = plt.subplots(figsize=(7, 3.5))
+    ax.plot(ts["t"], ts["pairs_slipping"], lw=1, color="tab:red", label="slipping")
+    ax.plot(ts["t"], ts["pairs_sticking"], lw=1, color="tab:cyan", label="sticking")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("sphere pairs in contact")
+    ax.set_title(f"{title}: active pairs by state (Fig. 9)")
+    ax.grid(alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(fig_dir / "active_pairs.png", dpi=110)
+    plt.close(fig)
+    for name, key, unit, label in (("offset", "offset_mm", "mm", "offset of $O_b$ from $O_a$ (Fig. 11)"),
+                                   ("contact_force", "force_N", "N", "combined contact force (Fig. 12)"),
+                                   ("contact_torque", "torque_Nm", "N m",
+                                    "combined contact torque about the module centroid")):
         fig, axes = plt.subplots(3, 1, sharex=True, figsize=(7, 6))
         for i, ax in enumerate(axes):
             ax.plot(ts["t"], ts[key][:, i], lw=1)
@@ -135,3 +148,26 @@ def _dual_arm_figures(ts: dict, fig_dir: Path, title: str, plt) -> None:
     fig.tight_layout()
     fig.savefig(fig_dir / "contact_forces_torques.png", dpi=110)
     plt.close(fig)
+
+
+FIGURES_SINGLE = ("offset.png", "contact_force.png", "contact_torque.png", "active_pairs.png")
+FIGURES_DUAL = FIGURES_SINGLE + ("robot_centroid_displacement.png", "contact_forces_torques.png")
+
+
+def replot(result_dir: str | Path) -> list[Path]:
+    """Regenerate a results directory's figures from its timeseries.npz and summary.json."""
+    from .errors import SpotsimError
+
+    d = Path(result_dir)
+    try:
+        summary = json.loads((d / SUMMARY).read_text())
+        with np.load(d / "timeseries.npz") as f:
+            ts = {k: f[k] for k in f.files}
+    except (OSError, ValueError, KeyError) as e:
+        raise SpotsimError(f"{d}: not a spotsim results directory (needs {SUMMARY} and "
+                           f"timeseries.npz): {e}") from e
+    if len(ts.get("t", ())) < 2:
+        raise SpotsimError(f"{d}: the run recorded fewer than two samples; nothing to plot")
+    plot_figures(ts, d / "figures", summary.get("scenario", d.name))
+    names = FIGURES_DUAL if "robot_centroid_m" in ts else FIGURES_SINGLE
+    return [d / "figures" / n for n in names]
