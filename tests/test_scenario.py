@@ -159,3 +159,11 @@ def test_broken_dual_arm_config_gives_one_clear_error(name, tmp_path, capsys):
     assert main(["validate", str(path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and expected in err[0], err
+
+
+def test_unwritable_results_directory_is_a_clear_error(tmp_path, capsys):
+    """An --out that cannot be created gives one line and exit 2, before anything runs."""
+    blocker = tmp_path / "file"
+    blocker.write_text("not a directory")
+    assert main(["run", str(CASE_I), "--out", str(blocker / "out"), "--quiet"]) == 2
+    assert "cannot write results" in capsys.readouterr().err

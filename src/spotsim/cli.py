@@ -85,10 +85,18 @@ def main(argv=None) -> int:
     from .run import simulate
 
     out = Path(args.out) if args.out else Path("results") / scenario.name
-    out.mkdir(parents=True, exist_ok=True)
-    clear_summary(out)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        clear_summary(out)
+    except OSError as e:
+        print(f"{out}: cannot write results: {e.strerror}", file=sys.stderr)
+        return 2
     result = simulate(scenario, model=model, progress=not args.quiet, source=str(path))
-    write_results(result, out, figures=not args.no_figures)
+    try:
+        write_results(result, out, figures=not args.no_figures)
+    except OSError as e:
+        print(f"{out}: cannot write results: {e.strerror}", file=sys.stderr)
+        return 2
     s = result.summary
     print(f"{s['scenario']}: {s['status']} - {s['message']}")
     for g in s["grasps"]:
