@@ -8,15 +8,15 @@ import numpy as np
 import pinocchio as pin
 
 from . import assets
+from .scenario import TABLE6_ARM1, TABLE6_ARM2
 
 DUAL_ARM_XACRO = assets.URDF_DIR / "dual_arm_scene.urdf.xacro"
 ARM = "ur3"
 ARM_JOINTS = ("shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint", "wrist_1_joint",
               "wrist_2_joint", "wrist_3_joint")
 FINGERS = ("ee1_finger_upper", "ee1_finger_lower", "ee2_finger_upper", "ee2_finger_lower")
-#: Table 6: joint states of the arms during the grasps, rad.
-TABLE6 = {"arm1_": (0.556, 0.481, 1.41, 2.40e-7, 1.25, 0.555),
-          "arm2_": (-0.511, 0.998, 0.479, 4.00e-6, 1.66, -0.511)}
+#: Table 6: joint states of the arms during the grasps, rad, by arm prefix.
+TABLE6 = {"arm1_": TABLE6_ARM1, "arm2_": TABLE6_ARM2}
 
 
 @dataclass(frozen=True)

@@ -192,6 +192,7 @@ class Scenario:
     completion: Completion = key(Completion())
 
 
+#: Table 6: the arms' joint states during the grasps, rad.
 TABLE6_ARM1 = (0.556, 0.481, 1.41, 2.40e-7, 1.25, 0.555)
 TABLE6_ARM2 = (-0.511, 0.998, 0.479, 4.00e-6, 1.66, -0.511)
 
