@@ -16,6 +16,11 @@ PAPER_FIRST, PAPER_SECOND = np.array([-0.637, -0.582, 0.146]), np.array([-0.173,
 #: The paper gives neither its robot's geometry nor its modules' placement: spotsim's
 #: displacement magnitudes are held to the paper's within a factor of five, no tighter.
 MAGNITUDE_BAND = 5.0
+#: Halving dt halves a first-order error; the stick-slip path itself shifts a little with dt,
+#: so the measured ratio (2.09) is held to 2 within +25 % / -20 %.
+FIRST_ORDER_RATIO = (1.6, 2.5)
+#: The negative control must break angular momentum by orders of magnitude, not by noise.
+NEGATIVE_CONTROL_FACTOR = 1000
 
 
 @pytest.fixture(scope="module")
@@ -80,7 +85,7 @@ def test_angular_momentum_error_halves_with_the_step(window):
     """Symplectic Euler is first order in rotation: halving dt halves the angular drift."""
     coarse = window(simulation={"substeps": 10})["angular_drift_rel"]
     fine = window(simulation={"substeps": 20})["angular_drift_rel"]
-    assert 1.6 <= coarse / fine <= 2.5
+    assert FIRST_ORDER_RATIO[0] <= coarse / fine <= FIRST_ORDER_RATIO[1]
 
 
 @pytest.mark.slow
@@ -89,4 +94,4 @@ def test_forces_at_sphere_centres_break_angular_momentum(window):
     leaves a torque imbalance that shows up a thousandfold in angular momentum."""
     common = window()["angular_drift_rel"]
     centres = window(contact={"force_point": "sphere_centres"})["angular_drift_rel"]
-    assert centres > 1000 * common
+    assert centres > NEGATIVE_CONTROL_FACTOR * common
