@@ -59,7 +59,9 @@ class GraspPhase:
             self.times[SELF_CENTRING] = t
         if self.phase != SELF_CENTRING:
             return
-        if n_pairs > 0 and all(self.criteria(stalled, contact_speed, net_force).values()):
+        # the criteria, tested directly: the labelled dict of criteria() is for messages
+        if (n_pairs > 0 and stalled and contact_speed <= self.max_contact_speed
+                and net_force <= self.max_net_force):
             if self._held_since is None:
                 self._held_since = t
             if t - self._held_since >= self.hold_s - 1e-12:
