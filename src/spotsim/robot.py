@@ -79,8 +79,3 @@ def fit_base(args: dict | None = None) -> dict[str, float]:
                          f"inertia eigenvalues {eig}")
     return {"base_mass_kg": m_b, "base_ixx": I_b[0, 0], "base_iyy": I_b[1, 1], "base_izz": I_b[2, 2],
             "base_ixy": I_b[0, 1], "base_ixz": I_b[0, 2], "base_iyz": I_b[1, 2]}
-
-
-def principal_about_centroid(inertia: pin.Inertia) -> np.ndarray:
-    """Diagonal of a body's inertia about its centroid, in its frame's axes, kg m^2."""
-    return np.diag(inertia.inertia).copy()

@@ -14,6 +14,7 @@ from .integrators import make_integrator
 from .model import Model, build_model, grasp_frame, groove_frame
 from .scenario import tolerance_warnings
 from .step import StateOverflow, make_data, step
+from .weld import twist_for_momentum, world_momentum
 
 COMPLETED, INCOMPLETE, DIVERGED, INTERRUPTED = "completed", "incomplete", "diverged", "interrupted"
 
@@ -47,7 +48,7 @@ def body_momentum_W(model: Model, data, j: int) -> pin.Force:
 
     Reads the kinematics in data.pin_data: call refresh_kinematics first.
     """
-    return data.pin_data.oMi[j].act(model.pin_model.inertias[j] * data.pin_data.v[j])
+    return world_momentum(data.pin_data.oMi[j], model.pin_model.inertias[j], data.pin_data.v[j])
 
 
 def free_momentum_W(model: Model, data) -> tuple[np.ndarray, np.ndarray, float, float]:
@@ -189,9 +190,9 @@ def weld(model: Model, data, source: str):
     r_old, m_old = model.robot_joint, model.modules[k].joint
     h_W = body_momentum_W(model, data, r_old) + body_momentum_W(model, data, m_old)
     r_new = new.robot_joint
-    h_r = data.pin_data.oMi[r_old].actInv(h_W)  # the robot's frame is kept by the weld
     iv = nm.idx_vs[r_new]
-    new_data.v[iv:iv + 6] = np.linalg.solve(nm.inertias[r_new].matrix(), h_r.vector)
+    # the robot's frame is kept by the weld; its new inertia is the composite's
+    new_data.v[iv:iv + 6] = twist_for_momentum(data.pin_data.oMi[r_old], nm.inertias[r_new], h_W).vector
     new_data.t = data.t
     new_data.phases, new_data.active = data.phases, data.active + 1
     new_data.drives = data.drives

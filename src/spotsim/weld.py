@@ -17,19 +17,19 @@ def world_momentum(M_WB: pin.SE3, inertia: pin.Inertia, v_B: pin.Motion) -> pin.
     return M_WB.act(inertia * v_B)
 
 
+def twist_for_momentum(M_WA: pin.SE3, inertia_A: pin.Inertia, h_W: pin.Force) -> pin.Motion:
+    """The twist, in frame A, that gives a body of inertia `inertia_A` (frame A) the world
+    momentum h_W: Y^-1 h, both in A."""
+    return pin.Motion(np.linalg.solve(inertia_A.matrix(), M_WA.actInv(h_W).vector))
+
+
 def merged_twist(M_WA: pin.SE3, inertia_A: pin.Inertia, v_A: pin.Motion,
                  M_WB: pin.SE3, inertia_B: pin.Inertia, v_B: pin.Motion) -> tuple[pin.Inertia, pin.Motion]:
     """Composite inertia (in A's frame) and the twist of A's frame that keep A's and B's momentum.
 
-    Y = Y_A + Y_B in world; the composite twist is Y^-1 (h_A + h_B). Returned in A's frame, the
-    frame the composite keeps.
+    Y = Y_A + Y_B; the composite twist is Y^-1 (h_A + h_B). Returned in A's frame, the frame
+    the composite keeps.
     """
-    Y_W = M_WA.act(inertia_A) + M_WB.act(inertia_B)
+    Y_A = M_WA.actInv(M_WA.act(inertia_A) + M_WB.act(inertia_B))
     h_W = world_momentum(M_WA, inertia_A, v_A) + world_momentum(M_WB, inertia_B, v_B)
-    V_W = pin.Motion(np.linalg.solve(Y_W.matrix(), h_W.vector))
-    return M_WA.actInv(Y_W), M_WA.actInv(V_W)
-
-
-def composite_about_centroid(inertia: pin.Inertia) -> tuple[float, np.ndarray]:
-    """Mass and inertia matrix about the centroid (frame axes) of a body, kg and kg m^2."""
-    return inertia.mass, inertia.inertia.copy()
+    return Y_A, twist_for_momentum(M_WA, Y_A, h_W)
