@@ -59,9 +59,7 @@ class GraspPhase:
             self.times[SELF_CENTRING] = t
         if self.phase != SELF_CENTRING:
             return
-        # the criteria, tested directly: the labelled dict of criteria() is for messages
-        if (n_pairs > 0 and stalled and contact_speed <= self.max_contact_speed
-                and net_force <= self.max_net_force):
+        if n_pairs > 0 and all(self.checks(stalled, contact_speed, net_force)):
             if self._held_since is None:
                 self._held_since = t
             if t - self._held_since >= self.hold_s - 1e-12:
@@ -70,10 +68,15 @@ class GraspPhase:
         else:
             self._held_since = None
 
+    def checks(self, stalled: bool, contact_speed: float, net_force: float) -> tuple[bool, bool, bool]:
+        """Whether each completion criterion holds now (labels: `labels()`)."""
+        return (bool(stalled), contact_speed <= self.max_contact_speed, net_force <= self.max_net_force)
+
+    def labels(self) -> tuple[str, str, str]:
+        return ("finger drive stalled at the grasp load",
+                f"contact speeds <= {self.max_contact_speed:g} m/s",
+                f"net contact force <= {self.max_net_force:g} N")
+
     def criteria(self, stalled: bool, contact_speed: float, net_force: float) -> dict[str, bool]:
-        """Each completion criterion and whether it holds now."""
-        return {
-            "finger drive stalled at the grasp load": bool(stalled),
-            f"contact speeds <= {self.max_contact_speed:g} m/s": contact_speed <= self.max_contact_speed,
-            f"net contact force <= {self.max_net_force:g} N": net_force <= self.max_net_force,
-        }
+        """Each completion criterion, labelled, and whether it holds now (for messages)."""
+        return dict(zip(self.labels(), self.checks(stalled, contact_speed, net_force), strict=True))

@@ -37,9 +37,13 @@ def centroid_acceleration(model: pin.Model, j: int, q, v, a):
     """Classical acceleration of free body j's centroid in world, from Pinocchio's spatial a."""
     iq, iv = model.idx_qs[j], model.idx_vs[j]
     R = (model.jointPlacements[j] * pin.XYZQUATToSE3(q[iq:iq + 7])).rotation
-    c = model.inertias[j].lever
-    v_O, w = v[iv:iv + 3], v[iv + 3:iv + 6]
-    a_O, alpha = a[iv:iv + 3], a[iv + 3:iv + 6]
+    return _centroid_acceleration(R, model.inertias[j].lever, v[iv:iv + 3], v[iv + 3:iv + 6],
+                                  a[iv:iv + 3], a[iv + 3:iv + 6])
+
+
+def _centroid_acceleration(R, c, v_O, w, a_O, alpha):
+    """d/dt of R (v_O + w x c): the centroid's world acceleration from the body-frame twist
+    (v_O, w) and its derivative (a_O, alpha); c is the centroid in the body frame."""
     return R @ (a_O + cross(w, v_O) + cross(alpha, c) + cross(w, cross(w, c)))
 
 
@@ -76,10 +80,8 @@ class SymplecticEuler:
         for j in self.free:
             iv = model.idx_vs[j]
             p_G, v_G, R, w = centroid_state(model, j, q, v)
-            c = model.inertias[j].lever
-            v_O, a_O, alpha = v[iv:iv + 3], a[iv:iv + 3], a[iv + 3:iv + 6]
-            # classical acceleration of the centroid in world (see centroid_acceleration)
-            a_G = R @ (a_O + cross(w, v_O) + cross(alpha, c) + cross(w, cross(w, c)))
+            a_G = _centroid_acceleration(R, model.inertias[j].lever, v[iv:iv + 3], w,
+                                         a[iv:iv + 3], a[iv + 3:iv + 6])
             v_G = v_G + h * a_G
             w = v_new[iv + 3:iv + 6]
             set_centroid_state(model, j, q_new, v_new, p_G + h * v_G, v_G, R @ pin.exp3(h * w), w)

@@ -133,6 +133,8 @@ class Model:
     free_joints: tuple[int, ...] = field(default=())
     # (joint, farthest contact sphere from its origin, m): bounds how far its spheres move
     sphere_reach: tuple[tuple[int, float], ...] = field(default=())
+    # the fingers of each end-effector's drive, as index arrays into `fingers`
+    drive_fingers: tuple[np.ndarray, ...] = field(default=())
 
     @property
     def module_joint(self) -> int:
@@ -325,7 +327,9 @@ def build_model(s, source: str = "<scenario>", welded: dict | None = None) -> Mo
     return Model(s, spec, urdf, model, geom, tuple(end_effectors), tuple(modules), spec.grasps,
                  robot_joint, tuple(fingers), master_finger, axes[master_finger] if len(master_finger)
                  else np.zeros((0, 3)), finger_geoms, contact_joints, master, slave, tuple(pairs), maps,
-                 params, q0, np.zeros(model.nv), free, _sphere_reach(master, slave, fingers))
+                 params, q0, np.zeros(model.nv), free, _sphere_reach(master, slave, fingers),
+                 tuple(np.array([i for i, f in enumerate(fingers) if f.drive == e], dtype=int)
+                       for e in range(len(end_effectors))))
 
 
 def _sphere_reach(master, slave, fingers) -> tuple[tuple[int, float], ...]:

@@ -258,8 +258,8 @@ def wrenches(model: Model, data: Data, c: Contacts) -> list:
     data.joint_torque_O_W = T + np.cross(data.p_W, F)
     # the free bodies' external load: what a fixed body (joint 0) exerts on them; forces
     # between two free bodies are internal and are left out
-    k = len(c.key)
-    partner = np.concatenate([joint[k:], joint[:k]])
+    n = len(c.key)  # rows [0, n) are the masters' sides of the pairs, [n, 2n) the slaves'
+    partner = np.concatenate([joint[n:], joint[:n]])
     ext = (partner == 0) & (joint != 0)
     data.external_force_W = f[ext].sum(axis=0)
     data.external_torque_O_W = np.cross(points[ext], f[ext]).sum(axis=0)
@@ -285,10 +285,9 @@ def step(model: Model, data: Data, h: float, integrator) -> Contacts:
     # the active grasp's drive sets its fingers' rate for the coming step from this step's
     # loads; the other end-effectors hold
     active_ee = model.grasps[data.active][0]
-    for k, drive in enumerate(data.drives):
-        mine = [i for i, f in enumerate(model.fingers) if f.drive == k]
-        if mine:
-            data.opening_rate[mine] = drive.opening_rate(data.finger_load[mine]) if k == active_ee else 0.0
+    for e, (drive, mine) in enumerate(zip(data.drives, model.drive_fingers, strict=True)):
+        if len(mine):
+            data.opening_rate[mine] = drive.opening_rate(data.finger_load[mine]) if e == active_ee else 0.0
     data.opening += h * data.opening_rate
     data.t += h
     data.travel += h * travel_rate(model, data)
