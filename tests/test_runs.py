@@ -129,7 +129,7 @@ def test_results_are_written_atomically(case_I, tmp_path):
     assert not (tmp_path / "summary.json").exists()
     r = spotsim.simulate(spotsim.replace(case_I, simulation={"duration_s": 0.01}))
     spotsim.write_results(r, tmp_path, figures=False)
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["scenario.yaml", "summary.json",
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["replay.npz", "scenario.yaml", "summary.json",
                                                            "timeseries.csv", "timeseries.npz"]
 
 

@@ -15,6 +15,7 @@ from .run import Result
 from .scenario import to_yaml
 
 SUMMARY = "summary.json"
+REPLAY = "replay.npz"  # what `spotsim replay` draws besides the timeseries
 
 
 def _atomic_write(path: Path, text: str) -> None:
@@ -28,20 +29,28 @@ def _atomic_write(path: Path, text: str) -> None:
         raise
 
 
+def _atomic_npz(path: Path, arrays: dict) -> None:
+    tmp = path.with_name(f".{path.name}.tmp")
+    with open(tmp, "wb") as f:
+        np.savez_compressed(f, **arrays)
+    os.replace(tmp, path)
+
+
 def clear_summary(out_dir: Path) -> None:
     """Remove a previous run's summary before a new run writes into the same directory."""
     (Path(out_dir) / SUMMARY).unlink(missing_ok=True)
 
 
 def write_results(result: Result, out_dir: str | Path, figures: bool = True) -> Path:
-    """Write summary.json, timeseries.npz/.csv, scenario.yaml and figures/ into `out_dir`."""
+    """Write summary.json, timeseries.npz/.csv, replay.npz, scenario.yaml and figures/ into
+    `out_dir`."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     clear_summary(out)
     ts = result.timeseries
-    with open(out / ".timeseries.npz.tmp", "wb") as f:
-        np.savez_compressed(f, **ts)
-    os.replace(out / ".timeseries.npz.tmp", out / "timeseries.npz")
+    _atomic_npz(out / "timeseries.npz", ts)
+    if result.replay:
+        _atomic_npz(out / REPLAY, result.replay)
     _atomic_write(out / "timeseries.csv", _csv(ts, result.summary.get("fingers", [])))
     _atomic_write(out / "scenario.yaml", to_yaml(result.scenario))
     if figures and len(ts["t"]) > 1:
