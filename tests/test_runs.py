@@ -105,13 +105,12 @@ def test_interrupted_run_keeps_what_it_recorded(case_I, tmp_path, monkeypatch):
     """Ctrl-C ends the run as interrupted; its summary says so and is not a completed one."""
     import spotsim.run as run
 
-    real_step, calls = run.step, {"n": 0}
+    real_step = run.step
 
-    def step_then_interrupt(*args):
-        calls["n"] += 1
-        if calls["n"] > 500:
+    def step_then_interrupt(model, data, *args):
+        if data.t >= 0.05 - 1e-9:  # Ctrl-C once 50 ms are recorded
             raise KeyboardInterrupt
-        return real_step(*args)
+        return real_step(model, data, *args)
 
     monkeypatch.setattr(run, "step", step_then_interrupt)
     r = spotsim.simulate(case_I)

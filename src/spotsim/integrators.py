@@ -12,52 +12,81 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
+from .bodies import body_pose, free_bodies, quat_times_exp, quat_to_rotation
+from .jit import njit
 
-def cross(a, b):
-    """a x b for two 3-vectors; np.cross costs ~10 us a call on this size."""
+
+@njit
+def _cross(a, b):
+    """a x b for two 3-vectors."""
     return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
 
 
-def free_flyers(model: pin.Model) -> list[int]:
-    """The joints of `model` that are free-flyers."""
-    return [j for j in range(1, model.njoints) if model.joints[j].shortname() == "JointModelFreeFlyer"]
+@njit
+def _centroid_state(bodies, b, q, v):
+    """World centroid position and velocity, rotation, and body angular velocity of free body b."""
+    iv = bodies.idx_v[b]
+    R, p = body_pose(bodies, b, q)
+    c = bodies.lever[b]
+    v_O, w = v[iv:iv + 3], v[iv + 3:iv + 6]
+    return p + R @ c, R @ (v_O + _cross(w, c)), R, w.copy()
+
+
+@njit
+def _centroid_acceleration(R, c, v_O, w, a_O, alpha):
+    """d/dt of R (v_O + w x c): the centroid's world acceleration from the body-frame twist
+    (v_O, w) and its derivative (a_O, alpha); c is the centroid in the body frame."""
+    return R @ (a_O + _cross(w, v_O) + _cross(alpha, c) + _cross(w, _cross(w, c)))
+
+
+@njit
+def _set_centroid_state(bodies, b, q, v, p_G, v_G, quat, w):
+    """Write free body b's configuration and velocity from its world centroid state and its
+    joint's quaternion (x, y, z, w), in place."""
+    iq, iv = bodies.idx_q[b], bodies.idx_v[b]
+    c = bodies.lever[b]
+    Rq = quat_to_rotation(quat[0], quat[1], quat[2], quat[3])
+    R_P = bodies.R_P[b]
+    # p_G = p_P + R_P (x + Rq c)
+    q[iq:iq + 3] = R_P.T @ (p_G - bodies.p_P[b]) - Rq @ c
+    q[iq + 3:iq + 7] = quat
+    v[iv:iv + 3] = (R_P @ Rq).T @ v_G - _cross(w, c)
+    v[iv + 3:iv + 6] = w
+
+
+@njit
+def _symplectic_euler_bodies(bodies, q, v, a, h, q_new, v_new):
+    """The free bodies' part of a symplectic Euler step, into q_new, v_new."""
+    for b in range(bodies.joint.shape[0]):
+        iq, iv = bodies.idx_q[b], bodies.idx_v[b]
+        p_G, v_G, R, w = _centroid_state(bodies, b, q, v)
+        a_G = _centroid_acceleration(R, bodies.lever[b], v[iv:iv + 3], w, a[iv:iv + 3], a[iv + 3:iv + 6])
+        v_G = v_G + h * a_G
+        w = w + h * a[iv + 3:iv + 6]
+        # a unit quaternion, or the round-off in R compounds from step to step
+        quat = quat_times_exp(q[iq + 3:iq + 7], h * w[0], h * w[1], h * w[2])
+        _set_centroid_state(bodies, b, q_new, v_new, p_G + h * v_G, v_G, quat, w)
+
+
+@njit
+def _symplectic_euler(bodies, q, v, a, h):
+    """A symplectic Euler step of a model made of free bodies only: new (q, v)."""
+    q_new, v_new = q.copy(), v + h * a
+    _symplectic_euler_bodies(bodies, q, v, a, h, q_new, v_new)
+    return q_new, v_new
 
 
 def centroid_state(model: pin.Model, j: int, q, v):
     """World centroid position and velocity, rotation, and body angular velocity of free body j."""
-    iq, iv = model.idx_qs[j], model.idx_vs[j]
-    M = model.jointPlacements[j] * pin.XYZQUATToSE3(q[iq:iq + 7])
-    c = model.inertias[j].lever
-    v_O, w = v[iv:iv + 3], v[iv + 3:iv + 6]
-    R = M.rotation
-    return M.translation + R @ c, R @ (v_O + cross(w, c)), R, w
+    bodies = free_bodies(model)
+    return _centroid_state(bodies, list(bodies.joint).index(j), np.asarray(q, float), np.asarray(v, float))
 
 
 def centroid_acceleration(model: pin.Model, j: int, q, v, a):
     """Classical acceleration of free body j's centroid in world, from Pinocchio's spatial a."""
-    iq, iv = model.idx_qs[j], model.idx_vs[j]
-    R = (model.jointPlacements[j] * pin.XYZQUATToSE3(q[iq:iq + 7])).rotation
-    return _centroid_acceleration(R, model.inertias[j].lever, v[iv:iv + 3], v[iv + 3:iv + 6],
-                                  a[iv:iv + 3], a[iv + 3:iv + 6])
-
-
-def _centroid_acceleration(R, c, v_O, w, a_O, alpha):
-    """d/dt of R (v_O + w x c): the centroid's world acceleration from the body-frame twist
-    (v_O, w) and its derivative (a_O, alpha); c is the centroid in the body frame."""
-    return R @ (a_O + cross(w, v_O) + cross(alpha, c) + cross(w, cross(w, c)))
-
-
-def set_centroid_state(model: pin.Model, j: int, q, v, p_G, v_G, R, w) -> None:
-    """Write free body j's configuration and velocity from its world centroid state, in place."""
-    iq, iv = model.idx_qs[j], model.idx_vs[j]
-    c = model.inertias[j].lever
-    M = model.jointPlacements[j].inverse() * pin.SE3(R, p_G - R @ c)
-    xyzquat = pin.SE3ToXYZQUAT(M)
-    # a unit quaternion, or the round-off in R compounds from step to step
-    xyzquat[3:] /= np.linalg.norm(xyzquat[3:])
-    q[iq:iq + 7] = xyzquat
-    v[iv:iv + 3] = R.T @ v_G - cross(w, c)
-    v[iv + 3:iv + 6] = w
+    iv = model.idx_vs[j]
+    _, _, R, w = centroid_state(model, j, q, v)
+    return _centroid_acceleration(R, model.inertias[j].lever, v[iv:iv + 3], w, a[iv:iv + 3], a[iv + 3:iv + 6])
 
 
 class SymplecticEuler:
@@ -71,20 +100,16 @@ class SymplecticEuler:
     order = 1
 
     def __init__(self, model: pin.Model):
-        self.free = free_flyers(model)
+        self.bodies = free_bodies(model)
+        self.only_free = len(self.bodies.joint) * 7 == model.nq
 
     def step(self, model: pin.Model, q: np.ndarray, v: np.ndarray, a: np.ndarray,
              h: float) -> tuple[np.ndarray, np.ndarray]:
+        if self.only_free:
+            return _symplectic_euler(self.bodies, q, v, a, h)
         v_new = v + h * a
-        q_new = q.copy() if len(self.free) * 7 == model.nq else pin.integrate(model, q, h * v_new)
-        for j in self.free:
-            iv = model.idx_vs[j]
-            p_G, v_G, R, w = centroid_state(model, j, q, v)
-            a_G = _centroid_acceleration(R, model.inertias[j].lever, v[iv:iv + 3], w,
-                                         a[iv:iv + 3], a[iv + 3:iv + 6])
-            v_G = v_G + h * a_G
-            w = v_new[iv + 3:iv + 6]
-            set_centroid_state(model, j, q_new, v_new, p_G + h * v_G, v_G, R @ pin.exp3(h * w), w)
+        q_new = pin.integrate(model, q, h * v_new)
+        _symplectic_euler_bodies(self.bodies, q, v, a, h, q_new, v_new)
         return q_new, v_new
 
 

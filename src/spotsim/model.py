@@ -12,6 +12,7 @@ module(s) and, on the free-flying robot, the robot.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, fields
+from functools import cached_property
 
 import coal
 import numpy as np
@@ -21,7 +22,8 @@ from . import assets
 from .contact.detection import cutoff_distance
 from .contact.friction import BristleParams
 from .contact.normal import damping_factor, hertz_stiffness
-from .contact.search import FacePair, LayerSet, SlaveGrid
+from .bodies import FreeBodies, free_bodies
+from .contact.search import FacePair, FaceTable, LayerSet, SlaveGrid, face_table
 from .errors import ModelError, ScenarioError
 from .scenario import DualArmScenario, Scenario
 from .spheres import contact_faces, sphere_layer
@@ -135,6 +137,51 @@ class Model:
     sphere_reach: tuple[tuple[int, float], ...] = field(default=())
     # the fingers of each end-effector's drive, as index arrays into `fingers`
     drive_fingers: tuple[np.ndarray, ...] = field(default=())
+
+    @cached_property
+    def face_table(self) -> FaceTable:
+        """`face_pairs` stacked as arrays, for the compiled search."""
+        return face_table(self.face_pairs)
+
+    @cached_property
+    def contact_kernel_args(self) -> tuple:
+        """The model's arguments of the compiled contact stage (`step.contact_kernel_args`)."""
+        from .step import contact_kernel_args
+
+        return contact_kernel_args(self)
+
+    @cached_property
+    def watch_args(self) -> list[tuple]:
+        """Per grasp, the end-effector's joint and grasp-frame rotation, the module's joint and
+        centroid: the frames `contact.forces.contact_summary` reads."""
+        out = []
+        for ee, k in self.grasps:
+            e, j = self.end_effectors[ee], self.modules[k].joint
+            out.append((e.joint, np.ascontiguousarray(e.placement.rotation), j,
+                        np.array(self.pin_model.inertias[j].lever)))
+        return out
+
+    @cached_property
+    def bodies(self) -> FreeBodies:
+        """The free bodies as arrays, for the compiled kinematics and integrators."""
+        return free_bodies(self.pin_model)
+
+    @cached_property
+    def finger_parent(self) -> np.ndarray:
+        """(n_fingers,) the joint of the body each finger is mounted on."""
+        return np.array([f.parent_joint for f in self.fingers], dtype=np.int64)
+
+    @cached_property
+    def finger_axis_J(self) -> np.ndarray:
+        """(n_fingers, 3) each finger's opening axis in that joint's frame."""
+        return np.array([f.axis_J for f in self.fingers], dtype=float).reshape(-1, 3)
+
+    @cached_property
+    def reach_table(self) -> tuple[np.ndarray, np.ndarray]:
+        """`sphere_reach` of the free bodies as (row in `bodies`, reach in m) arrays."""
+        rows = {int(j): b for b, j in enumerate(self.bodies.joint)}
+        pairs = [(rows[j], r) for j, r in self.sphere_reach if j != 0]
+        return (np.array([b for b, _ in pairs], dtype=np.int64), np.array([r for _, r in pairs], dtype=float))
 
     @property
     def module_joint(self) -> int:
@@ -299,6 +346,10 @@ def build_model(s, source: str = "<scenario>", welded: dict | None = None) -> Mo
     module_prefixes = [modules[k].prefix for k in active]
     layers = _contact_layers(model, urdf, finger_links, module_prefixes, params)
     master, master_finger, finger_geoms, slave, pairs, maps, geom, contact_joints = layers
+    movable = [j for j in contact_joints if j and model.joints[j].shortname() != "JointModelFreeFlyer"]
+    if movable:  # the compiled kinematics reads contact bodies' poses from free-flyers only
+        raise ModelError(f"contact faces on joints {[model.names[j] for j in movable]}, which are neither "
+                         "fixed nor free-flyers: lock them (reduced away) or make them free")
 
     q0 = pin.neutral(model)
     data = model.createData()

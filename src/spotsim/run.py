@@ -2,19 +2,21 @@
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
 import pinocchio as pin
 
+from .contact.forces import raise_peaks
 from .contact.friction import SLIPPING, STICKING
 from .grasp import COMPLETE, PHASES, SELF_CENTRING
 from .contact.search import FacePair
 from .integrators import make_integrator
 from .model import Model, build_model, grasp_frame, groove_frame
 from .scenario import tolerance_warnings
-from .step import StateOverflow, make_data, step
+from .step import StateOverflow, free_flight, make_data, step
 from .weld import twist_for_momentum, world_momentum
 
 COMPLETED, INCOMPLETE, DIVERGED, INTERRUPTED = "completed", "incomplete", "diverged", "interrupted"
@@ -65,7 +67,7 @@ def free_momentum_W(model: Model, data) -> tuple[np.ndarray, np.ndarray, float, 
     for j in model.free_joints:
         h = body_momentum_W(model, data, j)
         P, L = P + h.linear, L + h.angular
-        p_max, l_max = max(p_max, np.linalg.norm(h.linear)), max(l_max, np.linalg.norm(h.angular))
+        p_max, l_max = max(p_max, math.hypot(*h.linear)), max(l_max, math.hypot(*h.angular))
     return P, L, p_max, l_max
 
 
@@ -100,8 +102,8 @@ class Recorder:
                 self.rows[f"{mod.name}_quat_xyzw"] = []
             for ee in model.end_effectors:
                 self.rows[f"{ee.name}_pos_m"] = []
-        self.peaks = [dict(force=np.zeros(3), torque=np.zeros(3), force_norm=0.0, torque_norm=0.0, pairs=0)
-                      for _ in model.grasps]
+        # norms: the peak |force| and |torque|
+        self.peaks = [dict(force=np.zeros(3), torque=np.zeros(3), norms=np.zeros(2), pairs=0) for _ in model.grasps]
         self.force_a = np.zeros(3)
         self.torque_a = np.zeros(3)
         # the replay's contact snapshots, every `replay_every`-th sample: spheres by their index
@@ -112,27 +114,14 @@ class Recorder:
             "row", "pairs", "master", "slave", "state", "faces_in_range", "force_W")}
         self._ids = (None, None)  # (model, its SphereIds in the first model)
 
-
-    def wrench_in_a(self, model: Model, data):
-        """Combined contact force on the active module and torque about its centroid, O_a axes."""
-        ee, k = model.grasps[data.active]
-        j = model.modules[k].joint
-        r_G = data.pin_data.oMi[j].act(model.pin_model.inertias[j].lever)
-        F_W = data.module_force_W(model)
-        tau_G = data.module_torque_O_W(model) - np.cross(r_G, F_W)
-        R = grasp_frame(model, data.pin_data, ee).rotation
-        return R.T @ F_W, R.T @ tau_G
-
     def substep(self, model: Model, data, n_pairs: int) -> None:
         if n_pairs == 0:
             self.force_a, self.torque_a = np.zeros(3), np.zeros(3)
             return
-        self.force_a, self.torque_a = self.wrench_in_a(model, data)
+        # the combined wrench on the active module, in O_a: force, and moment about its centroid
+        self.force_a, self.torque_a = data.summary[:3], data.summary[3:6]
         p = self.peaks[data.active]
-        p["force"] = np.maximum(p["force"], np.abs(self.force_a))
-        p["torque"] = np.maximum(p["torque"], np.abs(self.torque_a))
-        p["force_norm"] = max(p["force_norm"], float(np.linalg.norm(self.force_a)))
-        p["torque_norm"] = max(p["torque_norm"], float(np.linalg.norm(self.torque_a)))
+        raise_peaks(p["force"], p["torque"], p["norms"], data.summary)
         p["pairs"] = max(p["pairs"], n_pairs)
 
     def sample(self, model: Model, data) -> None:
@@ -272,7 +261,6 @@ class SphereIds:
         return np.asarray(near_pairs, dtype=np.int64)
 
 
-
 def weld(model: Model, data, source: str):
     """Weld the active grasp's module to its end-effector and return the new (model, data).
 
@@ -319,7 +307,7 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
     model = model or build_model(scenario, source)
     check_start(model, source)
     sim = scenario.simulation
-    h = sim.dt_s / sim.substeps
+    h_contact = sim.dt_s / sim.substeps
     n_records = int(round(sim.duration_s / sim.dt_s))
     integrator = make_integrator(sim.integrator, model.pin_model)
     data = make_data(model)
@@ -337,10 +325,14 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
     rec.sample(model, data)
     bar = _progress(n_records, progress)
     wall0 = time.perf_counter()
-    steps = 0
+    steps = free_steps = 0
     try:
         for _ in range(n_records):
-            for _ in range(sim.substeps):
+            # nothing can touch before the next record (zero gravity): one step to it; else
+            # the dynamics substeps
+            flight = not gravity and free_flight(model, data, sim.dt_s)
+            free_steps += flight
+            for h in (sim.dt_s,) if flight else (h_contact,) * sim.substeps:
                 try:
                     c = step(model, data, h, integrator)
                 except StateOverflow as e:
@@ -356,15 +348,16 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
                 if gravity:
                     for j in model.free_joints:
                         m_j = model.pin_model.inertias[j].mass
-                        r_G = data.pin_data.oMi[j].act(model.pin_model.inertias[j].lever)
+                        r_G = data.p_W[j] + data.R_W[j] @ model.pin_model.inertias[j].lever
                         J += h * m_j * g_W
                         JL += h * np.cross(r_G, m_j * g_W)
-                if n and c.phi.max() > max_phi:
+                if n and data.summary[7] > max_phi:
                     status = DIVERGED
-                    message = (f"penetration {c.phi.max() * 1e3:.3f} mm exceeds the sphere radius "
+                    message = (f"penetration {data.summary[7] * 1e3:.3f} mm exceeds the sphere radius "
                                f"{max_phi * 1e3:.3f} mm at t = {data.t:.4f} s")
                     break
-                if not (np.all(np.isfinite(data.q)) and np.all(np.isfinite(data.v))):
+                # a NaN or an infinity anywhere makes the sum non-finite
+                if not math.isfinite(data.q.sum() + data.v.sum()):
                     status = DIVERGED
                     message = f"state became non-finite at t = {data.t:.4f} s"
                     break
@@ -402,8 +395,8 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
             bar.close()
     wall = time.perf_counter() - wall0
     series = rec.arrays()
-    summary = _summary(scenario, model, data, rec, series, status, message, wall, steps, h, starts,
-                       welds, drift_lin / max(p_max, 1e-300), drift_ang / max(l_max, 1e-300))
+    summary = _summary(scenario, model, data, rec, series, status, message, wall, steps, free_steps,
+                       h_contact, starts, welds, drift_lin / max(p_max, 1e-300), drift_ang / max(l_max, 1e-300))
     return Result(scenario, model, summary, series, rec.replay_arrays())
 
 
@@ -432,7 +425,7 @@ def _why_incomplete(model: Model, data, limit: str) -> str:
             f"unmet at the end: {'; '.join(unmet) or 'criteria not held for hold_s'}")
 
 
-def _summary(s, model, data, rec, series, status, message, wall, steps, h, starts, welds,
+def _summary(s, model, data, rec, series, status, message, wall, steps, free_steps, h, starts, welds,
              drift_lin, drift_ang):
     grasps = []
     for g, (ee, k) in enumerate(model.grasps):
@@ -454,8 +447,8 @@ def _summary(s, model, data, rec, series, status, message, wall, steps, h, start
             "residual_rpy_deg": None if not done else [float(x) for x in series["rpy_deg"][last]],
             "peak_force_N": [float(x) for x in peak["force"]],
             "peak_torque_Nm": [float(x) for x in peak["torque"]],
-            "peak_force_norm_N": peak["force_norm"],
-            "peak_torque_norm_Nm": peak["torque_norm"],
+            "peak_force_norm_N": float(peak["norms"][0]),
+            "peak_torque_norm_Nm": float(peak["norms"][1]),
             "max_active_pairs": int(peak["pairs"]),
             "final_offset_mm": None if last is None else [float(x) for x in series["offset_mm"][last]],
         }
@@ -477,6 +470,8 @@ def _summary(s, model, data, rec, series, status, message, wall, steps, h, start
         "dt_s": s.simulation.dt_s,
         "substeps": s.simulation.substeps,
         "dynamics_dt_s": h,
+        # steps of a whole record interval, taken where no contact could start within it
+        "free_flight_steps": free_steps,
         "integrator": s.simulation.integrator,
         "broad_phase": s.contact.broad_phase,
         "phases": {"approach": 0.0, **data.phases[0].times} if len(model.grasps) == 1 else
@@ -507,10 +502,13 @@ def initial_contacts(model: Model) -> int:
     The literal search finds pairs at any depth, where the grid search only looks as deep
     as a run may go before it is declared diverged.
     """
-    from .step import kinematics, literal_pairs
+    from .step import broad_phase, kinematics, literal_pairs
 
     data = make_data(model)
     kinematics(model, data)
+    # spheres of faces whose patches coal finds apart by more than the margin do not touch
+    if model.params.broad_phase == "coal" and not len(broad_phase(model, data)):
+        return 0
     return len(literal_pairs(model, data)[0])
 
 

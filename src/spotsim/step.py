@@ -7,15 +7,16 @@ The run loop around the step is in `run.py`.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
 import pinocchio as pin
 
-from .contact.detection import contact_point, penetration
-from .contact.friction import bristle_step
-from .contact.normal import indentation, normal_force
+from .bodies import body_kinematics
+from .contact.forces import body_wrenches, contact_summary, pair_forces
 from .contact.search import all_pairs, grid_search
+from .jit import njit
 from .grasp import FingerDrive, GraspPhase
 from .errors import SimulationError
 from .model import Model
@@ -62,14 +63,16 @@ class Data:
     drives: list = None  # FingerDrive of each end-effector
     opening: np.ndarray = None  # (n_fingers,) each finger's opening, m
     opening_rate: np.ndarray = None  # (n_fingers,) its rate during the current step, m/s
-    C1_J: np.ndarray = None  # (|S1|, 3) master sphere centres at the current openings
     finger_load: np.ndarray = None
     contacts: Contacts = None
-    f_ext: list = None
+    f_ext: list = None  # (njoints,) pin.Force on each body, its joint's frame
+    f_views: list = None  # a writable view of each one's 6-vector
+    tau: np.ndarray = None  # joint torques: none, every joint is free or reduced away
+    summary: np.ndarray = field(default_factory=lambda: np.zeros(8))  # contact_summary of the step
     active: int = 0  # the grasp under way
     joint_force_W: np.ndarray = None  # (njoints, 3) contact force on each body, world
     joint_torque_O_W: np.ndarray = None  # (njoints, 3) its moment about the world origin
-    near_pairs: list = None  # face pairs coal kept at its last run
+    near_pairs: np.ndarray = None  # indices of the face pairs coal kept at its last run
     travel: float = np.inf  # bound on any two spheres' relative motion since then, m
     external_force_W: np.ndarray = field(default_factory=lambda: np.zeros(3))
     external_torque_O_W: np.ndarray = field(default_factory=lambda: np.zeros(3))
@@ -101,6 +104,7 @@ def make_data(model: Model) -> Data:
     phases = [GraspPhase(c.hold_s, c.max_contact_speed_m_s, c.max_net_force_N) for _ in model.grasps]
     nj = m.njoints
     n_f = len(model.fingers)
+    f_ext = [pin.Force.Zero() for _ in range(nj)]
     return Data(0.0, model.q0.copy(), model.v0.copy(), pdata, gdata, manager, phases,
                 np.tile(np.eye(3), (nj, 1, 1)), np.zeros((nj, 3)), np.zeros((nj, 3)),
                 np.zeros((nj, 3)), finger_load=np.zeros(n_f),
@@ -108,35 +112,36 @@ def make_data(model: Model) -> Data:
                         for _ in model.end_effectors],
                 joint_force_W=np.zeros((nj, 3)), joint_torque_O_W=np.zeros((nj, 3)),
                 opening=np.array([f.opening_start for f in model.fingers]),
-                opening_rate=np.zeros(n_f))
+                opening_rate=np.zeros(n_f), f_ext=f_ext, f_views=[f.vector for f in f_ext],
+                tau=np.zeros(m.nv))
 
 
 # ------------------------------------------------------------------------------ stages
 
 
 def kinematics(model: Model, data: Data) -> None:
-    """Placements and world velocities of the bodies that carry contact faces, and the finger
-    spheres' centres at the current openings."""
-    pin.forwardKinematics(model.pin_model, data.pin_data, data.q, data.v)
-    data.C1_J = model.master.centres_J + data.opening[model.master_finger, None] * model.master_axis_J
-    for j in model.contact_joints:
-        M = data.pin_data.oMi[j]
-        nu = data.pin_data.v[j]
-        data.R_W[j] = M.rotation
-        data.p_W[j] = M.translation
-        data.w_W[j] = M.rotation @ nu.angular
-        data.vo_W[j] = M.rotation @ nu.linear
+    """Placements and world velocities of the bodies that carry contact faces (all free
+    bodies; fixed ones stay at the identity)."""
+    body_kinematics(model.bodies, data.q, data.v, data.R_W, data.p_W, data.w_W, data.vo_W)
 
 
-def broad_phase(model: Model, data: Data):
-    """Face pairs whose patches lie within the security margin (coal), or all of them."""
+def finger_centres_J(model: Model, data: Data) -> np.ndarray:
+    """(|S1|, 3) the master spheres' centres at the current openings, their joints' frames, m."""
+    return model.master.centres_J + data.opening[model.master_finger, None] * model.master_axis_J
+
+
+def broad_phase(model: Model, data: Data) -> np.ndarray:
+    """Indices into model.face_pairs of the face pairs whose patches lie within the security
+    margin (coal), or of all of them."""
     if data.manager is None:
-        return model.face_pairs
+        return np.arange(len(model.face_pairs))
+    pin.forwardKinematics(model.pin_model, data.pin_data, data.q)
     pin.updateGeometryPlacements(model.pin_model, data.pin_data, model.geom_model, data.geom_data)
     for g, k in model.finger_geoms:  # finger patches slide along their axes by the opening
         f = model.fingers[k]
         M = data.geom_data.oMg[g]
-        M.translation = M.translation + data.R_W[f.parent_joint] @ f.axis_J * data.opening[k]
+        R = data.pin_data.oMi[f.parent_joint].rotation
+        M.translation = M.translation + R @ f.axis_J * data.opening[k]
         data.geom_data.oMg[g] = M
     try:
         data.manager.update(False)
@@ -145,19 +150,28 @@ def broad_phase(model: Model, data: Data):
         reason = str(e).strip().splitlines()[-1].removeprefix("message: ")
         raise StateOverflow(f"state left the representable range (coal: {reason})") from e
     results = data.geom_data.collisionResults
-    return [fp for fp in model.face_pairs if results[fp.geom_pair].isCollision()]
+    return np.array([i for i, fp in enumerate(model.face_pairs) if results[fp.geom_pair].isCollision()],
+                    dtype=np.int64)
 
 
-def candidate_pairs(model: Model, data: Data, face_pairs) -> tuple[np.ndarray, np.ndarray]:
-    """(master, slave) sphere pairs in contact: a local grid search inside each face pair."""
+def refresh_broad_phase(model: Model, data: Data) -> None:
+    """Run the broad phase anew: its face pairs start a fresh skin."""
+    data.near_pairs, data.travel = broad_phase(model, data), 0.0
+
+
+def candidate_pairs(model: Model, data: Data, near) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(master, slave, key) sphere pairs in contact, sorted by key: a local grid search inside
+    the face pairs `near` (indices into model.face_pairs)."""
     p = model.params
-    return grid_search(face_pairs, data.C1_J, model.master.normals_J, model.slave_maps, data.R_W,
-                       data.p_W, p.r1, p.r2, p.cutoff)
+    M = model.master
+    return grid_search(np.asarray(near, dtype=np.int64), model.face_table, M.centres_J, M.normals_J,
+                       model.master_finger, model.master_axis_J, data.opening,
+                       model.slave_maps, len(model.slave.centres_J), data.R_W, data.p_W, p.r1, p.r2, p.cutoff)
 
 
 def literal_pairs(model: Model, data: Data) -> tuple[np.ndarray, np.ndarray]:
     """The paper's search: every master sphere against every slave sphere (reference)."""
-    C1, N1 = model.master.to_world(data.R_W, data.p_W, data.C1_J)
+    C1, N1 = model.master.to_world(data.R_W, data.p_W, finger_centres_J(model, data))
     C2, N2 = model.slave.to_world(data.R_W, data.p_W)
     return all_pairs(model.master, model.slave, C1, N1, C2, N2)
 
@@ -166,15 +180,14 @@ def sphere_pairs(model: Model, data: Data) -> Contacts:
     """The pairs in contact (Eq. 6-10), found by the configured search, sorted by key."""
     if model.params.broad_phase == "none":
         m_idx, s_idx = literal_pairs(model, data)
-    else:
-        # Verlet skin: a face pair coal left out was at least the margin apart, and stays
-        # beyond contact reach until the spheres have moved the skin relative to each other
-        if data.travel > model.params.skin:
-            data.near_pairs, data.travel = broad_phase(model, data), 0.0
-        m_idx, s_idx = candidate_pairs(model, data, data.near_pairs)
-    key = m_idx * len(model.slave.centres_J) + s_idx
-    order = np.argsort(key, kind="stable")
-    return Contacts(m_idx[order], s_idx[order], key[order])
+        key = m_idx * len(model.slave.centres_J) + s_idx
+        order = np.argsort(key, kind="stable")
+        return Contacts(m_idx[order], s_idx[order], key[order])
+    # Verlet skin: a face pair coal left out was at least the margin apart, and stays
+    # beyond contact reach until the spheres have moved the skin relative to each other
+    if data.travel > model.params.skin:
+        refresh_broad_phase(model, data)
+    return Contacts(*candidate_pairs(model, data, data.near_pairs))
 
 
 def contact_forces(model: Model, data: Data, c: Contacts, h: float) -> Contacts:
@@ -184,46 +197,13 @@ def contact_forces(model: Model, data: Data, c: Contacts, h: float) -> Contacts:
     onset approach speed carry over from the last step (new pairs start from zero).
     """
     M, S, p = model.master, model.slave, model.params
-    if len(c.key) == 0:  # nothing touches: every pair's memory ends
-        data.mem_key, data.mem_s, data.mem_vminus = c.key, np.zeros((0, 3)), np.zeros(0)
-        c.phi, c.point_W, c.force_W, c.speed = np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0)
-        c.state = np.zeros(0, dtype=np.int64)
-        return c
-    jm, js = M.joint[c.master], S.joint[c.slave]
-    Rm, Rs = data.R_W[jm], data.R_W[js]
-    c1 = np.einsum("kij,kj->ki", Rm, data.C1_J[c.master]) + data.p_W[jm]
-    c2 = np.einsum("kij,kj->ki", Rs, S.centres_J[c.slave]) + data.p_W[js]
-    n1 = np.einsum("kij,kj->ki", Rm, M.normals_J[c.master])
-    n2 = np.einsum("kij,kj->ki", Rs, S.normals_J[c.slave])
-    n_c, phi, hit = penetration(c1, n1, p.r1, c2, n2, p.r2)
-    if not hit.all():
-        keep = np.flatnonzero(hit)
-        c = Contacts(c.master[keep], c.slave[keep], c.key[keep])
-        jm, js, c1, c2, n_c, phi = jm[keep], js[keep], c1[keep], c2[keep], n_c[keep], phi[keep]
-        Rm = Rm[keep]
-    point = contact_point(c1, c2, p.r1, p.r2, n_c, phi)
-    finger = model.master_finger[c.master]
-    slide_W = np.einsum("kij,kj->ki", Rm, model.master_axis_J[c.master]) * data.opening_rate[finger, None]
-    v_A = data.vo_W[jm] + np.cross(data.w_W[jm], point - data.p_W[jm]) + slide_W
-    v_B = data.vo_W[js] + np.cross(data.w_W[js], point - data.p_W[js])
-    v_rel = v_A - v_B
-    delta = indentation(phi)
-    delta_dot = -0.5 * np.einsum("ij,ij->i", v_rel, n_c)  # rate of delta = phi/2
-
-    pos = np.searchsorted(data.mem_key, c.key)
-    pos_ok = np.minimum(pos, max(len(data.mem_key) - 1, 0))
-    known = (pos < len(data.mem_key)) & (data.mem_key[pos_ok] == c.key) if len(data.mem_key) else \
-        np.zeros(len(c.key), dtype=bool)
-    onset_speed = np.maximum(delta_dot, p.approach_speed_floor)
-    v_minus = np.where(known, data.mem_vminus[pos_ok] if len(data.mem_key) else 0.0, onset_speed)
-    s_prev = np.where(known[:, None], data.mem_s[pos_ok] if len(data.mem_key) else 0.0, 0.0)
-
-    F_n = normal_force(delta, delta_dot, v_minus, p.K, p.damping_factor)
-    s, F_f, state = bristle_step(s_prev, v_rel, n_c, F_n, h, p.bristle)
-    data.mem_key, data.mem_s, data.mem_vminus = c.key, s, v_minus
-    c.phi, c.point_W, c.state, c.c1_W, c.c2_W = phi, point, state, c1, c2
-    c.force_W = F_n[:, None] * n_c + F_f  # Eq. (18): f_i = F_n,i + F_f,i, on the master
-    c.speed = np.linalg.norm(v_rel, axis=1)
+    out = pair_forces(c.master, c.slave, c.key, M.centres_J, M.normals_J, M.joint, model.master_finger,
+                      model.master_axis_J, S.centres_J, S.normals_J, S.joint, data.R_W, data.p_W,
+                      data.w_W, data.vo_W, data.opening, data.opening_rate, data.mem_key, data.mem_s, data.mem_vminus,
+                      p.r1, p.r2, p.K, p.damping_factor, p.approach_speed_floor, h, p.bristle)
+    c = Contacts(*out[:3])
+    c.phi, c.point_W, c.c1_W, c.c2_W, c.force_W, c.speed, c.state = out[3:10]
+    data.mem_key, data.mem_s, data.mem_vminus = c.key, out[10], out[11]
     return c
 
 
@@ -233,42 +213,71 @@ def wrenches(model: Model, data: Data, c: Contacts) -> list:
     A finger's wrench acts on the body it is mounted on. Returned as Pinocchio external forces,
     each in its joint's local frame. Also sets each finger's load along its opening axis.
     """
-    nj = model.pin_model.njoints
-    if len(c.key) == 0:
-        data.joint_force_W = np.zeros((nj, 3))
-        data.joint_torque_O_W = np.zeros((nj, 3))
-        data.external_force_W, data.external_torque_O_W = np.zeros(3), np.zeros(3)
-        data.finger_load[:] = 0.0
-        return [pin.Force.Zero() for _ in range(nj)]
-    joint = np.concatenate([model.master.joint[c.master], model.slave.joint[c.slave]])
-    f = np.concatenate([c.force_W, -c.force_W])
-    if model.params.force_point == "common":
-        points = np.concatenate([c.point_W, c.point_W])
-    else:  # negative control: each body's force at its own sphere's centre
-        points = np.concatenate([c.c1_W, c.c2_W])
-    arm = points - data.p_W[joint]
-    tau = np.cross(arm, f)
-    F = np.stack([np.bincount(joint, f[:, i], nj) for i in range(3)], axis=1)
-    T = np.stack([np.bincount(joint, tau[:, i], nj) for i in range(3)], axis=1)
-    f_ext = [pin.Force.Zero() for _ in range(nj)]
-    for j in model.contact_joints:
-        R = data.R_W[j]
-        f_ext[j] = pin.Force(R.T @ F[j], R.T @ T[j])
-    data.joint_force_W = F
-    data.joint_torque_O_W = T + np.cross(data.p_W, F)
-    # the free bodies' external load: what a fixed body (joint 0) exerts on them; forces
-    # between two free bodies are internal and are left out
-    n = len(c.key)  # rows [0, n) are the masters' sides of the pairs, [n, 2n) the slaves'
-    partner = np.concatenate([joint[n:], joint[:n]])
-    ext = (partner == 0) & (joint != 0)
-    data.external_force_W = f[ext].sum(axis=0)
-    data.external_torque_O_W = np.cross(points[ext], f[ext]).sum(axis=0)
-    finger = model.master_finger[c.master]
-    for k, fg in enumerate(model.fingers):
-        on_k = finger == k
-        axis_W = data.R_W[fg.parent_joint] @ fg.axis_J
-        data.finger_load[k] = max(float(c.force_W[on_k].sum(axis=0) @ axis_W), 0.0)
-    return f_ext
+    local, data.joint_force_W, data.joint_torque_O_W, data.external_force_W, data.external_torque_O_W, \
+        data.finger_load = body_wrenches(c.master, c.slave, c.force_W, c.point_W, c.c1_W, c.c2_W,
+                                         model.params.force_point == "common", model.master.joint,
+                                         model.slave.joint, model.master_finger, model.finger_parent,
+                                         model.finger_axis_J, data.R_W, data.p_W, model.pin_model.njoints)
+    for view, w in zip(data.f_views, local):  # written into the Force objects ABA reads
+        view[:] = w
+    return data.f_ext
+
+
+def contact_stage(model: Model, data: Data, h: float) -> Contacts:
+    """kinematics -> broad phase -> sphere pairs -> forces -> wrenches, for one step.
+
+    The culled search runs the stages' kernels in one compiled call; the literal search
+    (the reference) runs them one by one.
+    """
+    if model.params.broad_phase == "none":
+        kinematics(model, data)
+        c = contact_forces(model, data, sphere_pairs(model, data), h)
+        wrenches(model, data, c)
+        data.summary = contact_summary(data.joint_force_W, data.joint_torque_O_W, data.R_W, data.p_W,
+                                       *model.watch_args[data.active], c.speed, c.phi)
+        return c
+    # Verlet skin: a face pair coal left out was at least the margin apart, and stays
+    # beyond contact reach until the spheres have moved the skin relative to each other
+    if data.travel > model.params.skin:
+        refresh_broad_phase(model, data)
+    pairs, (local, data.joint_force_W, data.joint_torque_O_W, data.external_force_W, data.external_torque_O_W,
+            data.finger_load), data.summary = _contact_kernels(
+        data.q, data.v, data.R_W, data.p_W, data.w_W, data.vo_W, data.near_pairs, data.opening,
+        data.opening_rate, data.mem_key, data.mem_s, data.mem_vminus, h, *model.watch_args[data.active],
+        *model.contact_kernel_args)
+    c = Contacts(*pairs[:10])
+    data.mem_key, data.mem_s, data.mem_vminus = c.key, pairs[10], pairs[11]
+    for view, w in zip(data.f_views, local):  # written into the Force objects ABA reads
+        view[:] = w
+    return c
+
+
+def contact_kernel_args(model: Model) -> tuple:
+    """The model's part of `_contact_kernels`' arguments, in its order."""
+    M, S, p = model.master, model.slave, model.params
+    return (model.bodies, model.face_table, model.slave_maps, M.centres_J, M.normals_J, M.joint,
+            model.master_finger, model.master_axis_J, S.centres_J, S.normals_J, S.joint, p.r1, p.r2, p.K,
+            p.damping_factor, p.approach_speed_floor, p.cutoff, p.bristle, p.force_point == "common",
+            model.finger_parent, model.finger_axis_J)
+
+
+@njit
+def _contact_kernels(q, v, R_W, p_W, w_W, vo_W, near, opening, opening_rate, mem_key, mem_s, mem_vminus, h,
+                     ee_joint, R_ee, module_joint, lever, bodies, table, maps, C1_J, N1_J, joint1, finger1, axis1_J, C2_J, N2_J, joint2,
+                     r1, r2, K, damping, floor, cutoff, bristle, common_point, finger_parent, finger_axis_J):
+    """The kernels of `kinematics`, `candidate_pairs`, `contact_forces` and `wrenches`, chained,
+    and the `contact_summary` of the step."""
+    body_kinematics(bodies, q, v, R_W, p_W, w_W, vo_W)
+    master, slave, key = grid_search(near, table, C1_J, N1_J, finger1, axis1_J, opening, maps,
+                                     C2_J.shape[0], R_W, p_W, r1, r2, cutoff)
+    pairs = pair_forces(master, slave, key, C1_J, N1_J, joint1, finger1, axis1_J, C2_J, N2_J, joint2,
+                        R_W, p_W, w_W, vo_W, opening, opening_rate, mem_key, mem_s, mem_vminus,
+                        r1, r2, K, damping, floor, h, bristle)
+    loads = body_wrenches(pairs[0], pairs[1], pairs[7], pairs[4], pairs[5], pairs[6], common_point,
+                          joint1, joint2, finger1, finger_parent, finger_axis_J, R_W, p_W, R_W.shape[0])
+    summary = contact_summary(loads[1], loads[2], R_W, p_W, ee_joint, R_ee, module_joint, lever, pairs[8],
+                              pairs[3])
+    return pairs, loads, summary
 
 
 # -------------------------------------------------------------------------------- step
@@ -276,18 +285,16 @@ def wrenches(model: Model, data: Data, c: Contacts) -> list:
 
 def step(model: Model, data: Data, h: float, integrator) -> Contacts:
     """Advance the scene by h seconds; returns the contacts that acted during the step."""
-    kinematics(model, data)
-    contacts = contact_forces(model, data, sphere_pairs(model, data), h)
-    data.f_ext = wrenches(model, data, contacts)
+    contacts = contact_stage(model, data, h)
     m = model.pin_model
-    a = pin.aba(m, data.pin_data, data.q, data.v, np.zeros(m.nv), data.f_ext)
+    a = pin.aba(m, data.pin_data, data.q, data.v, data.tau, data.f_ext)
     data.q, data.v = integrator.step(m, data.q, data.v, a, h)
     # the active grasp's drive sets its fingers' rate for the coming step from this step's
-    # loads; the other end-effectors hold
+    # loads; the other end-effectors hold (their rates stay zero)
     active_ee = model.grasps[data.active][0]
-    for e, (drive, mine) in enumerate(zip(data.drives, model.drive_fingers, strict=True)):
-        if len(mine):
-            data.opening_rate[mine] = drive.opening_rate(data.finger_load[mine]) if e == active_ee else 0.0
+    mine = model.drive_fingers[active_ee]
+    if len(mine):
+        data.opening_rate[mine] = data.drives[active_ee].opening_rate(data.finger_load[mine])
     data.opening += h * data.opening_rate
     data.t += h
     data.travel += h * travel_rate(model, data)
@@ -296,27 +303,46 @@ def step(model: Model, data: Data, h: float, integrator) -> Contacts:
     return contacts
 
 
+#: Free flight takes the travel bound at the start of a step times this for the whole step: in
+#: zero gravity and without contact the centroid velocities are constant and the fingers close
+#: at their set speed; only the spin's direction changes, and bodies are barely moving then.
+FREE_FLIGHT_SAFETY = 2.0
+
+
+def free_flight(model: Model, data: Data, H: float) -> bool:
+    """Whether no sphere pair can come into contact within the next H seconds, so that a step
+    of H (no contact forces, zero gravity) is exact for the centroids.
+
+    True when coal's face pairs (refreshed if the skin is used up) are all beyond the margin
+    and the travel bound over H keeps within the skin. Never with the literal search.
+    """
+    if model.params.broad_phase == "none":
+        return False
+    if data.travel > model.params.skin:
+        refresh_broad_phase(model, data)
+    return len(data.near_pairs) == 0 and \
+        data.travel + FREE_FLIGHT_SAFETY * H * travel_rate(model, data) <= model.params.skin
+
+
 def travel_rate(model: Model, data: Data) -> float:
     """A bound on how fast any two contact spheres approach each other, m/s: the sum over the
-    contact bodies of |v_O| + |omega| reach, plus the fastest finger slide. Uses the
-    velocities of the step just taken (R_W, vo_W, w_W from its kinematics)."""
-    rate = float(np.abs(data.opening_rate).max()) if len(data.opening_rate) else 0.0
-    nu = data.v
-    m = model.pin_model
-    for j, reach in model.sphere_reach:
-        if j == 0:
-            continue
-        iv = m.idx_vs[j]
-        if m.nvs[j] == 6:  # free-flyer: v = (v_O, omega) in its frame; norms are frame-free
-            rate += float(np.linalg.norm(nu[iv:iv + 3]) + np.linalg.norm(nu[iv + 3:iv + 6]) * reach)
-        else:
-            rate += float(np.linalg.norm(data.vo_W[j]) + np.linalg.norm(data.w_W[j]) * reach)
+    free contact bodies of |v_O| + |omega| reach, plus the fastest finger slide."""
+    rows, reach = model.reach_table
+    return _travel_rate(model.bodies.idx_v, rows, reach, data.v, data.opening_rate)
+
+
+@njit
+def _travel_rate(idx_v, rows, reach, v, opening_rate):
+    rate = np.abs(opening_rate).max() if opening_rate.shape[0] else 0.0
+    for b, r in zip(rows, reach):
+        iv = idx_v[b]  # a free-flyer's v = (v_O, omega) in its frame; norms are frame-free
+        rate += np.linalg.norm(v[iv:iv + 3]) + np.linalg.norm(v[iv + 3:iv + 6]) * r
     return rate
 
 
 def grasp_phase(model: Model, data: Data, c: Contacts) -> None:
     """Advance the active grasp's phase on this step's contacts (approach -> self-centring ->
     complete)."""
-    speed = float(c.speed.max()) if len(c.key) else 0.0
-    data.phase.update(data.t, len(c.key), data.drives[model.grasps[data.active][0]].stalled, speed,
-                      float(np.linalg.norm(data.module_force_W(model))))
+    w = data.summary
+    data.phase.update(data.t, len(c.key), data.drives[model.grasps[data.active][0]].stalled, w[6],
+                      math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]))

@@ -2,13 +2,18 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+
+from ..jit import njit
 
 #: Two spheres whose face normals differ by less than this (|n2 - n1|) face the same way and
 #: cannot touch across a common normal: Eq. (6) is undefined for them, so they never pair.
 NORMAL_EPS = 1e-9
 
 
+@njit
 def penetration(c1, n1, r1, c2, n2, r2):
     """Eq. (6), (8)-(10): common normal and penetration of sphere pairs.
 
@@ -17,18 +22,29 @@ def penetration(c1, n1, r1, c2, n2, r2):
     Returns n_c (k, 3), phi (k,) in m (how far A must move along n_c to just touch B), and
     in_contact (k,) bool: the root of Eq. (8) is real and phi > 0.
     """
-    dn = n2 - n1
-    norm = np.sqrt(np.einsum("ij,ij->i", dn, dn))
-    facing = norm > NORMAL_EPS
-    n_c = dn / np.where(facing, norm, 1.0)[:, None]
-    rel = c1 - c2
-    chi = np.einsum("ij,ij->i", n_c, rel)  # Eq. (9)
-    w = np.einsum("ij,ij->i", rel, rel) - (r1 + r2) ** 2  # Eq. (10)
-    disc = chi * chi - w
-    phi = -chi + np.sqrt(np.maximum(disc, 0.0))  # Eq. (8)
-    return n_c, phi, facing & (disc >= 0.0) & (phi > 0.0)
+    k = c1.shape[0]
+    n_c = np.zeros((k, 3))
+    phi = np.empty(k)
+    hit = np.empty(k, dtype=np.bool_)
+    R2 = (r1 + r2) ** 2
+    for i in range(k):
+        d0, d1, d2 = n2[i, 0] - n1[i, 0], n2[i, 1] - n1[i, 1], n2[i, 2] - n1[i, 2]
+        norm = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        facing = norm > NORMAL_EPS
+        if facing:
+            n_c[i, 0], n_c[i, 1], n_c[i, 2] = d0 / norm, d1 / norm, d2 / norm
+        else:
+            n_c[i, 0], n_c[i, 1], n_c[i, 2] = d0, d1, d2
+        e0, e1, e2 = c1[i, 0] - c2[i, 0], c1[i, 1] - c2[i, 1], c1[i, 2] - c2[i, 2]
+        chi = n_c[i, 0] * e0 + n_c[i, 1] * e1 + n_c[i, 2] * e2  # Eq. (9)
+        w = e0 * e0 + e1 * e1 + e2 * e2 - R2  # Eq. (10)
+        disc = chi * chi - w
+        phi[i] = -chi + math.sqrt(max(disc, 0.0))  # Eq. (8)
+        hit[i] = facing and disc >= 0.0 and phi[i] > 0.0
+    return n_c, phi, hit
 
 
+@njit
 def contact_point(c1, c2, r1, r2, n_c, phi):
     """One contact point per pair, shared by both bodies, m (k, 3).
 
@@ -36,8 +52,14 @@ def contact_point(c1, c2, r1, r2, n_c, phi):
     c2 + r2/(r1 + r2) d; the point used is that tangency point moved back by phi/2 along n_c,
     the middle of the overlap. For coaxial spheres it lies halfway through the overlap.
     """
-    d = c1 - c2 + phi[:, None] * n_c  # Eq. (7)
-    return c2 + (r2 / (r1 + r2)) * d - 0.5 * phi[:, None] * n_c
+    k = c1.shape[0]
+    p = np.empty((k, 3))
+    share = r2 / (r1 + r2)
+    for i in range(k):
+        for a in range(3):
+            d = c1[i, a] - c2[i, a] + phi[i] * n_c[i, a]  # Eq. (7)
+            p[i, a] = c2[i, a] + share * d - 0.5 * phi[i] * n_c[i, a]
+    return p
 
 
 def cutoff_distance(r1: float, r2: float, max_penetration: float) -> float:

@@ -2,18 +2,23 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from typing import NamedTuple
 
 import numpy as np
+
+from ..jit import njit
 
 #: Pair states, as the paper's Fig. 9 colours them.
 NONE, SLIPPING, STICKING = 0, 1, 2
 STATE_NAMES = ("none", "slipping", "sticking")
 
 
-@dataclass(frozen=True)
-class BristleParams:
-    """Table 2: mu_k, mu_s, bristle stiffness k_b (N/m), damping c_b (N s/m), deadband v_d (m/s)."""
+class BristleParams(NamedTuple):
+    """Table 2: mu_k, mu_s, bristle stiffness k_b (N/m), damping c_b (N s/m), deadband v_d (m/s).
+
+    A named tuple of floats, so that the compiled kernels take it as it is.
+    """
 
     mu_k: float
     mu_s: float
@@ -22,47 +27,69 @@ class BristleParams:
     v_d: float
 
 
+@njit
 def tangential(v, n_c):
     """Eq. (17): v_t = v - (v . n) n, rows of (k, 3)."""
-    return v - np.einsum("ij,ij->i", v, n_c)[:, None] * n_c
+    out = np.empty_like(v)
+    for i in range(v.shape[0]):
+        vn = v[i, 0] * n_c[i, 0] + v[i, 1] * n_c[i, 1] + v[i, 2] * n_c[i, 2]
+        for a in range(3):
+            out[i, a] = v[i, a] - vn * n_c[i, a]
+    return out
 
 
+@njit
+def _norm3(x, i):
+    return math.sqrt(x[i, 0] * x[i, 0] + x[i, 1] * x[i, 1] + x[i, 2] * x[i, 2])
+
+
+@njit
 def carry_deflection(s, n_c):
     """Keep a carried deflection (k, 3) in the current tangent plane, with its length kept."""
     s_t = tangential(s, n_c)
-    old = np.linalg.norm(s, axis=1)
-    new = np.linalg.norm(s_t, axis=1)
-    scale = np.divide(old, new, out=np.zeros_like(old), where=new > 0.0)
-    return s_t * scale[:, None]
+    for i in range(s.shape[0]):
+        old, new = _norm3(s, i), _norm3(s_t, i)
+        scale = old / new if new > 0.0 else 0.0
+        for a in range(3):
+            s_t[i, a] *= scale
+    return s_t
 
 
-def bristle_step(s_prev, v, n_c, F_n, dt: float, p: BristleParams):
+@njit
+def bristle_step(s_prev, v, n_c, F_n, dt, p):
     """One step of the bristle law for k pairs.
 
     s_prev: (k, 3) deflection carried from the last step (zero at onset), m.
     v: (k, 3) velocity of A's contact point relative to B's, m/s.  n_c: (k, 3) common normal.
-    F_n: (k,) normal force magnitude, N.  dt: step, s.
+    F_n: (k,) normal force magnitude, N.  dt: step, s.  p: BristleParams.
     Returns s (k, 3), friction force on A (k, 3) in N, and the pair state (k,) int.
     """
-    s0 = carry_deflection(s_prev, n_c)
+    k = s_prev.shape[0]
+    s = carry_deflection(s_prev, n_c)
     v_t = tangential(v, n_c)
-    speed = np.linalg.norm(v_t, axis=1)
-    slipping = speed > p.v_d
-    s_max = np.where(slipping, p.mu_k, p.mu_s) * F_n / p.k_b  # Eq. (16)
-    s = s0 + v_t * dt  # Eq. (15), first branch
-    length = np.linalg.norm(s, axis=1)
-    saturated = length >= s_max
-    # Eq. (15), second branch: the bristle lies at s_max along the sliding direction
-    direction = np.where((speed > 0.0)[:, None], v_t, s)
-    dir_norm = np.linalg.norm(direction, axis=1)
-    unit = np.divide(direction, dir_norm[:, None], out=np.zeros_like(direction),
-                     where=(dir_norm > 0.0)[:, None])
-    s = np.where(saturated[:, None], s_max[:, None] * unit, s)
-    # [reading] s_dot is the bristle's deflection rate while it holds (v_t); a saturated
-    # bristle lies at s_max and slides, so its rate is zero. Differencing the clamped s
-    # instead would turn every reversal of the sliding direction into an impulse of
-    # c_b * 2 s_max / dt, which grows without bound as dt shrinks.
-    s_dot = np.where(saturated[:, None], 0.0, v_t)
-    F_f = -p.k_b * s - p.c_b * s_dot  # Eq. (14)
-    state = np.where(slipping, SLIPPING, STICKING)
+    F_f = np.empty((k, 3))
+    state = np.empty(k, dtype=np.int64)
+    for i in range(k):
+        speed = _norm3(v_t, i)
+        slipping = speed > p.v_d
+        s_max = (p.mu_k if slipping else p.mu_s) * F_n[i] / p.k_b  # Eq. (16)
+        for a in range(3):
+            s[i, a] += v_t[i, a] * dt  # Eq. (15), first branch
+        length = _norm3(s, i)
+        saturated = length >= s_max
+        if saturated:
+            # Eq. (15), second branch: the bristle lies at s_max along the sliding direction
+            # (along its own deflection when there is no sliding)
+            src = v_t if speed > 0.0 else s
+            dir_norm = _norm3(src, i)
+            for a in range(3):
+                s[i, a] = s_max * src[i, a] / dir_norm if dir_norm > 0.0 else 0.0
+        for a in range(3):
+            # [reading] s_dot is the bristle's deflection rate while it holds (v_t); a
+            # saturated bristle lies at s_max and slides, so its rate is zero. Differencing
+            # the clamped s instead would turn every reversal of the sliding direction into
+            # an impulse of c_b * 2 s_max / dt, which grows without bound as dt shrinks.
+            s_dot = 0.0 if saturated else v_t[i, a]
+            F_f[i, a] = -p.k_b * s[i, a] - p.c_b * s_dot  # Eq. (14)
+        state[i] = SLIPPING if slipping else STICKING
     return s, F_f, state

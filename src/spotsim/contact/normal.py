@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..jit import njit
+
 #: Power of the Hertz law for sphere contact (paper: alpha = 1.5).
 HERTZ_EXPONENT = 1.5
 
@@ -18,17 +20,22 @@ def damping_factor(restitution: float) -> float:
     return 6.0 * (1.0 - restitution) / ((2.0 * restitution - 1.0) ** 2 + 3.0)
 
 
+@njit
 def indentation(phi):
     """[reading] Local indentation delta = phi / 2 (printed as "phi1 2"), m."""
     return 0.5 * phi
 
 
-def normal_force(delta, delta_dot, delta_dot_minus, K: float, factor: float):
+@njit
+def normal_force(delta, delta_dot, delta_dot_minus, K, factor):
     """Eq. (11)-(12): magnitude of F_n = K delta^a + lambda delta^a delta_dot, never pulling.
 
     delta: (k,) indentation, m.  delta_dot: (k,) its rate, m/s (> 0 approaching).
     delta_dot_minus: (k,) approach speed at each pair's contact onset, m/s, already floored.
     lambda = factor K / delta_dot_minus. Returns (k,) N, clamped at 0.
     """
-    elastic = K * delta**HERTZ_EXPONENT
-    return np.maximum(elastic * (1.0 + factor * delta_dot / delta_dot_minus), 0.0)
+    F = np.empty(delta.shape[0])
+    for i in range(delta.shape[0]):
+        elastic = K * delta[i] ** HERTZ_EXPONENT
+        F[i] = max(elastic * (1.0 + factor * delta_dot[i] / delta_dot_minus[i]), 0.0)
+    return F

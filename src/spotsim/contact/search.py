@@ -6,10 +6,13 @@ The paper's literal search (every master sphere against every slave sphere) is k
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
+from ..jit import njit
 from .detection import NORMAL_EPS
 
 #: The grid search keeps pairs whose penetration, computed in face coordinates, exceeds
@@ -78,76 +81,154 @@ class FacePair:
     geom_pair: int
 
 
-def grid_search(face_pairs, C1_J, N1_J, maps, R_W, p_W, r1: float, radius: float, cutoff: float):
-    """Sphere pairs in contact (Eq. 6-10) inside the given face pairs, found locally.
+class FaceTable(NamedTuple):
+    """The face pairs of a model stacked as arrays, for the compiled search (one row a pair)."""
+
+    master_start: np.ndarray  # (n,) first master sphere of the pair's master face
+    master_stop: np.ndarray  # (n,) one past its last
+    master_joint: np.ndarray  # (n,)
+    slave_joint: np.ndarray  # (n,)
+    slave_face: np.ndarray  # (n,) index into the stacked slave grids (`maps`)
+    origin_J: np.ndarray  # (n, 3) the slave grid's reference vertex, its joint's frame, m
+    t1_J: np.ndarray  # (n, 3) the slave grid's in-plane axes and outward normal
+    t2_J: np.ndarray
+    n_J: np.ndarray
+    shape: np.ndarray  # (n, 2) grid size
+
+
+def face_table(face_pairs) -> FaceTable:
+    """The face pairs as one `FaceTable`."""
+    n = len(face_pairs)
+    vec = lambda name: np.array([getattr(fp.slave, name) for fp in face_pairs], dtype=float).reshape(n, 3)
+    ints = lambda values: np.array(values, dtype=np.int64)
+    return FaceTable(ints([fp.master_slice.start for fp in face_pairs]),
+                     ints([fp.master_slice.stop for fp in face_pairs]),
+                     ints([fp.master_joint for fp in face_pairs]),
+                     ints([fp.slave.joint for fp in face_pairs]),
+                     ints([fp.slave.face for fp in face_pairs]),
+                     vec("origin_J"), vec("t1_J"), vec("t2_J"), vec("n_J"),
+                     ints([fp.slave.shape for fp in face_pairs]).reshape(n, 2))
+
+
+@njit
+def _rotate(R, x):
+    """R x for a 3x3 R and a 3-vector x, as a 3-tuple."""
+    return (R[0, 0] * x[0] + R[0, 1] * x[1] + R[0, 2] * x[2],
+            R[1, 0] * x[0] + R[1, 1] * x[1] + R[1, 2] * x[2],
+            R[2, 0] * x[0] + R[2, 1] * x[1] + R[2, 2] * x[2])
+
+
+@njit
+def _dot(a, b):
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+@njit
+def grid_search(near, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_slave, R_W, p_W, r1, radius,
+                cutoff):
+    """Sphere pairs in contact (Eq. 6-10) inside the face pairs `near`, found locally.
 
     The slave spheres of a face lie on a regular grid of step `radius`, `radius` above its
     plane, so each master centre's grid coordinates (u, v) and lift above the plane bound
     the slave spheres within `cutoff` (m) to a small window: no distance to a far sphere is
     computed. Inside the window, the common normal is the face pair's, so Eq. (8) is
     evaluated in face coordinates.
-    maps: (n_faces, ni, nj) global slave index of each grid node, -1 where there is none.
-    C1_J, N1_J: (|S1|, 3) master centres and normals in their joints' frames. R_W, p_W: joint poses.
+    near: (m,) indices into `table` (a FaceTable) of the face pairs to search.
+    maps: (n_faces, ni, nj) global slave index of each grid node, -1 where there is none;
+    n_slave: the number of slave spheres.
+    C1_J, N1_J: (|S1|, 3) master centres (fingers at opening 0) and normals in their joints'
+    frames; finger1, axis1_J: each master sphere's finger and its opening axis; opening:
+    (n_fingers,) the fingers' openings, m. R_W, p_W: joint poses.
     r1, radius: master and slave sphere radii, m.
-    Returns (master index, slave index) arrays of the pairs (a superset by SEARCH_SLACK).
+    Returns (master index, slave index, key = master * n_slave + slave) of the pairs, sorted
+    by key (a superset by SEARCH_SLACK of the pairs in contact).
     """
-    if not face_pairs:
-        empty = np.zeros(0, dtype=np.int64)
-        return empty, empty
-    rows, coords, face, shape, normal = [], [], [], [], []
-    for fp in face_pairs:
-        g, R, p = fp.slave, R_W[fp.slave.joint], p_W[fp.slave.joint]
-        basis = np.stack([R @ g.t1_J, R @ g.t2_J, R @ g.n_J], axis=1)
-        Rm, pm = R_W[fp.master_joint], p_W[fp.master_joint]
-        dn = basis[:, 2] - Rm @ N1_J[fp.master_slice.start]
-        if np.linalg.norm(dn) <= NORMAL_EPS:
-            continue  # faces facing the same way never pair (Eq. 6 undefined)
-        n = fp.master_slice.stop - fp.master_slice.start
-        rows.append(np.arange(fp.master_slice.start, fp.master_slice.stop))
-        # master centres in the slave face frame: basis^T (Rm c + pm - O)
-        coords.append(C1_J[fp.master_slice] @ (Rm.T @ basis)
-                      + (pm - (R @ g.origin_J + p)) @ basis)
-        face.append(np.full(n, g.face))
-        shape.append(np.broadcast_to(g.shape, (n, 2)))
-        normal.append(np.broadcast_to(dn / np.linalg.norm(dn) @ basis, (n, 3)))
-    if not rows:
-        empty = np.zeros(0, dtype=np.int64)
-        return empty, empty
-    rows, uvh = np.concatenate(rows), np.concatenate(coords)
-    face, shape, n_c = np.concatenate(face), np.concatenate(shape), np.concatenate(normal)
-    u, v = uvh[:, 0] / radius, uvh[:, 1] / radius
-    lift = uvh[:, 2] - radius  # slave centres lie `radius` above the face plane
-    # within cutoff in 3-D means within sqrt(cutoff^2 - lift^2) in the face plane
-    reach = np.sqrt(np.maximum(cutoff * cutoff - lift * lift, 0.0)) / radius
-    near = ((np.abs(lift) < cutoff) & (u > -reach) & (u < shape[:, 0] - 1 + reach)
-            & (v > -reach) & (v < shape[:, 1] - 1 + reach))
-    # A row lifted by at least r1 + r2 has w >= 0, so it can touch only where chi < 0; chi is
-    # at least n_h lift - |n_uv| (in-plane reach), which rules most such rows out.
+    cap = 64
+    found_m = np.empty(cap, dtype=np.int64)
+    found_s = np.empty(cap, dtype=np.int64)
+    n_found = 0
     R = r1 + radius
-    n_uv = np.hypot(n_c[:, 0], n_c[:, 1])
-    near &= (lift < R + SEARCH_SLACK) | (n_c[:, 2] * lift <= n_uv * reach * radius + SEARCH_SLACK)
-    keep = np.flatnonzero(near)
-    if keep.size == 0:
-        return keep, keep
-    rows, u, v, lift, reach = rows[keep], u[keep], v[keep], lift[keep], reach[keep]
-    face, n_c = face[keep], n_c[keep]
-    k = int(np.floor(2.0 * reach.max())) + 1
-    i = np.ceil(u - reach).astype(np.int64)[:, None, None] + np.arange(k)[None, :, None]
-    j = np.ceil(v - reach).astype(np.int64)[:, None, None] + np.arange(k)[None, None, :]
-    i, j = np.broadcast_arrays(i, j)
-    ni, nj = maps.shape[1:]
-    inside = (i >= 0) & (i < ni) & (j >= 0) & (j < nj)
-    # c1 - c2 in face coordinates, then Eq. (8)-(10) with the face pair's common normal
-    du = (u[:, None, None] - i) * radius
-    dv = (v[:, None, None] - j) * radius
-    dh = lift[:, None, None]
-    chi = n_c[:, 0, None, None] * du + n_c[:, 1, None, None] * dv + n_c[:, 2, None, None] * dh
-    disc = chi * chi - (du * du + dv * dv + dh * dh - (r1 + radius) ** 2)
-    inside &= (disc >= -SEARCH_SLACK * cutoff) & (-chi + np.sqrt(np.maximum(disc, 0.0)) > -SEARCH_SLACK)
-    r_idx, a, b = np.nonzero(inside)
-    slave = maps[face[r_idx], i[r_idx, a, b], j[r_idx, a, b]]
-    found = slave >= 0
-    return rows[r_idx[found]], slave[found]
+    for f in near:
+        Rs, ps = R_W[table.slave_joint[f]], p_W[table.slave_joint[f]]
+        b0, b1, b2 = _rotate(Rs, table.t1_J[f]), _rotate(Rs, table.t2_J[f]), _rotate(Rs, table.n_J[f])
+        Rm, pm = R_W[table.master_joint[f]], p_W[table.master_joint[f]]
+        nm = _rotate(Rm, N1_J[table.master_start[f]])
+        dn = (b2[0] - nm[0], b2[1] - nm[1], b2[2] - nm[2])
+        norm = math.sqrt(_dot(dn, dn))
+        if norm <= NORMAL_EPS:
+            continue  # faces facing the same way never pair (Eq. 6 undefined)
+        # the common normal in face coordinates
+        nu, nv, nh = _dot(dn, b0) / norm, _dot(dn, b1) / norm, _dot(dn, b2) / norm
+        n_uv = math.hypot(nu, nv)
+        o = _rotate(Rs, table.origin_J[f])
+        ni, nj = table.shape[f, 0], table.shape[f, 1]
+        face = table.slave_face[f]
+        # a master centre c (its joint's frame) in face coordinates is A c + off: the rows of
+        # A are the face axes in the master's frame, and off holds the master origin and the
+        # finger's opening, which shifts all the face's spheres alike (a face is on one finger)
+        A = np.empty((3, 3))
+        for k in range(3):
+            A[0, k] = Rm[0, k] * b0[0] + Rm[1, k] * b0[1] + Rm[2, k] * b0[2]
+            A[1, k] = Rm[0, k] * b1[0] + Rm[1, k] * b1[1] + Rm[2, k] * b1[2]
+            A[2, k] = Rm[0, k] * b2[0] + Rm[1, k] * b2[1] + Rm[2, k] * b2[2]
+        first = table.master_start[f]
+        shift = opening[finger1[first]] * axis1_J[first]
+        e = (pm[0] - o[0] - ps[0], pm[1] - o[1] - ps[1], pm[2] - o[2] - ps[2])
+        off = (A[0, 0] * shift[0] + A[0, 1] * shift[1] + A[0, 2] * shift[2] + _dot(e, b0),
+               A[1, 0] * shift[0] + A[1, 1] * shift[1] + A[1, 2] * shift[2] + _dot(e, b1),
+               A[2, 0] * shift[0] + A[2, 1] * shift[1] + A[2, 2] * shift[2] + _dot(e, b2))
+        for row in range(first, table.master_stop[f]):
+            c = C1_J[row]
+            lift = A[2, 0] * c[0] + A[2, 1] * c[1] + A[2, 2] * c[2] + off[2] - radius
+            if abs(lift) >= cutoff:  # slave centres lie `radius` above the face plane
+                continue
+            u = (A[0, 0] * c[0] + A[0, 1] * c[1] + A[0, 2] * c[2] + off[0]) / radius
+            v = (A[1, 0] * c[0] + A[1, 1] * c[1] + A[1, 2] * c[2] + off[1]) / radius
+            # within cutoff in 3-D means within sqrt(cutoff^2 - lift^2) in the face plane
+            reach = math.sqrt(max(cutoff * cutoff - lift * lift, 0.0)) / radius
+            if not (-reach < u < ni - 1 + reach and -reach < v < nj - 1 + reach):
+                continue
+            # A row lifted by at least r1 + r2 has w >= 0, so it can touch only where chi < 0;
+            # chi is at least n_h lift - |n_uv| (in-plane reach), which rules most such rows out.
+            if not (lift < R + SEARCH_SLACK or nh * lift <= n_uv * reach * radius + SEARCH_SLACK):
+                continue
+            # Where chi stays above SEARCH_SLACK over the whole window, a pair touches only
+            # if w < 2 chi SEARCH_SLACK: its centres lie within the ball of radius ~R, whose
+            # trace on the grid is a much smaller circle than the cutoff's
+            if nh * lift - n_uv * reach * radius > SEARCH_SLACK:
+                ball = R * R + 2.0 * cutoff * SEARCH_SLACK - lift * lift
+                if ball < 0.0:
+                    continue
+                reach = min(reach, math.sqrt(ball) / radius)
+            w0 = lift * lift - R * R
+            for i in range(max(math.ceil(u - reach), 0), min(math.floor(u + reach), ni - 1) + 1):
+                # the nodes of this grid row within reach: a chord of the reach circle
+                half = math.sqrt(max(reach * reach - (u - i) ** 2, 0.0))
+                du = (u - i) * radius
+                chi_u = nu * du + nh * lift
+                w_u = du * du + w0
+                for j in range(max(math.ceil(v - half), 0), min(math.floor(v + half), nj - 1) + 1):
+                    # c1 - c2 in face coordinates, then Eq. (8)-(10) with the pair's normal:
+                    # phi = -chi + sqrt(disc) > -SEARCH_SLACK, tested without the root
+                    dv = (v - j) * radius
+                    chi = chi_u + nv * dv
+                    disc = chi * chi - (w_u + dv * dv)
+                    if disc < -SEARCH_SLACK * cutoff:
+                        continue
+                    if chi > SEARCH_SLACK and max(disc, 0.0) <= (chi - SEARCH_SLACK) ** 2:
+                        continue
+                    s = maps[face, i, j]
+                    if s < 0:
+                        continue
+                    if n_found == cap:
+                        cap *= 2
+                        found_m = np.concatenate((found_m, np.empty(cap - n_found, dtype=np.int64)))
+                        found_s = np.concatenate((found_s, np.empty(cap - n_found, dtype=np.int64)))
+                    found_m[n_found], found_s[n_found] = row, s
+                    n_found += 1
+    key = found_m[:n_found] * n_slave + found_s[:n_found]
+    order = np.argsort(key)
+    return found_m[:n_found][order], found_s[:n_found][order], key[order]
 
 
 def face_slices(layers: LayerSet) -> list[slice]:

@@ -1,0 +1,103 @@
+"""Free bodies (free-flyer joints) as arrays, and their kinematics, compiled.
+
+After the locked joints are reduced away every body that carries a contact face is either
+fixed (joint 0) or free (a free-flyer child of the world), so the placements and velocities
+the contact needs follow from q and v directly. Quaternions are Pinocchio's XYZQUAT order:
+(x, y, z, qx, qy, qz, qw).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+import pinocchio as pin
+
+from .jit import njit
+
+
+class FreeBodies(NamedTuple):
+    """The free-flyer joints of a model (one row each)."""
+
+    joint: np.ndarray  # (n,) joint index
+    idx_q: np.ndarray  # (n,) first index of its configuration in q (xyz, then quaternion)
+    idx_v: np.ndarray  # (n,) first index of its velocity in v (v_O, then omega; body frame)
+    R_P: np.ndarray  # (n, 3, 3) the joint's placement in the world (its parent), rotation
+    p_P: np.ndarray  # (n, 3) and translation, m
+    lever: np.ndarray  # (n, 3) the body's centroid in its joint frame, m
+
+
+def free_flyers(model: pin.Model) -> list[int]:
+    """The joints of `model` that are free-flyers."""
+    return [j for j in range(1, model.njoints) if model.joints[j].shortname() == "JointModelFreeFlyer"]
+
+
+def free_bodies(model: pin.Model) -> FreeBodies:
+    """The free-flyer joints of `model`, which must all be children of the world."""
+    joints = free_flyers(model)
+    if any(model.parents[j] != 0 for j in joints):
+        raise ValueError("a free-flyer joint is not a child of the world")
+    ints = lambda values: np.array(values, dtype=np.int64)
+    return FreeBodies(ints(joints), ints([model.idx_qs[j] for j in joints]),
+                      ints([model.idx_vs[j] for j in joints]),
+                      np.array([model.jointPlacements[j].rotation for j in joints]).reshape(-1, 3, 3),
+                      np.array([model.jointPlacements[j].translation for j in joints]).reshape(-1, 3),
+                      np.array([model.inertias[j].lever for j in joints]).reshape(-1, 3))
+
+
+@njit
+def quat_to_rotation(x, y, z, w):
+    """Rotation matrix (3, 3) of the unit quaternion (x, y, z, w)."""
+    R = np.empty((3, 3))
+    R[0, 0] = 1.0 - 2.0 * (y * y + z * z)
+    R[0, 1] = 2.0 * (x * y - z * w)
+    R[0, 2] = 2.0 * (x * z + y * w)
+    R[1, 0] = 2.0 * (x * y + z * w)
+    R[1, 1] = 1.0 - 2.0 * (x * x + z * z)
+    R[1, 2] = 2.0 * (y * z - x * w)
+    R[2, 0] = 2.0 * (x * z - y * w)
+    R[2, 1] = 2.0 * (y * z + x * w)
+    R[2, 2] = 1.0 - 2.0 * (x * x + y * y)
+    return R
+
+
+@njit
+def quat_times_exp(q, t0, t1, t2):
+    """q exp(t) for the quaternion q (x, y, z, w) and a rotation vector t in q's own frame
+    (R <- R exp(t)), normalised, as a new (4,) array."""
+    angle = math.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
+    half = 0.5 * angle
+    # sin(half) / angle, with its series where the division loses digits
+    k = 0.5 - angle * angle / 48.0 if angle < 1e-4 else math.sin(half) / angle
+    dx, dy, dz, dw = k * t0, k * t1, k * t2, math.cos(half)
+    x, y, z, w = q[0], q[1], q[2], q[3]
+    out = np.empty(4)
+    out[0] = w * dx + x * dw + y * dz - z * dy
+    out[1] = w * dy - x * dz + y * dw + z * dx
+    out[2] = w * dz + x * dy - y * dx + z * dw
+    out[3] = w * dw - x * dx - y * dy - z * dz
+    norm = math.sqrt(out[0] ** 2 + out[1] ** 2 + out[2] ** 2 + out[3] ** 2)
+    return out / norm
+
+
+@njit
+def body_pose(bodies, b, q):
+    """Rotation (3, 3) and origin (3,) of free body b in the world, from q."""
+    iq = bodies.idx_q[b]
+    Rq = quat_to_rotation(q[iq + 3], q[iq + 4], q[iq + 5], q[iq + 6])
+    R_P = bodies.R_P[b]
+    return R_P @ Rq, R_P @ q[iq:iq + 3] + bodies.p_P[b]
+
+
+@njit
+def body_kinematics(bodies, q, v, R_W, p_W, w_W, vo_W):
+    """Each free body's rotation, origin, angular velocity and origin velocity in the world,
+    written into rows bodies.joint of R_W, p_W, w_W, vo_W (njoints, ...)."""
+    for b in range(bodies.joint.shape[0]):
+        j, iv = bodies.joint[b], bodies.idx_v[b]
+        R, p = body_pose(bodies, b, q)
+        R_W[j] = R
+        p_W[j] = p
+        vo_W[j] = R @ v[iv:iv + 3]
+        w_W[j] = R @ v[iv + 3:iv + 6]

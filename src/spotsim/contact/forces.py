@@ -1,0 +1,202 @@
+"""The force of each sphere pair (Eq. 6-17) and one wrench per body (Eq. 18-21), compiled.
+
+`pair_forces` chains the contact law's kernels (detection, normal force, bristle friction)
+over the candidate pairs of one step, with each pair's memory carried from the last step;
+`body_wrenches` sums the pair forces into one wrench per body.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..jit import njit
+from .detection import contact_point, penetration
+from .friction import bristle_step
+from .normal import indentation, normal_force
+
+
+@njit
+def _to_world(R_W, p_W, joint, x_J, rows, point, shift=None, shift_J=None):
+    """(k, 3): R_W[joint[r]] x_J[r] (+ p_W[joint[r]] if point) for each r in rows; with
+    `shift` (k,) and `shift_J` (|rows|, 3), x_J[r] + shift[i] shift_J[r] in place of x_J[r]."""
+    out = np.empty((rows.shape[0], 3))
+    x = np.empty(3)
+    for i in range(rows.shape[0]):
+        r = rows[i]
+        j = joint[r]
+        for a in range(3):
+            x[a] = x_J[r, a] if shift is None else x_J[r, a] + shift[i] * shift_J[r, a]
+        for a in range(3):
+            out[i, a] = R_W[j, a, 0] * x[0] + R_W[j, a, 1] * x[1] + R_W[j, a, 2] * x[2]
+            if point:
+                out[i, a] += p_W[j, a]
+    return out
+
+
+@njit
+def _point_velocity(vo_W, w_W, p_W, j, point, out, i):
+    """out[i] += velocity of the point `point` (3,) riding on the body of joint j, world."""
+    r0, r1, r2 = point[0] - p_W[j, 0], point[1] - p_W[j, 1], point[2] - p_W[j, 2]
+    w = w_W[j]
+    out[i, 0] += vo_W[j, 0] + w[1] * r2 - w[2] * r1
+    out[i, 1] += vo_W[j, 1] + w[2] * r0 - w[0] * r2
+    out[i, 2] += vo_W[j, 2] + w[0] * r1 - w[1] * r0
+
+
+@njit
+def pair_forces(master, slave, key, C1_J, N1_J, joint1, finger1, axis1_J, C2_J, N2_J, joint2,
+                R_W, p_W, w_W, vo_W, opening, opening_rate, mem_key, mem_s, mem_vminus,
+                r1, r2, K, damping, floor, h, bristle):
+    """Normal (Eq. 11-13) and bristle friction (Eq. 14-17) force of each candidate pair.
+
+    master, slave, key: (k,) candidate pairs, sorted by key. C1_J, N1_J, joint1, finger1,
+    axis1_J: the master spheres' centres (fingers at opening 0), normals, joints, fingers and
+    opening axes, in their joints' frames; C2_J, N2_J, joint2: the slave spheres'.
+    R_W, p_W, w_W, vo_W: (njoints, ...) each joint's rotation, origin, angular velocity and
+    origin velocity, world. opening, opening_rate: (n_fingers,) m and m/s. mem_key, mem_s, mem_vminus: the
+    memory of the last step's pairs (sorted keys, bristle deflection, onset approach speed).
+    r1, r2: radii, m; K: Hertz stiffness; damping: Zhang factor; floor: least onset approach
+    speed, m/s; h: step, s; bristle: BristleParams.
+    Returns, for the pairs in contact only (sorted by key): master, slave, key, phi (m),
+    contact point (m), master and slave centres (m), force on the master (N, world), relative
+    speed at the point (m/s), state, and the new memory (deflection, onset approach speed).
+    """
+    c1 = _to_world(R_W, p_W, joint1, C1_J, master, True, opening[finger1[master]], axis1_J)
+    n1 = _to_world(R_W, p_W, joint1, N1_J, master, False)
+    c2 = _to_world(R_W, p_W, joint2, C2_J, slave, True)
+    n2 = _to_world(R_W, p_W, joint2, N2_J, slave, False)
+    n_c, phi, hit = penetration(c1, n1, r1, c2, n2, r2)
+    keep = np.flatnonzero(hit)
+    master, slave, key = master[keep], slave[keep], key[keep]
+    c1, c2, n_c, phi = c1[keep], c2[keep], n_c[keep], phi[keep]
+    k = keep.shape[0]
+    point = contact_point(c1, c2, r1, r2, n_c, phi)
+    slide = _to_world(R_W, p_W, joint1, axis1_J, master, False)
+    v_rel = np.empty((k, 3))
+    v_B = np.zeros((k, 3))
+    delta_dot = np.empty(k)
+    v_minus = np.empty(k)
+    s_prev = np.zeros((k, 3))
+    n_mem = mem_key.shape[0]
+    for i in range(k):
+        rate = opening_rate[finger1[master[i]]]
+        for a in range(3):
+            v_rel[i, a] = slide[i, a] * rate
+        _point_velocity(vo_W, w_W, p_W, joint1[master[i]], point[i], v_rel, i)
+        _point_velocity(vo_W, w_W, p_W, joint2[slave[i]], point[i], v_B, i)
+        for a in range(3):
+            v_rel[i, a] -= v_B[i, a]
+        # rate of delta = phi / 2
+        delta_dot[i] = -0.5 * (v_rel[i, 0] * n_c[i, 0] + v_rel[i, 1] * n_c[i, 1] + v_rel[i, 2] * n_c[i, 2])
+        # a pair in contact at the last step keeps its onset speed and bristle; a new one
+        # starts from its approach speed (floored) and an unbent bristle
+        pos = np.searchsorted(mem_key, key[i])
+        if pos < n_mem and mem_key[pos] == key[i]:
+            v_minus[i] = mem_vminus[pos]
+            s_prev[i] = mem_s[pos]
+        else:
+            v_minus[i] = max(delta_dot[i], floor)
+    F_n = normal_force(indentation(phi), delta_dot, v_minus, K, damping)
+    s, F_f, state = bristle_step(s_prev, v_rel, n_c, F_n, h, bristle)
+    force = np.empty((k, 3))
+    speed = np.empty(k)
+    for i in range(k):
+        for a in range(3):
+            force[i, a] = F_n[i] * n_c[i, a] + F_f[i, a]  # Eq. (18): f_i = F_n,i + F_f,i
+        speed[i] = math.sqrt(v_rel[i, 0] ** 2 + v_rel[i, 1] ** 2 + v_rel[i, 2] ** 2)
+    return master, slave, key, phi, point, c1, c2, force, speed, state, s, v_minus
+
+
+@njit
+def body_wrenches(master, slave, force, point, c1, c2, common_point, joint1, joint2, finger1,
+                  finger_parent, finger_axis_J, R_W, p_W, njoints):
+    """One wrench per body (Eq. 18-21): +f_i on the finger's body, -f_i on the module's.
+
+    force: (k, 3) on the masters, world, N; point: (k, 3) contact points; c1, c2: sphere
+    centres, where each body's force acts instead when common_point is False (the negative
+    control). finger_parent, finger_axis_J: each finger's body joint and opening axis.
+    Returns: (njoints, 6) each joint's wrench (force, moment about its origin) in its own
+    frame; (njoints, 3) force and (njoints, 3) moment about the world origin, world axes;
+    the force and moment (world origin) that fixed bodies (joint 0) exert on free ones; and
+    (n_fingers,) each finger's load along its opening axis, N (never negative).
+    """
+    F = np.zeros((njoints, 3))
+    T = np.zeros((njoints, 3))  # moment about each joint's origin, world axes
+    ext_f, ext_t = np.zeros(3), np.zeros(3)
+    load = np.zeros(finger_parent.shape[0])
+    for i in range(master.shape[0]):
+        j1, j2 = joint1[master[i]], joint2[slave[i]]
+        p1 = point[i] if common_point else c1[i]
+        p2 = point[i] if common_point else c2[i]
+        f = force[i]
+        for side in range(2):
+            j, p, sign, partner = (j1, p1, 1.0, j2) if side == 0 else (j2, p2, -1.0, j1)
+            r0, r1, r2 = p[0] - p_W[j, 0], p[1] - p_W[j, 1], p[2] - p_W[j, 2]
+            for a in range(3):
+                F[j, a] += sign * f[a]
+            T[j, 0] += sign * (r1 * f[2] - r2 * f[1])
+            T[j, 1] += sign * (r2 * f[0] - r0 * f[2])
+            T[j, 2] += sign * (r0 * f[1] - r1 * f[0])
+            # what a fixed body exerts on a free one is external; between free bodies internal
+            if partner == 0 and j != 0:
+                for a in range(3):
+                    ext_f[a] += sign * f[a]
+                ext_t[0] += sign * (p[1] * f[2] - p[2] * f[1])
+                ext_t[1] += sign * (p[2] * f[0] - p[0] * f[2])
+                ext_t[2] += sign * (p[0] * f[1] - p[1] * f[0])
+        fg = finger1[master[i]]
+        axis = finger_axis_J[fg]
+        R = R_W[finger_parent[fg]]
+        for a in range(3):
+            load[fg] += f[a] * (R[a, 0] * axis[0] + R[a, 1] * axis[1] + R[a, 2] * axis[2])
+    local = np.empty((njoints, 6))
+    T_O = np.empty((njoints, 3))
+    for j in range(njoints):
+        R, p = R_W[j], p_W[j]
+        for a in range(3):
+            local[j, a] = R[0, a] * F[j, 0] + R[1, a] * F[j, 1] + R[2, a] * F[j, 2]
+            local[j, 3 + a] = R[0, a] * T[j, 0] + R[1, a] * T[j, 1] + R[2, a] * T[j, 2]
+        T_O[j, 0] = T[j, 0] + p[1] * F[j, 2] - p[2] * F[j, 1]
+        T_O[j, 1] = T[j, 1] + p[2] * F[j, 0] - p[0] * F[j, 2]
+        T_O[j, 2] = T[j, 2] + p[0] * F[j, 1] - p[1] * F[j, 0]
+    for k in range(load.shape[0]):
+        load[k] = max(load[k], 0.0)
+    return local, F, T_O, ext_f, ext_t, load
+
+
+@njit
+def contact_summary(F, T_O, R_W, p_W, ee_joint, R_ee, module_joint, lever, speed, phi):
+    """What the run watches each step, as an (8,) array: the combined contact force on the
+    active module and its moment about the module's centroid, both in the grasp frame O_a
+    (N, N m), the fastest relative speed at a contact (m/s) and the deepest penetration (m).
+
+    F, T_O: (njoints, 3) each body's contact force and moment about the world origin. ee_joint,
+    R_ee: the end-effector's joint and its grasp frame's rotation in that joint's frame.
+    module_joint, lever: the module's joint and its centroid in that joint's frame.
+    speed, phi: (k,) the pairs' relative speeds and penetrations.
+    """
+    out = np.zeros(8)
+    R = R_W[ee_joint] @ R_ee
+    r_G = R_W[module_joint] @ lever + p_W[module_joint]
+    f = F[module_joint]
+    tau = T_O[module_joint] - np.array([r_G[1] * f[2] - r_G[2] * f[1], r_G[2] * f[0] - r_G[0] * f[2],
+                                        r_G[0] * f[1] - r_G[1] * f[0]])
+    for a in range(3):
+        out[a] = R[0, a] * f[0] + R[1, a] * f[1] + R[2, a] * f[2]
+        out[3 + a] = R[0, a] * tau[0] + R[1, a] * tau[1] + R[2, a] * tau[2]
+    if speed.shape[0]:
+        out[6], out[7] = speed.max(), phi.max()
+    return out
+
+
+@njit
+def raise_peaks(force, torque, norms, summary):
+    """Raise the per-axis peaks |force|, |torque| (3,) and the peak norms (2,) in place to
+    include one step's `contact_summary`."""
+    for a in range(3):
+        force[a] = max(force[a], abs(summary[a]))
+        torque[a] = max(torque[a], abs(summary[3 + a]))
+    norms[0] = max(norms[0], math.sqrt(summary[0] ** 2 + summary[1] ** 2 + summary[2] ** 2))
+    norms[1] = max(norms[1], math.sqrt(summary[3] ** 2 + summary[4] ** 2 + summary[5] ** 2))
