@@ -26,6 +26,8 @@ class FreeBodies(NamedTuple):
     R_P: np.ndarray  # (n, 3, 3) the joint's placement in the world (its parent), rotation
     p_P: np.ndarray  # (n, 3) and translation, m
     lever: np.ndarray  # (n, 3) the body's centroid in its joint frame, m
+    mass: np.ndarray  # (n,) kg
+    inertia_G: np.ndarray  # (n, 3, 3) rotational inertia about the centroid, joint axes, kg m^2
 
 
 def free_flyers(model: pin.Model) -> list[int]:
@@ -43,7 +45,9 @@ def free_bodies(model: pin.Model) -> FreeBodies:
                       ints([model.idx_vs[j] for j in joints]),
                       np.array([model.jointPlacements[j].rotation for j in joints]).reshape(-1, 3, 3),
                       np.array([model.jointPlacements[j].translation for j in joints]).reshape(-1, 3),
-                      np.array([model.inertias[j].lever for j in joints]).reshape(-1, 3))
+                      np.array([model.inertias[j].lever for j in joints]).reshape(-1, 3),
+                      np.array([model.inertias[j].mass for j in joints], dtype=float),
+                      np.array([model.inertias[j].inertia for j in joints]).reshape(-1, 3, 3))
 
 
 @njit
@@ -101,3 +105,28 @@ def body_kinematics(bodies, q, v, R_W, p_W, w_W, vo_W):
         p_W[j] = p
         vo_W[j] = R @ v[iv:iv + 3]
         w_W[j] = R @ v[iv + 3:iv + 6]
+
+
+@njit
+def bodies_momentum(bodies, rows, q, v):
+    """Linear and angular momentum (about the world origin) of the free bodies `rows`, summed,
+    and the largest single body's linear and angular momentum magnitudes: (3,), (3,), float,
+    float. Also their centroid (3,), m."""
+    P, L, c = np.zeros(3), np.zeros(3), np.zeros(3)
+    p_max = l_max = m_sum = 0.0
+    for b in rows:
+        iv = bodies.idx_v[b]
+        R, p = body_pose(bodies, b, q)
+        m, lever = bodies.mass[b], bodies.lever[b]
+        w = v[iv + 3:iv + 6]
+        v_G = R @ (v[iv:iv + 3] + np.cross(w, lever))
+        p_G = p + R @ lever
+        p_b = m * v_G
+        l_b = np.cross(p_G, p_b) + R @ (bodies.inertia_G[b] @ w)
+        P += p_b
+        L += l_b
+        c += m * p_G
+        m_sum += m
+        p_max = max(p_max, np.linalg.norm(p_b))
+        l_max = max(l_max, np.linalg.norm(l_b))
+    return P, L, p_max, l_max, c / m_sum

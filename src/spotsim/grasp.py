@@ -27,7 +27,7 @@ class FingerDrive:
 
     def opening_rate(self, load: np.ndarray) -> float:
         """The fingers' common opening rate for the coming step, m/s (closing is negative)."""
-        force = float(load.sum()) / len(load)
+        force = sum(load.tolist()) / len(load)
         if force >= self.grasp_load:
             self.stalled = True
         elif force < self.resume_fraction * self.grasp_load:

@@ -167,6 +167,11 @@ class Model:
         return free_bodies(self.pin_model)
 
     @cached_property
+    def body_row(self) -> dict[int, int]:
+        """Each free joint's row in `bodies`."""
+        return {int(j): b for b, j in enumerate(self.bodies.joint)}
+
+    @cached_property
     def finger_parent(self) -> np.ndarray:
         """(n_fingers,) the joint of the body each finger is mounted on."""
         return np.array([f.parent_joint for f in self.fingers], dtype=np.int64)
@@ -179,8 +184,7 @@ class Model:
     @cached_property
     def reach_table(self) -> tuple[np.ndarray, np.ndarray]:
         """`sphere_reach` of the free bodies as (row in `bodies`, reach in m) arrays."""
-        rows = {int(j): b for b, j in enumerate(self.bodies.joint)}
-        pairs = [(rows[j], r) for j, r in self.sphere_reach if j != 0]
+        pairs = [(self.body_row[j], r) for j, r in self.sphere_reach if j != 0]
         return (np.array([b for b, _ in pairs], dtype=np.int64), np.array([r for _, r in pairs], dtype=float))
 
     @property

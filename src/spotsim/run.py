@@ -9,6 +9,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
+from .bodies import bodies_momentum
 from .contact.forces import raise_peaks
 from .contact.friction import SLIPPING, STICKING
 from .grasp import COMPLETE, PHASES, SELF_CENTRING
@@ -62,21 +63,14 @@ def body_momentum_W(model: Model, data, j: int) -> pin.Force:
 
 def free_momentum_W(model: Model, data) -> tuple[np.ndarray, np.ndarray, float, float]:
     """Total linear and angular momentum (about the world origin) of the free bodies, and the
-    largest single body's linear and angular momentum magnitudes."""
-    P, L, p_max, l_max = np.zeros(3), np.zeros(3), 0.0, 0.0
-    for j in model.free_joints:
-        h = body_momentum_W(model, data, j)
-        P, L = P + h.linear, L + h.angular
-        p_max, l_max = max(p_max, math.hypot(*h.linear)), max(l_max, math.hypot(*h.angular))
-    return P, L, p_max, l_max
+    largest single body's linear and angular momentum magnitudes. From (q, v) directly."""
+    return bodies_momentum(model.bodies, np.arange(len(model.bodies.joint)), data.q, data.v)[:4]
 
 
-def centroid_W(model: Model, data, joints) -> tuple[np.ndarray, float]:
-    """Centroid (world) and mass of the bodies of `joints`."""
-    m = sum(model.pin_model.inertias[j].mass for j in joints)
-    c = sum(model.pin_model.inertias[j].mass * data.pin_data.oMi[j].act(model.pin_model.inertias[j].lever)
-            for j in joints)
-    return c / m, m
+def centroid_W(model: Model, data, joints) -> np.ndarray:
+    """Centroid (world) of the free bodies of `joints`, from q."""
+    rows = np.array([model.body_row[j] for j in joints], dtype=np.int64)
+    return bodies_momentum(model.bodies, rows, data.q, data.v)[4]
 
 
 class Recorder:
@@ -156,10 +150,10 @@ class Recorder:
         r["max_penetration_um"].append(c.phi.max() * 1e6 if c is not None and len(c.key) else 0.0)
         if model.robot_joint:
             base = data.pin_data.oMi[model.robot_joint]
-            r["robot_centroid_m"].append(centroid_W(model, data, [model.robot_joint])[0])
+            r["robot_centroid_m"].append(centroid_W(model, data, [model.robot_joint]))
             r["base_pos_m"].append(base.translation.copy())
             r["base_quat_xyzw"].append(pin.SE3ToXYZQUAT(base)[3:])
-            r["system_centroid_m"].append(centroid_W(model, data, model.free_joints)[0])
+            r["system_centroid_m"].append(centroid_W(model, data, model.free_joints))
             for i, mod in enumerate(model.modules):
                 M = groove_frame(model, data.pin_data, i)
                 r[f"{mod.name}_pos_m"].append(M.translation.copy())
