@@ -1,4 +1,4 @@
-"""`spotsim` command line (run, validate, plot): a thin layer over the library.
+"""`spotsim` command line (run, validate, plot, replay): a thin layer over the library.
 
 Exit codes: 0 completed (or valid), 2 bad input, 3 incomplete, 4 diverged, 130 interrupted.
 """
@@ -26,12 +26,86 @@ def _parser() -> argparse.ArgumentParser:
                      help="override a scenario key, validated like the file (repeatable)")
     run.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
+    run.add_argument("--replay", action="store_true", help="replay the run in Meshcat when it ends")
+    run.add_argument("--zmq-url", help="with --replay: the Meshcat server to use (default: start one)")
     val = sub.add_parser("validate", help="print the resolved scenario, or every problem in it")
     val.add_argument("config")
     val.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE")
     plot = sub.add_parser("plot", help="regenerate the figures of a run's results directory")
     plot.add_argument("result_dir")
+    rep = sub.add_parser("replay", help="replay a run in Meshcat, in the browser or as one HTML file")
+    rep.add_argument("result_dir")
+    rep.add_argument("--html", metavar="FILE", help="write a self-contained HTML file instead (no server)")
+    rep.add_argument("--zmq-url", help="the Meshcat server to use (default: start one)")
+    rep.add_argument("--rate", type=float, default=100.0, metavar="HZ",
+                     help="display frames per simulated second (default 100, the recorded rate)")
+    rep.add_argument("--no-spheres", action="store_true", help="hide the sphere layers")
+    rep.add_argument("--force-scale", type=float, metavar="MM_PER_N",
+                     help="force arrow length per newton (default: a typical load draws 80 mm)")
+    rep.add_argument("--no-loop", action="store_true", help="play once instead of looping")
+    rep.add_argument("--no-browser", action="store_true", help="do not open a browser")
     return p
+
+
+def _replay(result_dir, args, run_code=None) -> int:
+    """`spotsim replay` (and `run --replay`): exit 2 on bad input, else 0 (or the run's code)."""
+    try:
+        import meshcat  # noqa: F401
+        import umsgpack  # noqa: F401
+        import zmq  # noqa: F401
+    except ImportError as e:
+        print(f"spotsim replay needs meshcat ({e}); install it with `pip install meshcat`", file=sys.stderr)
+        return 2
+    from . import replay
+
+    if getattr(args, "force_scale", None) is not None and not args.force_scale > 0:
+        print(f"--force-scale {args.force_scale}: must be > 0", file=sys.stderr)
+        return 2
+    try:
+        run = replay.load_run(result_dir)
+        commands, info = replay.build(run, rate_hz=getattr(args, "rate", 100.0),
+                                      spheres=not getattr(args, "no_spheres", False),
+                                      force_mm_per_N=getattr(args, "force_scale", None),
+                                      loop=not getattr(args, "no_loop", False))
+    except SpotsimError as e:
+        print(e, file=sys.stderr)
+        return 2
+    if run.snapshots is None:
+        print(f"warning: {result_dir} has no replay.npz (recorded by an older spotsim): no spheres and no "
+              f"force arrows", file=sys.stderr)
+    what = f"{info.frames} frames at {info.rate_hz:g} Hz over {info.duration_s:.3f} s simulated"
+    if getattr(args, "html", None):
+        out = Path(args.html)
+        try:
+            replay.write_html(out, replay.static_html(commands, info, run.summary.get("scenario", "spotsim")))
+        except OSError as e:
+            print(f"{out}: cannot write: {e.strerror}", file=sys.stderr)
+            return 2
+        print(f"{out}: {out.stat().st_size / 1e6:.2f} MB, {what}; force arrows {info.force_mm_per_N:g} mm/N")
+        print(f"  open it in a browser; ?t=<s> shows an instant, ?view={'|'.join(info.views)} a camera")
+        return 0 if run_code is None else run_code
+    try:
+        server = replay.Server(args.zmq_url)
+        server.send(commands)
+    except SpotsimError as e:
+        print(e, file=sys.stderr)
+        return 2
+    print(f"replaying {result_dir} ({what}) at {server.web_url}")
+    if server.proc is None:  # someone else's server: the scene stays there
+        server.close()
+        return 0 if run_code is None else run_code
+    if not getattr(args, "no_browser", False):
+        import webbrowser
+
+        webbrowser.open(server.web_url, new=2)
+    print("the Meshcat server runs until Ctrl-C")
+    try:
+        server.proc.wait()
+    except KeyboardInterrupt:
+        pass
+    finally:
+        server.close()
+    return 0 if run_code is None else run_code
 
 
 def _config_path(arg: str | None) -> Path:
@@ -53,6 +127,8 @@ def _load(path: Path, overrides):
 
 def main(argv=None) -> int:
     args = _parser().parse_args(argv)
+    if args.command == "replay":
+        return _replay(args.result_dir, args)
     if args.command == "plot":
         from .results import replot
 
@@ -84,6 +160,12 @@ def main(argv=None) -> int:
     from .results import clear_summary, write_results
     from .run import simulate
 
+    if args.replay:  # before the run: a missing meshcat is bad input, found before anything ran
+        try:
+            import meshcat  # noqa: F401
+        except ImportError as e:
+            print(f"--replay needs meshcat ({e}); install it with `pip install meshcat`", file=sys.stderr)
+            return 2
     out = Path(args.out) if args.out else Path("results") / scenario.name
     try:
         out.mkdir(parents=True, exist_ok=True)
@@ -111,6 +193,8 @@ def main(argv=None) -> int:
                   f"{json.dumps([round(d, 4) for d in g['robot_centroid_displacement_mm']])} mm")
     print(f"  wall time {s['wall_time_s']:.2f} s for {s['sim_time_s']:.3f} s simulated")
     print(f"  results in {out}")
+    if args.replay:
+        return _replay(out, args, run_code=EXIT[s["status"]])
     return EXIT[s["status"]]
 
 

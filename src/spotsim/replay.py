@@ -1,0 +1,936 @@
+"""`spotsim replay`: a run in Meshcat, live in the browser or as one self-contained HTML file.
+
+The scene is built from the run's own scenario.yaml, unwelded: Pinocchio's MeshcatVisualizer
+loads its visual geometry (the arm meshes coarsened, see COARSE_MESH_CELL_M), and each display
+frame places every body from the recorded poses (timeseries.npz): the modules, the free-flying
+base, the finger openings. A welded module is placed from its own recorded pose, so one model
+serves the whole run. From replay.npz come the paper's Fig. 9 on screen: the sphere layers of
+the faces in contact range (blue), the spheres of the pairs in contact coloured by state
+(slipping red, sticking light blue), and the combined contact force on each module as an
+arrow. A head-up line shows the simulated time and the grasp phase.
+
+Everything is one meshcat animation (play, pause, time slider, speed, loop) whose time is the
+simulated time. The commands are built once, then either sent to a Meshcat server or written
+into meshcat's static page with the animation embedded.
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+import uuid
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+from .contact.friction import NONE, SLIPPING, STICKING
+from .errors import ScenarioError, SpotsimError
+from .grasp import APPROACH, COMPLETE, SELF_CENTRING
+
+#: Pair state colours of the paper's Fig. 9 (RGB in [0, 1]).
+STATE_COLOURS = {NONE: (0.10, 0.30, 1.00), SLIPPING: (1.00, 0.12, 0.12), STICKING: (0.55, 0.85, 1.00)}
+#: Drawn size of a sphere, as a fraction of its radius: the layers' grid step is one radius,
+#: so idle spheres drawn smaller leave gaps; the spheres of pairs in contact are drawn over
+#: them at their diameter.
+IDLE_SPHERE_SIZE, PAIR_SPHERE_SIZE = 0.5, 2.0
+#: Arm meshes are coarsened by vertex clustering on this grid (m): the example-robot-data
+#: meshes hold 130-250 k triangles (14-21 MB of COLLADA), a few thousand keep their shape.
+COARSE_MESH_CELL_M = 0.006
+#: Visuals drawn see-through, by the end of their URDF visual's or link's name, with their
+#: opacity: the adapter block holds the grooves and the fingers' backs hide the wedges, where
+#: the spheres are.
+SEE_THROUGH = {"adapter": 0.25, "finger_upper": 0.35, "finger_lower": 0.35}
+#: Visuals left out, by link name: the Z1's own gripper, which the paper's end-effector replaces
+#: (example-robot-data's Z1 carries it) and which would hide the fingers.
+LEFT_OUT = ("gripperStator", "gripperMover")
+#: Opacity of the contact faces' plates: the spheres in contact lie between two of them.
+PLATE_OPACITY = 0.35
+#: Longest force arrow for a typical load (95th percentile of the run's nonzero forces), m.
+ARROW_LENGTH_M = 0.08
+#: How long `replay --zmq-url` waits for a Meshcat server to answer, s.
+ZMQ_TIMEOUT_S = 5.0
+#: Light grey background (Pinocchio's "gray" preset): the blue and light blue spheres need it.
+BACKGROUND = ([0.98, 0.98, 0.98], [0.8, 0.8, 0.8])
+#: Perspective camera of meshcat's viewer: vertical field of view, deg.
+CAMERA_FOV_DEG = 75.0
+#: The whole-scene camera, chosen by eye: its direction from the scene's centre (world axes)
+#: and its distance in units of the scene's radius; a fixed arm, and the free-flying robot.
+SCENE_VIEWS = {"fixed": ((1.0, -1.3, 0.8), 2.2), "free": ((1.0, 0.6, 0.5), 3.0)}
+
+ROOT = "/meshcat/spotsim"
+CAMERA = "/Cameras/default/rotated/<object>"
+HUD = CAMERA + "/spotsim_hud"
+# the server replays its scene tree node by node; the animation must come after every object
+# it animates, so it is filed under a node created last (the viewer ignores this path)
+ANIMATION_NODE = "/spotsim_animation"
+CLEAR = (ROOT, HUD, ANIMATION_NODE)
+
+PHASE_NAMES = {APPROACH: "approach", SELF_CENTRING: "self-centring", COMPLETE: "complete"}
+
+
+# ------------------------------------------------------------------------------ the run
+
+
+@dataclass
+class Run:
+    """A results directory as the replay reads it."""
+
+    path: Path
+    summary: dict
+    ts: dict[str, np.ndarray]
+    snapshots: dict[str, np.ndarray] | None  # replay.npz, None for runs recorded before it
+    model: object  # the first (unwelded) Model of the run's scenario
+
+
+def load_run(result_dir: str | Path) -> Run:
+    """Read a results directory (raises SpotsimError with what is missing or wrong)."""
+    from .model import build_model
+    from .results import REPLAY, SUMMARY
+    from .run import face_names
+    from .scenario import load_scenario
+
+    d = Path(result_dir)
+    try:
+        summary = json.loads((d / SUMMARY).read_text())
+        with np.load(d / "timeseries.npz") as f:
+            ts = {k: f[k] for k in f.files}
+        scenario = load_scenario(d / "scenario.yaml")
+    except (OSError, ValueError, KeyError, ScenarioError) as e:
+        raise SpotsimError(f"{d}: not a spotsim results directory (needs {SUMMARY}, timeseries.npz "
+                           f"and scenario.yaml): {e}") from e
+    if len(ts.get("t", ())) < 2:
+        raise SpotsimError(f"{d}: the run recorded fewer than two samples; nothing to replay")
+    model = build_model(scenario, str(d / "scenario.yaml"))
+    snapshots = None
+    if (d / REPLAY).exists():
+        try:
+            with np.load(d / REPLAY) as f:
+                snapshots = {k: f[k] for k in f.files}
+        except (OSError, ValueError) as e:
+            raise SpotsimError(f"{d / REPLAY}: unreadable: {e}") from e
+        names = face_names(model)
+        if [list(snapshots["master_faces"]), list(snapshots["slave_faces"])] != [names[0], names[1]]:
+            raise SpotsimError(f"{d / REPLAY}: its contact faces are not those of the scene of "
+                               f"{d / 'scenario.yaml'}; was it written by another spotsim version?")
+    return Run(d, summary, ts, snapshots, model)
+
+
+@dataclass
+class Frames:
+    """The display frames: timeseries rows, their simulated times and contact snapshots."""
+
+    rate_hz: float
+    rows: np.ndarray
+    t: np.ndarray
+    snapshot: np.ndarray  # index into replay.npz's snapshots, -1 before the first
+    keys: np.ndarray  # animation key times, in frames: 0, 1, 2, ... (the last may fall between)
+
+
+def display_frames(run: Run, rate_hz: float) -> Frames:
+    """Every timeseries row at `rate_hz` of simulated time, and the last row."""
+    dt = float(run.summary["dt_s"])
+    top = float(run.snapshots["rate_hz"]) if run.snapshots is not None else 1.0 / dt
+    if not 0 < rate_hz <= top * (1 + 1e-9):
+        raise SpotsimError(f"--rate {rate_hz:g}: must be in (0, {top:g}] Hz, the rate at which the run "
+                           f"recorded {'contacts' if run.snapshots is not None else 'poses'}")
+    stride = max(1, int(round(1.0 / (rate_hz * dt))))
+    n = len(run.ts["t"])
+    rows = np.arange(0, n, stride)
+    if rows[-1] != n - 1:
+        rows = np.append(rows, n - 1)
+    snap = np.full(len(rows), -1)
+    if run.snapshots is not None and len(run.snapshots["row"]):
+        snap = np.searchsorted(run.snapshots["row"], rows, side="right") - 1
+    return Frames(1.0 / (stride * dt), rows, run.ts["t"][rows], snap, rows / stride)
+
+
+# ------------------------------------------------------------------------------ poses
+
+
+def _se3(pos, quat_xyzw) -> pin.SE3:
+    return pin.XYZQUATToSE3(np.concatenate([pos, quat_xyzw]))
+
+
+def module_pose_keys(run: Run) -> list[tuple[str, str]]:
+    """The timeseries keys of each module's groove frame O_b (position, quaternion x y z w)."""
+    mods = run.model.modules
+    if len(mods) == 1:
+        return [("module_pos_m", "module_quat_xyzw")]
+    return [(f"{m.name}_pos_m", f"{m.name}_quat_xyzw") for m in mods]
+
+
+class Kinematics:
+    """Places a scene's joints from recorded poses: the free-flyers (robot base, modules) from
+    their world poses, the fingers at their openings, the locked arm joints at their angles."""
+
+    def __init__(self, run: Run, pin_model: pin.Model):
+        m, model = pin_model, run.model
+        self.pin_model, self.data = m, m.createData()
+        self.q_ref = pin.neutral(m)
+        for name, angle in model.spec.locked.items():
+            if m.existJointName(name):
+                self.q_ref[m.idx_qs[m.getJointId(name)]] = angle
+        self.fingers = [(m.idx_qs[m.getJointId(f)], i) for i, f in enumerate(run.summary["fingers"])
+                        if m.existJointName(f)]
+        self.free = []  # (joint, placement^-1 of the recorded frame in it, ("module", k) or ("base", 0))
+        for k, (_, prefix, _, _) in enumerate(model.spec.modules):
+            f = m.frames[m.getFrameId(f"{prefix}module", pin.BODY)]
+            self.free.append((f.parentJoint, f.placement.inverse(), ("module", k)))
+        if model.spec.robot_joint:
+            self.free.append((m.getJointId(model.spec.robot_joint), pin.SE3.Identity(), ("base", 0)))
+        for j, _, _ in self.free:
+            if m.parents[j] != 0 or m.nqs[j] != 7:
+                raise SpotsimError(f"joint {m.names[j]} is not a free-flyer on the world")
+
+    def q(self, modules_W, base_W, opening_m) -> np.ndarray:
+        m, q = self.pin_model, self.q_ref.copy()
+        for j, frame_inv, (kind, k) in self.free:
+            oMi = (modules_W[k] if kind == "module" else base_W) * frame_inv
+            q[m.idx_qs[j]:m.idx_qs[j] + 7] = pin.SE3ToXYZQUAT(m.jointPlacements[j].inverse() * oMi)
+        for iq, i in self.fingers:
+            q[iq] = opening_m[i]
+        return q
+
+    def place(self, modules_W, base_W, opening_m) -> pin.Data:
+        pin.forwardKinematics(self.pin_model, self.data, self.q(modules_W, base_W, opening_m))
+        return self.data
+
+
+def recorded_state(run: Run, row: int):
+    """World poses of the modules' groove frames and of the robot base, and finger openings (m)."""
+    ts = run.ts
+    modules = [_se3(ts[p][row], ts[q][row]) for p, q in module_pose_keys(run)]
+    base = _se3(ts["base_pos_m"][row], ts["base_quat_xyzw"][row]) if "base_pos_m" in ts else None
+    return modules, base, ts["finger_opening_mm"][row] * 1e-3
+
+
+# ------------------------------------------------------------------------------ three.js JSON
+
+
+def _uuid() -> str:
+    return str(uuid.uuid4())
+
+
+def _array(a: np.ndarray, dtype=np.float32) -> dict:
+    """A typed array as meshcat packs one: msgpack ext types the viewer decodes."""
+    import umsgpack
+
+    codes = {np.dtype(np.float32): (0x17, "Float32Array"), np.dtype(np.uint8): (0x12, "Uint8Array")}
+    a = np.ascontiguousarray(a, dtype=dtype)
+    code, name = codes[a.dtype]
+    return {"itemSize": a.shape[1] if a.ndim == 2 else 1, "type": name,
+            "array": umsgpack.Ext(code, a.tobytes()), "normalized": a.dtype == np.uint8}
+
+
+def _ext_f32(a) -> object:
+    import umsgpack
+
+    return umsgpack.Ext(0x17, np.ascontiguousarray(a, dtype=np.float32).tobytes())
+
+
+def _matrix(M: pin.SE3 | None = None, scale=None) -> list[float]:
+    """Column-major 4x4 (three.js `matrix`)."""
+    T = np.eye(4) if M is None else M.homogeneous.copy()
+    if scale is not None:
+        T[:3, :3] = T[:3, :3] @ np.diag(scale)
+    return [float(x) for x in T.T.ravel()]
+
+
+def _colour(rgb) -> int:
+    r, g, b = (int(round(255 * c)) for c in rgb)
+    return (r << 16) + (g << 8) + b
+
+
+class ObjectTree:
+    """One three.js object tree in the JSON of meshcat's set_object, geometries, materials and
+    textures shared by key."""
+
+    def __init__(self):
+        self.lists = {"geometries": [], "materials": [], "textures": []}
+        self.keys: dict = {}
+
+    def add(self, kind: str, data: dict, key=None) -> str:
+        if key is not None and (kind, key) in self.keys:
+            return self.keys[kind, key]
+        data = {"uuid": _uuid(), **data}
+        self.lists[kind].append(data)
+        if key is not None:
+            self.keys[kind, key] = data["uuid"]
+        return data["uuid"]
+
+    def points(self, name: str, positions: np.ndarray, colours: np.ndarray | None, size: float,
+               rgb=(1, 1, 1), visible=True, render_order=0) -> dict:
+        """A point cloud, `positions` (n, 3) m; per-point `colours` (n, 3) or one `rgb`."""
+        attrs = {"position": _array(positions)}
+        if colours is not None:  # bytes, read as [0, 1] (normalized)
+            attrs["color"] = _array(np.round(np.asarray(colours) * 255), np.uint8)
+        g = self.add("geometries", {"type": "BufferGeometry", "data": {"attributes": attrs}})
+        m = self.add("materials", {"type": "PointsMaterial", "size": size, "sizeAttenuation": True,
+                                   "vertexColors": colours is not None, "color": _colour(rgb)},
+                     key=("points", size, colours is not None, tuple(rgb)))
+        return node("Points", name, g, m, visible=visible, renderOrder=render_order, frustumCulled=False)
+
+    def command(self, path: str, root: dict) -> dict:
+        obj = {"metadata": {"version": 4.5, "type": "Object"}, **self.lists, "images": [], "object": root}
+        return {"type": "set_object", "path": path, "object": obj}
+
+
+def node(kind: str, name: str, geometry: str | None = None, material: str | None = None,
+         matrix=None, children=(), **extra) -> dict:
+    n = {"uuid": _uuid(), "type": kind, "name": name, "matrix": matrix or _matrix()}
+    if geometry is not None:
+        n["geometry"], n["material"] = geometry, material
+    if children:
+        n["children"] = list(children)
+    n.update(extra)
+    return n
+
+
+class Clip:
+    """One node's animation clip; keys are in frames of the display rate, values float32."""
+
+    def __init__(self, path: str):
+        self.path, self.tracks = path, []
+
+    def pose(self, target: str, poses: list[pin.SE3], times: np.ndarray) -> None:
+        xyzq = np.array([pin.SE3ToXYZQUAT(M) for M in poses])
+        self.vector(target, "position", times, xyzq[:, :3])
+        self.tracks.append({"name": f"{target}.quaternion", "type": "quaternion", "times": _ext_f32(times),
+                            "values": _ext_f32(_continuous(xyzq[:, 3:]).ravel())})
+
+    def vector(self, target: str, prop: str, times, values) -> None:
+        self.tracks.append({"name": f"{target}.{prop}", "type": "vector3", "times": _ext_f32(times),
+                            "values": _ext_f32(np.asarray(values).ravel())})
+
+    def visible(self, target: str, shown: np.ndarray, times: np.ndarray) -> None:
+        """`shown` (n_frames,) bool: keys only where it changes (discrete track)."""
+        keep = np.flatnonzero(np.r_[True, shown[1:] != shown[:-1]])
+        self.tracks.append({"name": f"{target}.visible", "type": "boolean",
+                            "times": _ext_f32(times[keep]), "values": [bool(v) for v in shown[keep]]})
+
+    def lower(self, fps: float) -> dict:
+        return {"path": self.path, "clip": {"fps": fps, "name": "default", "uuid": _uuid(), "tracks": self.tracks}}
+
+
+def _continuous(q: np.ndarray) -> np.ndarray:
+    """Quaternions (n, 4) with signs flipped so that consecutive ones are on the same side."""
+    q = q.copy()
+    for i in range(1, len(q)):
+        if q[i] @ q[i - 1] < 0:
+            q[i] = -q[i]
+    return q
+
+
+def _moves(poses: list[pin.SE3]) -> bool:
+    return any(not M.isApprox(poses[0], 1e-9) for M in poses[1:])
+
+
+# ------------------------------------------------------------------------------ the scene
+
+
+def coarse_mesh(vertices: np.ndarray, triangles: np.ndarray, cell: float):
+    """Vertex clustering: the vertices in one cube of side `cell` merge at their mean and the
+    triangles that collapse are dropped. vertices (n, 3), triangles (m, 3) int."""
+    key = np.floor(vertices / cell).astype(np.int64)
+    _, inverse = np.unique(key, axis=0, return_inverse=True)
+    inverse = inverse.ravel()
+    counts = np.bincount(inverse)
+    merged = np.stack([np.bincount(inverse, vertices[:, i]) for i in range(3)], axis=1) / counts[:, None]
+    tri = inverse[triangles]
+    tri = tri[(tri[:, 0] != tri[:, 1]) & (tri[:, 1] != tri[:, 2]) & (tri[:, 0] != tri[:, 2])]
+    _, first = np.unique(np.sort(tri, axis=1), axis=0, return_index=True)
+    return merged, tri[np.sort(first)]
+
+
+def visual_model(model) -> tuple[pin.Model, pin.GeometryModel]:
+    """The unreduced scene with its visual geometry: arm meshes coarsened, the adapter see-through."""
+    import coal
+    import yourdfpy
+    import io
+
+    full = pin.buildModelFromXML(model.urdf)
+    visual = pin.buildGeomFromUrdfString(full, model.urdf, pin.GeometryType.VISUAL)
+    # Pinocchio names visuals <link>_<i>; the URDF's own names say which is which
+    urdf = yourdfpy.URDF.load(io.BytesIO(model.urdf.encode()), load_meshes=False, build_scene_graph=False,
+                              load_collision_meshes=False)
+    names = {f"{link.name}_{i}": (link.name, v.name or "") for link in urdf.robot.links
+             for i, v in enumerate(link.visuals)}
+    for g in [g.name for g in visual.geometryObjects if names.get(g.name, ("", ""))[0] in LEFT_OUT]:
+        visual.removeGeometryObject(g)
+    for g in visual.geometryObjects:
+        link, name = names.get(g.name, ("", ""))
+        for suffix, opacity in SEE_THROUGH.items():
+            if name.endswith(suffix) or link.endswith(suffix):
+                colour = g.meshColor.copy()
+                colour[3] = opacity
+                g.meshColor = colour
+        geom = g.geometry
+        if isinstance(geom, coal.BVHModelBase) and geom.num_tris:
+            tris = np.array([[t[0], t[1], t[2]] for t in map(geom.tri_indices, range(geom.num_tris))])
+            scale = np.asarray(g.meshScale)
+            v, t = coarse_mesh(geom.vertices() * scale, tris, COARSE_MESH_CELL_M)
+            bvh = coal.BVHModelOBBRSS()
+            bvh.beginModel(len(t), len(v))
+            bvh.addVertices(v / scale)
+            bvh.addTriangles(t)
+            bvh.endModel()
+            g.geometry, g.meshPath = bvh, ""  # no file: the visualizer sends these triangles
+    return full, visual
+
+
+@dataclass
+class ReplayInfo:
+    frames: int
+    rate_hz: float
+    duration_s: float
+    force_mm_per_N: float
+    views: dict  # name -> {"camera": [x, y, z], "target": [x, y, z]} (three.js axes)
+
+
+class _Commands:
+    """A meshcat window that keeps the lowered commands instead of sending them."""
+
+    def __init__(self):
+        self.commands: list[dict] = []
+
+    def send(self, command) -> None:
+        self.commands.append(command.lower())
+
+
+def build(run: Run, rate_hz: float = 100.0, spheres: bool = True, force_mm_per_N: float | None = None,
+          loop: bool = True) -> tuple[list[dict], ReplayInfo]:
+    """The meshcat commands that draw and animate a run, and what they show.
+
+    rate_hz: display frames per simulated second. spheres: draw the sphere layers.
+    force_mm_per_N: arrow scale (None: ARROW_LENGTH_M for a typical load, rounded to 1-2-5).
+    """
+    import meshcat
+    from pinocchio.visualize import MeshcatVisualizer
+
+    model = run.model
+    frames = display_frames(run, rate_hz)
+    keys = frames.keys
+    states = [recorded_state(run, r) for r in frames.rows]
+
+    window = _Commands()
+    vis = meshcat.Visualizer(window=window)
+    for path in CLEAR:
+        vis[path].delete()
+    full, visual = visual_model(model)
+    viz = MeshcatVisualizer(full, None, visual)
+    viz.initViewer(viewer=vis)
+    viz.loadViewerModel(rootNodeName="spotsim")
+    full_kin = Kinematics(run, full)
+    viz.display(full_kin.q(*states[0]))
+    clips = []
+    vdata = visual.createData()
+    placements = [[] for _ in visual.geometryObjects]
+    for s in states:
+        pin.updateGeometryPlacements(full, full_kin.place(*s), visual, vdata)
+        for g, M in enumerate(vdata.oMg):
+            placements[g].append(M.copy())
+    for g, obj in enumerate(visual.geometryObjects):
+        if _moves(placements[g]):
+            clip = Clip(f"{ROOT}/visuals/{obj.name}")
+            clip.pose("", placements[g], keys)
+            clips.append(clip)
+
+    first = Kinematics(run, model.pin_model)
+    datas = [[M.copy() for M in first.place(*s).oMi] for s in states]
+    clips += _contact_bodies(run, frames, keys, states, datas, spheres, window.commands)
+    scale = _force_scale(run, frames) if force_mm_per_N is None else force_mm_per_N * 1e-3
+    clips += _force_arrows(run, frames, keys, states, scale, window.commands)
+    clips.append(_hud(run, frames, keys, scale, spheres, window.commands))
+
+    focus, views = _views(run, states[0], datas[0])
+    vis[ROOT].set_transform(pin.SE3(np.eye(3), -focus).homogeneous)
+    for path, prop, value in (("/Background", "top_color", BACKGROUND[0]),
+                              ("/Background", "bottom_color", BACKGROUND[1]),
+                              ("/Grid", "visible", False), ("/Axes", "visible", False),
+                              (CAMERA, "position", views["scene"]["camera"])):
+        vis[path].set_property(prop, value)
+    window.commands.append({
+        "type": "set_animation", "path": "",
+        "animations": [c.lower(frames.rate_hz) for c in clips],
+        "options": {"play": True, "repetitions": float("inf") if loop else 1},
+    })
+    return window.commands, ReplayInfo(len(frames.rows), frames.rate_hz, float(frames.t[-1]), scale * 1e3, views)
+
+
+def _body_of_faces(model):
+    """Group the first model's faces by the body their spheres ride: each finger (moved by its
+    opening) and each module. Returns [(name, kind, index, master faces, slave faces)]."""
+    bodies = []
+    n_master_faces = int(model.master.face.max()) + 1 if len(model.master.face) else 0
+    for i, f in enumerate(model.fingers):
+        faces = np.unique(model.master.face[model.master_finger == i])
+        bodies.append((f.name, "finger", i, faces, np.zeros(0, int)))
+    for k, mod in enumerate(model.modules):
+        faces = np.unique(model.slave.face[model.slave.joint == mod.joint])
+        bodies.append((mod.name, "module", k, np.zeros(0, int), faces + n_master_faces))
+    return bodies, n_master_faces
+
+
+def _body_frame(model, kind, i, oMi, opening) -> pin.SE3:
+    """World pose of the frame the spheres of a finger or a module are given in."""
+    if kind == "finger":
+        f = model.fingers[i]
+        return oMi[f.parent_joint] * pin.SE3(np.eye(3), f.axis_J * opening[i])
+    return oMi[model.modules[i].joint]
+
+
+def _contact_bodies(run, frames, keys, states, datas, spheres, commands) -> list[Clip]:
+    """Per finger and per module: its contact faces as thin plates, the sphere layers of its
+    faces in contact range and, over them, the spheres of the pairs in contact by state."""
+    model = run.model
+    snaps = run.snapshots
+    bodies, n_mf = _body_of_faces(model)
+    p = model.params
+    # three.js draws a point of `size` as wide as a segment of size * tan(fov / 2) at its depth
+    focal = 1 / np.tan(np.radians(CAMERA_FOV_DEG) / 2)
+    face_layers = []  # per face (first-model numbering): (positions in its body frame, radius)
+    for layers, r in ((model.master, p.r1), (model.slave, p.r2)):
+        for f in range(int(layers.face.max()) + 1):
+            face_layers.append((layers.centres_J[layers.face == f], r))
+    plates = _plates(model)
+    clips = []
+    for name, kind, i, mfaces, sfaces in bodies:
+        tree = ObjectTree()
+        children = []
+        plate_mat = tree.add("materials", {"type": "MeshLambertMaterial", "side": 2, "transparent": True,
+                                           "opacity": PLATE_OPACITY, "depthWrite": False,
+                                           "color": _colour((0.3, 0.45, 0.9) if kind == "finger" else (0.5, 0.5, 0.52))})
+        for f in [*mfaces, *sfaces]:
+            size, M = plates[f]
+            g = tree.add("geometries", {"type": "BoxGeometry", "width": size[0], "height": size[1], "depth": size[2]})
+            children.append(node("Mesh", f"plate{f}", g, plate_mat, matrix=_matrix(M)))
+        clip = Clip(f"{ROOT}/contact/{name}")
+        clip.pose("", [_body_frame(model, kind, i, oMi, s[2]) for oMi, s in zip(datas, states)], keys)
+        if spheres and snaps is not None:
+            snap = frames.snapshot
+            for f in [*mfaces, *sfaces]:
+                centres, r = face_layers[f]
+                shown = np.where(snap >= 0, snaps["faces_in_range"][np.maximum(snap, 0), f], False)
+                children.append(tree.points(f"f{f}", centres, None, IDLE_SPHERE_SIZE * r * focal,
+                                            STATE_COLOURS[NONE], visible=bool(shown[0])))
+                clip.visible(f"f{f}", shown, keys)
+            for child, shown in _pair_clouds(model, snaps, snap, kind, i, tree, focal):
+                children.append(child)
+                clip.visible(child["name"], shown, keys)
+        commands.append(tree.command(f"{ROOT}/contact/{name}", node("Group", "body", children=children)))
+        clips.append(clip)
+    return clips
+
+
+def _plates(model) -> dict:
+    """Each contact face's thin box: (size (3,), placement in its body's sphere frame)."""
+    objects = model.geom_model.geometryObjects
+    masters = [g for g, _ in model.finger_geoms]
+    slaves = [g for g in range(len(objects)) if g not in set(masters)]
+    out = {}
+    for f, g in enumerate(masters + slaves):
+        o = objects[g]
+        out[f] = (2 * np.asarray(o.geometry.halfSide), o.placement)
+    return out
+
+
+def _pair_clouds(model, snaps, snap, kind, i, tree, focal):
+    """The coloured spheres of one body at each display frame, one point cloud per distinct
+    set (a grasp that holds shows one cloud for many frames). Yields (cloud, shown per frame)."""
+    ends = snaps["pairs_end"]
+    clouds: dict[bytes, tuple[dict, np.ndarray]] = {}
+    order = []
+    if kind == "finger":
+        layers, r, idx_key, on_body = model.master, model.params.r1, "master", model.master_finger == i
+    else:
+        layers, r, idx_key = model.slave, model.params.r2, "slave"
+        on_body = layers.joint == model.modules[i].joint
+    for frame, s in enumerate(snap):
+        if s < 0:
+            continue
+        lo, hi = (ends[s - 1] if s else 0), ends[s]
+        idx, st = snaps[idx_key][lo:hi], snaps["state"][lo:hi]
+        mine = on_body[idx]
+        if not mine.any():
+            continue
+        # a sphere in pairs of both states shows slipping
+        idx, st = idx[mine], st[mine]
+        o = np.lexsort((st, idx))
+        idx, st = idx[o], st[o]
+        first = np.r_[True, idx[1:] != idx[:-1]]
+        idx, st = idx[first], st[first]
+        key = idx.tobytes() + st.tobytes()
+        if key not in clouds:
+            colours = np.array([STATE_COLOURS[int(x)] for x in st])
+            cloud = tree.points(f"s{len(order)}", layers.centres_J[idx], colours, PAIR_SPHERE_SIZE * r * focal,
+                                visible=False, render_order=1)
+            clouds[key] = (cloud, np.zeros(len(snap), dtype=bool))
+            order.append(key)
+        clouds[key][1][frame] = True
+    for key in order:
+        cloud, shown = clouds[key]
+        cloud["visible"] = bool(shown[0])
+        yield cloud, shown
+
+
+def _nice(x: float) -> float:
+    """The largest of 1, 2, 5 x 10^k not above x."""
+    k = np.floor(np.log10(x))
+    for m in (5, 2, 1):
+        if m * 10 ** k <= x:
+            return float(m * 10 ** k)
+    return float(10 ** k)
+
+
+def _force_scale(run, frames) -> float:
+    """Arrow length per newton, m/N: a typical load (95th percentile) draws ARROW_LENGTH_M."""
+    if run.snapshots is None:
+        return 1e-3
+    F = np.linalg.norm(run.snapshots["force_W"], axis=2).ravel()
+    F = F[F > 0]
+    return _nice(ARROW_LENGTH_M / np.percentile(F, 95)) if len(F) else 1e-3
+
+
+def _force_arrows(run, frames, keys, states, scale, commands) -> list[Clip]:
+    """The combined contact force on each module: an arrow from its groove frame origin O_b,
+    drawn over everything, `scale` m per N; hidden while the module takes no force."""
+    if run.snapshots is None:
+        return []
+    clips = []
+    F_all = run.snapshots["force_W"]
+    shaft_r, head_r, head_h = 0.0012, 0.0035, 0.008
+    for k, mod in enumerate(run.model.modules):
+        F = np.where((frames.snapshot >= 0)[:, None], F_all[np.maximum(frames.snapshot, 0), k], 0.0)
+        norm = np.linalg.norm(F, axis=1)
+        L, shown = norm * scale, norm > 0
+        poses = []
+        for (modules_W, _, _), f, n in zip(states, F, norm):
+            R = pin.Quaternion.FromTwoVectors(np.array([0.0, 1.0, 0.0]), f / n).matrix() if n > 0 else np.eye(3)
+            poses.append(pin.SE3(R, modules_W[k].translation))
+        tree = ObjectTree()
+        mat = tree.add("materials", {"type": "MeshLambertMaterial", "color": 0xE000E0, "depthTest": False,
+                                     "transparent": True, "opacity": 0.9})
+        shaft = tree.add("geometries", {"type": "CylinderGeometry", "radiusTop": shaft_r, "radiusBottom": shaft_r,
+                                        "height": 1.0, "radialSegments": 12})
+        head = tree.add("geometries", {"type": "CylinderGeometry", "radiusTop": 0.0, "radiusBottom": head_r,
+                                       "height": head_h, "radialSegments": 16})
+        path = f"{ROOT}/forces/{mod.name}"
+        commands.append(tree.command(path, node("Group", "arrow", children=[
+            node("Mesh", "shaft", shaft, mat, renderOrder=10), node("Mesh", "head", head, mat, renderOrder=10)],
+            visible=bool(shown[0]))))
+        clip = Clip(path)
+        clip.pose("", poses, keys)
+        clip.visible("arrow", shown, keys)
+        Lc = np.maximum(L, 1e-6)
+        clip.vector("shaft", "scale", keys, np.stack([np.ones_like(Lc), Lc, np.ones_like(Lc)], axis=1))
+        clip.vector("shaft", "position", keys, np.stack([0 * Lc, Lc / 2, 0 * Lc], axis=1))
+        clip.vector("head", "position", keys, np.stack([0 * Lc, Lc + head_h / 2, 0 * Lc], axis=1))
+        clips.append(clip)
+    return clips
+
+
+# ------------------------------------------------------------------------------ head-up text
+
+#: The head-up text: glyphs drawn by meshcat's viewer (its `_text` canvas textures, 256 px,
+#: black), monospace; one plane per character, HUD_GLYPH_M wide at HUD_DISTANCE_M in front of
+#: the camera, so that it keeps its place on screen as the camera moves.
+HUD_FONT_PX, HUD_GLYPH_M, HUD_DISTANCE_M = 160, 0.09, 1.0
+HUD_ADVANCE_M = 0.6 * HUD_FONT_PX / 256 * HUD_GLYPH_M  # monospace advance ~0.6 em
+HUD_LINE_M = 0.06
+
+
+class _Text:
+    def __init__(self, tree: ObjectTree):
+        self.tree = tree
+        self.plane = tree.add("geometries", {"type": "PlaneGeometry", "width": HUD_GLYPH_M, "height": HUD_GLYPH_M})
+
+    def glyph(self, ch: str, x: float, y: float, name: str = "") -> dict:
+        tex = self.tree.add("textures", {"type": "_text", "text": ch, "font_size": HUD_FONT_PX,
+                                         "font_face": "monospace"}, key=ch)
+        mat = self.tree.add("materials", {"type": "MeshBasicMaterial", "map": tex, "transparent": True,
+                                          "depthTest": False, "depthWrite": False}, key=ch)
+        return node("Mesh", name or f"g{_uuid()[:8]}", self.plane, mat, matrix=_matrix(pin.SE3(np.eye(3), np.array([x, y, 0.0]))),
+                    renderOrder=1001, frustumCulled=False)
+
+    def line(self, text: str, x0: float, y: float, name: str, visible=True) -> dict:
+        """Glyph i of `text` centred at x0 + (i + 1/2) advances."""
+        chars = [self.glyph(c, x0 + (i + 0.5) * HUD_ADVANCE_M, y) for i, c in enumerate(text) if c != " "]
+        return node("Group", name, children=chars, visible=visible)
+
+    def box(self, rgb, x: float, y: float, w: float, h: float, opacity=1.0, order=1001) -> dict:
+        g = self.tree.add("geometries", {"type": "PlaneGeometry", "width": w, "height": h}, key=("box", w, h))
+        m = self.tree.add("materials", {"type": "MeshBasicMaterial", "color": _colour(rgb), "transparent": True,
+                                        "opacity": opacity, "depthTest": False, "depthWrite": False},
+                          key=("box", tuple(rgb), opacity))
+        return node("Mesh", f"b{_uuid()[:8]}", g, m, matrix=_matrix(pin.SE3(np.eye(3), np.array([x, y, 0.0]))),
+                    renderOrder=order, frustumCulled=False)
+
+
+def phase_labels(summary: dict) -> list[tuple[float, str]]:
+    """(start time, label) of each grasp phase, in order."""
+    phases = summary["phases"]
+    grasps = summary["grasps"]
+    if isinstance(phases, dict):
+        phases = [phases]
+    out = []
+    for g, (times, grasp) in enumerate(zip(phases, grasps, strict=True)):
+        who = f"{grasp['end_effector']} on {grasp['module']}"
+        if len(grasps) > 1:
+            who = f"grasp {g + 1}/{len(grasps)} {who}"
+        for phase in (APPROACH, SELF_CENTRING, COMPLETE):
+            if times.get(phase) is not None:
+                out.append((float(times[phase]), f"{who}: {PHASE_NAMES[phase]}"))
+    return sorted(out, key=lambda x: x[0])
+
+
+def time_digits(t: np.ndarray, n_int: int) -> np.ndarray:
+    """(n, n_int + 2) the digits of each time (s) to 0.01 s, -1 for a leading blank."""
+    cs = np.round(np.asarray(t) * 100).astype(np.int64)
+    digits = np.stack([(cs // 10 ** p) % 10 for p in range(n_int + 1, -1, -1)], axis=1)
+    for col in range(n_int - 1):  # leading zeros of the integer part are blank
+        blank = (cs < 10 ** (n_int + 1 - col))
+        digits[blank, col] = -1
+    return digits
+
+
+def _hud(run, frames, keys, scale, spheres, commands) -> Clip:
+    """Time and phase at the top, the run and the legend at the bottom, fixed on screen."""
+    tree = ObjectTree()
+    text = _Text(tree)
+    half_h = HUD_DISTANCE_M * np.tan(np.radians(CAMERA_FOV_DEG) / 2)
+    top, bottom = half_h - 0.13, -half_h + 0.05  # below meshcat's "Open Controls" bar
+    clip = Clip(HUD)
+    labels = phase_labels(run.summary)
+    n_int = max(1, len(str(int(frames.t[-1]))))
+    # top line: "t = 12.34 s   <phase label>", the time's digits per slot (column)
+    time_cols = [4 + s + (s >= n_int) for s in range(n_int + 2)]  # after "t = ", "." skipped
+    label_col = 4 + n_int + 3 + 5
+    n_cols = label_col + max((len(l) for _, l in labels), default=0)
+    x0 = -n_cols * HUD_ADVANCE_M / 2
+    col = lambda c: x0 + (c + 0.5) * HUD_ADVANCE_M  # noqa: E731
+    children = [text.box((1, 1, 1), 0, top + 0.015, n_cols * HUD_ADVANCE_M + 0.04, HUD_LINE_M, 0.7, 1000),
+                text.line("t =", x0, top, "tlabel"),
+                text.glyph(".", col(4 + n_int), top), text.glyph("s", col(4 + n_int + 4), top)]
+    digits = time_digits(frames.t, n_int)
+    for slot, c in enumerate(time_cols):
+        for d in range(10):  # ten planes per slot, one shown
+            shown = digits[:, slot] == d
+            if shown.any():
+                name = f"d{slot}_{d}"
+                g = text.glyph(str(d), col(c), top, name)
+                g["visible"] = bool(shown[0])
+                children.append(g)
+                clip.visible(name, shown, keys)
+    starts = np.array([t for t, _ in labels])
+    current = np.searchsorted(starts, frames.t + 1e-9, side="right") - 1
+    for k, (_, label) in enumerate(labels):
+        shown = current == k
+        if shown.any():
+            children.append(text.line(label, col(label_col) - HUD_ADVANCE_M / 2, top, f"p{k}",
+                                      visible=bool(shown[0])))
+            clip.visible(f"p{k}", shown, keys)
+    # bottom lines: the run, and the legend with a swatch in the gap before each entry
+    s = run.summary
+    status = f"{s['scenario']}: {s['status']} at {s['sim_time_s']:.3f} s"
+    legend = f"   force {scale * 1e3:g} mm/N" + ("     spheres:   none   slipping   sticking" if spheres else "")
+    swatches = [("force", (0.88, 0.0, 0.88), 0.045, 0.01)]
+    if spheres:
+        swatches += [(w, STATE_COLOURS[st], 0.025, 0.025) for w, st in
+                     (("none", NONE), ("slipping", SLIPPING), ("sticking", STICKING))]
+    for y, line in ((bottom + HUD_LINE_M, status), (bottom, legend)):
+        w = len(line) * HUD_ADVANCE_M
+        children.append(text.box((1, 1, 1), 0, y + 0.015, w + 0.04, HUD_LINE_M, 0.7, 1000))
+        children.append(text.line(line, -w / 2, y, f"l{len(children)}"))
+    w = len(legend) * HUD_ADVANCE_M
+    for word, rgb, bw, bh in swatches:
+        x = -w / 2 + (legend.index(word) - 1) * HUD_ADVANCE_M
+        children.append(text.box(rgb, x, bottom + 0.012, bw, bh))
+    commands.append(tree.command(HUD, node("Group", "hud", children=children,
+                                           matrix=_matrix(pin.SE3(np.eye(3), np.array([0, 0, -HUD_DISTANCE_M]))))))
+    return clip
+
+
+# ------------------------------------------------------------------------------ camera
+
+
+def _three(p_W: np.ndarray) -> list[float]:
+    """Meshcat's world (z up) in the axes of three.js (y up), where its camera lives."""
+    return [float(p_W[0]), float(p_W[2]), float(-p_W[1])]
+
+
+def _views(run, state0, oMi0) -> tuple[np.ndarray, dict]:
+    """The point the scene is centred on (world), and camera views about it: `scene` (all of
+    it) and one close view per end-effector's grasp, in three.js axes of the centred scene."""
+    model = run.model
+    grasps = [oMi0[e.joint] * e.placement for e in model.end_effectors]
+    modules_W = state0[0]
+    points = np.array([g.translation for g in grasps] + [M.translation for M in modules_W])
+    focus = points.mean(axis=0)
+    radius = max(0.15, float(np.linalg.norm(points - focus, axis=1).max()) + 0.15)
+    direction, distance = SCENE_VIEWS["free" if model.robot_joint else "fixed"]
+    direction = np.array(direction) / np.linalg.norm(direction)
+    views = {"scene": {"camera": _three(direction * radius * distance), "target": [0.0, 0.0, 0.0]}}
+    for e, (ee, g) in enumerate(zip(model.end_effectors, grasps)):
+        # from the side (y_a), a little above: along both grooves' V between the bodies
+        d = g.rotation @ np.array([0.0, 1.0, 0.3])
+        d /= np.linalg.norm(d)
+        target = g.translation - focus
+        views[ee.name] = {"camera": _three(target + 0.08 * d), "target": _three(target)}
+    return focus, views
+
+
+# ------------------------------------------------------------------------------ delivery
+
+
+def packed(commands: list[dict]) -> list[bytes]:
+    import umsgpack
+
+    return [umsgpack.packb(c) for c in commands]
+
+
+PAGE = """<!DOCTYPE html>
+<html>
+<head><meta charset="utf-8"><title>{title}</title></head>
+<body>
+<div id="meshcat-pane"></div>
+<script>{main_js}</script>
+<script type="application/json" id="spotsim-commands">{commands}</script>
+<script type="application/json" id="spotsim-views">{views}</script>
+<script>
+var viewer = new MeshCat.Viewer(document.getElementById("meshcat-pane"));
+(function () {{
+  // the commands in order, decoded at once: the animation binds to objects already made
+  const blobs = JSON.parse(document.getElementById("spotsim-commands").textContent);
+  for (const b of blobs) {{
+    viewer.handle_command_bytearray(Uint8Array.from(atob(b), (c) => c.charCodeAt(0)));
+  }}
+  // ?t=<simulated s> shows that instant, paused; ?view=scene|<end-effector>; ?speed=<x>
+  const q = new URLSearchParams(window.location.search || window.location.hash.slice(1));
+  const views = JSON.parse(document.getElementById("spotsim-views").textContent);
+  const view = views[q.get("view") || "scene"];
+  if (view) {{
+    viewer.camera.position.set(...view.camera);
+    viewer.controls.target.set(...view.target);
+    viewer.controls.update();
+  }}
+  const a = viewer.animator;
+  if (q.has("speed")) a.mixer.timeScale = parseFloat(q.get("speed"));
+  if (q.has("t")) {{
+    a.pause();
+    const t = parseFloat(q.get("t"));
+    a.seek(t * (1 + 1e-6) + 1e-6);  // past float32 key times equal to t
+    a.display_progress(t);
+  }}
+  viewer.set_dirty();
+}})();
+</script>
+<style>body {{margin: 0;}} #meshcat-pane {{width: 100vw; height: 100vh; overflow: hidden;}}</style>
+</body>
+</html>
+"""
+
+
+def static_html(commands: list[dict], info: ReplayInfo, title: str) -> str:
+    """Meshcat's static page: its viewer inline and the commands embedded (no server, no
+    network); URL parameters t, view and speed pick the instant, the camera and the speed."""
+    import html
+
+    import meshcat
+
+    main_js = (Path(meshcat.__file__).parent / "viewer" / "dist" / "main.min.js").read_text()
+    blobs = [base64.b64encode(b).decode("ascii") for b in packed(commands)]
+    return PAGE.format(title=html.escape(title), main_js=main_js, commands=json.dumps(blobs),
+                       views=json.dumps(info.views))
+
+
+def write_html(path: Path, text: str) -> None:
+    """Write the page atomically: an interrupted write leaves no half page."""
+    import os
+    import tempfile
+
+    fd, tmp = tempfile.mkstemp(dir=Path(path).parent, prefix=f".{Path(path).name}.")
+    try:
+        with os.fdopen(fd, "w") as f:
+            f.write(text)
+        os.chmod(tmp, 0o644)  # a page to share (mkstemp makes it private)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def commands_of_html(text: str) -> list[dict]:
+    """The meshcat commands a page written by `static_html` embeds, decoded."""
+    import re
+
+    import umsgpack
+
+    m = re.search(r'<script type="application/json" id="spotsim-commands">(.*?)</script>', text, re.S)
+    if m is None:
+        raise SpotsimError("not a page written by spotsim replay --html")
+    return [umsgpack.unpackb(base64.b64decode(b)) for b in json.loads(m.group(1))]
+
+
+class Server:
+    """A Meshcat server over ZeroMQ: the one at `zmq_url`, or a new local one (ours to stop)."""
+
+    def __init__(self, zmq_url: str | None = None):
+        import zmq
+
+        self.proc = None
+        if zmq_url is None:
+            from meshcat.servers.zmqserver import start_zmq_server_as_subprocess
+
+            try:
+                self.proc, zmq_url, _ = start_zmq_server_as_subprocess()
+            except Exception as e:  # meshcat raises RuntimeError, or whatever its server did
+                raise SpotsimError(f"cannot start a Meshcat server: {e}") from e
+        self.zmq_url = zmq_url
+        self.context = zmq.Context.instance()
+        self.socket = self._connect()
+        self.web_url = self._request([b"url"]).decode()
+
+    def _connect(self):
+        import zmq
+
+        s = self.context.socket(zmq.REQ)
+        s.setsockopt(zmq.LINGER, 0)
+        s.setsockopt(zmq.RCVTIMEO, int(ZMQ_TIMEOUT_S * 1000))
+        s.setsockopt(zmq.SNDTIMEO, int(ZMQ_TIMEOUT_S * 1000))
+        try:
+            s.connect(self.zmq_url)
+        except zmq.ZMQError as e:
+            s.close()
+            raise SpotsimError(f"--zmq-url {self.zmq_url}: {e}") from e
+        return s
+
+    def _request(self, frames: list[bytes]) -> bytes:
+        import zmq
+
+        try:
+            self.socket.send_multipart(frames)
+            return self.socket.recv()
+        except zmq.ZMQError as e:
+            self.close()
+            raise SpotsimError(f"no Meshcat server answers at {self.zmq_url} (waited {ZMQ_TIMEOUT_S:g} s); "
+                               f"start one with `meshcat-server`") from e
+
+    def send(self, commands: list[dict]) -> None:
+        for cmd, data in zip(commands, packed(commands), strict=True):
+            route = ANIMATION_NODE if cmd["type"] == "set_animation" else cmd["path"]
+            reply = self._request([cmd["type"].encode(), route.encode(), data])
+            if reply != b"ok":
+                raise SpotsimError(f"the Meshcat server at {self.zmq_url} refused {cmd['type']}: {reply!r}")
+
+    def scene_html(self) -> str:
+        """The server's scene as its static page (meshcat's `get_scene`)."""
+        return self._request([b"get_scene"]).decode()
+
+    def close(self) -> None:
+        self.socket.close()
+        if self.proc is not None:
+            self.proc.kill()
+            self.proc.wait()
+            self.proc = None
