@@ -319,7 +319,7 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
     rec.sample(model, data)
     bar = _progress(n_records, progress)
     wall0 = time.perf_counter()
-    steps = free_steps = 0
+    steps = free_steps = pair_steps = 0
     try:
         for _ in range(n_records):
             # nothing can touch before the next record (zero gravity): one step to it; else
@@ -334,6 +334,7 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
                     break
                 steps += 1
                 n = len(c.key)
+                pair_steps += n
                 rec.substep(model, data, n)
                 # impulse of the external forces on the free bodies: the contact forces from
                 # fixed bodies (a fixed base) and gravity
@@ -390,7 +391,7 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
     wall = time.perf_counter() - wall0
     series = rec.arrays()
     summary = _summary(scenario, model, data, rec, series, status, message, wall, steps, free_steps,
-                       h_contact, starts, welds, drift_lin / max(p_max, 1e-300), drift_ang / max(l_max, 1e-300))
+                       pair_steps, h_contact, starts, welds, drift_lin / max(p_max, 1e-300), drift_ang / max(l_max, 1e-300))
     return Result(scenario, model, summary, series, rec.replay_arrays())
 
 
@@ -419,8 +420,8 @@ def _why_incomplete(model: Model, data, limit: str) -> str:
             f"unmet at the end: {'; '.join(unmet) or 'criteria not held for hold_s'}")
 
 
-def _summary(s, model, data, rec, series, status, message, wall, steps, free_steps, h, starts, welds,
-             drift_lin, drift_ang):
+def _summary(s, model, data, rec, series, status, message, wall, steps, free_steps, pair_steps, h, starts,
+             welds, drift_lin, drift_ang):
     grasps = []
     for g, (ee, k) in enumerate(model.grasps):
         times = data.phases[g].times
@@ -461,6 +462,7 @@ def _summary(s, model, data, rec, series, status, message, wall, steps, free_ste
         "wall_time_s": wall,
         "sim_time_s": data.t,
         "steps": steps,
+        "pair_steps": pair_steps,  # sphere pairs in contact, summed over the steps
         "dt_s": s.simulation.dt_s,
         "substeps": s.simulation.substeps,
         "dynamics_dt_s": h,
