@@ -9,6 +9,7 @@ import subprocess
 import sys
 
 import numpy as np
+import pinocchio as pin
 import pytest
 
 import spotsim
@@ -139,7 +140,7 @@ def server_commands(zmq_url):
 # ------------------------------------------------------------------------------ the recorder
 
 
-def test_welded_model_spheres_map_to_the_same_first_model_spheres(case_I):
+def test_welded_model_spheres_map_to_the_same_first_model_spheres():
     """After a weld, each remaining sphere keeps its place: mapped by face name to the first
     model, it has the same centre and normal in the same joint's frame."""
     from spotsim.model import build_model
@@ -297,8 +298,6 @@ def test_force_arrow_shows_the_recorded_combined_force(single):
             scale = scale or length / np.linalg.norm(F)
             assert abs(length - scale * np.linalg.norm(F)) < 1e-6 + 1e-5 * length
             q = at(tr[".quaternion"], key, 4)
-            import pinocchio as pin
-
             y = pin.Quaternion(*map(float, (q[3], q[0], q[1], q[2]))).matrix()[:, 1]
             assert np.allclose(y, F / np.linalg.norm(F), atol=1e-5)
     assert scale is not None
