@@ -130,3 +130,15 @@ def bodies_momentum(bodies, rows, q, v):
         p_max = max(p_max, np.linalg.norm(p_b))
         l_max = max(l_max, np.linalg.norm(l_b))
     return P, L, p_max, l_max, c / m_sum
+
+
+@njit
+def kinetic_energy(bodies, q, v):
+    """Kinetic energy of all free bodies, J: 1/2 m |v_G|^2 + 1/2 omega . I_G omega."""
+    total = 0.0
+    for b in range(bodies.joint.shape[0]):
+        iv = bodies.idx_v[b]
+        w = v[iv + 3:iv + 6]
+        v_G = v[iv:iv + 3] + np.cross(w, bodies.lever[b])  # body axes; the norm is frame-free
+        total += 0.5 * bodies.mass[b] * (v_G @ v_G) + 0.5 * (w @ (bodies.inertia_G[b] @ w))
+    return total

@@ -151,7 +151,9 @@ def main(argv=None) -> int:
         return 2
     from .scenario import to_yaml, tolerance_warnings
 
-    for w in tolerance_warnings(scenario):
+    from .stability import stability_warnings
+
+    for w in tolerance_warnings(scenario) + stability_warnings(model):
         print(f"warning: {path}: {w}", file=sys.stderr)
     if args.command == "validate":
         print(to_yaml(scenario), end="")

@@ -9,11 +9,15 @@ keep them: its error grows with (omega dt)^2.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pinocchio as pin
 
 from .bodies import body_pose, free_bodies, quat_times_exp, quat_to_rotation
+from .errors import SimulationError
 from .jit import njit
+from .step import contact_stage
 
 
 @njit
@@ -98,13 +102,17 @@ class SymplecticEuler:
 
     name = "symplectic_euler"
     order = 1
+    adaptive = False
+    moves_fingers = False  # the step's drive moves them (step.step), at the rate it sets
 
-    def __init__(self, model: pin.Model):
+    def __init__(self, model: pin.Model, spec=None):
         self.bodies = free_bodies(model)
         self.only_free = len(self.bodies.joint) * 7 == model.nq
+        self.h = None
 
     def step(self, model: pin.Model, q: np.ndarray, v: np.ndarray, a: np.ndarray,
              h: float) -> tuple[np.ndarray, np.ndarray]:
+        """(q, v) after h, given the acceleration a at (q, v)."""
         if self.only_free:
             return _symplectic_euler(self.bodies, q, v, a, h)
         v_new = v + h * a
@@ -112,13 +120,213 @@ class SymplecticEuler:
         _symplectic_euler_bodies(self.bodies, q, v, a, h, q_new, v_new)
         return q_new, v_new
 
+    def advance(self, model, data, h: float):
+        """One step of h of the scene: contact forces at the start, ABA, update. Returns the
+        contacts that acted and the step taken."""
+        contacts = contact_stage(model, data, h)
+        m = model.pin_model
+        a = pin.aba(m, data.pin_data, data.q, data.v, data.tau, data.f_ext)
+        data.q, data.v = self.step(m, data.q, data.v, a, h)
+        return contacts, h
 
-INTEGRATORS = {SymplecticEuler.name: SymplecticEuler}
+    def stats(self) -> dict:
+        return {"method": self.name}
 
 
-def make_integrator(name: str, model: pin.Model):
-    """The integrator `name` for `model`."""
+# --------------------------------------------------------------------------- Runge-Kutta
+# The free bodies' state for Runge-Kutta methods: per body 13 numbers, the centroid's world
+# position, the joint's unit quaternion (x, y, z, w), the centroid's world velocity and the
+# body angular velocity. Pairwise contact forces keep sum m a_G = 0 at every stage, so a
+# linear combination of stages keeps the total linear momentum to round-off.
+
+STATE = 13
+
+
+@njit
+def _pack(bodies, q, v):
+    """The Runge-Kutta state y of the free bodies at (q, v)."""
+    y = np.empty(STATE * bodies.joint.shape[0])
+    for b in range(bodies.joint.shape[0]):
+        p_G, v_G, _, w = _centroid_state(bodies, b, q, v)
+        iq, o = bodies.idx_q[b], STATE * b
+        y[o:o + 3] = p_G
+        y[o + 3:o + 7] = q[iq + 3:iq + 7]
+        y[o + 7:o + 10] = v_G
+        y[o + 10:o + 13] = w
+    return y
+
+
+@njit
+def _unpack(bodies, y, q, v):
+    """Write the state y into (q, v), in place; quaternions normalised."""
+    for b in range(bodies.joint.shape[0]):
+        o = STATE * b
+        quat = y[o + 3:o + 7] / np.linalg.norm(y[o + 3:o + 7])
+        _set_centroid_state(bodies, b, q, v, y[o:o + 3].copy(), y[o + 7:o + 10].copy(), quat,
+                            y[o + 10:o + 13].copy())
+
+
+@njit
+def _derivative(bodies, y, q, v, a):
+    """dy/dt at the state y = (q, v) given ABA's acceleration a there."""
+    dy = np.empty_like(y)
+    for b in range(bodies.joint.shape[0]):
+        o, iv = STATE * b, bodies.idx_v[b]
+        R, _ = body_pose(bodies, b, q)
+        w = v[iv + 3:iv + 6]
+        x, qy, z, qw = y[o + 3], y[o + 4], y[o + 5], y[o + 6]
+        dy[o:o + 3] = y[o + 7:o + 10]
+        # q' = q (x) (omega, 0) / 2, omega in the body frame
+        dy[o + 3] = 0.5 * (qw * w[0] + qy * w[2] - z * w[1])
+        dy[o + 4] = 0.5 * (qw * w[1] + z * w[0] - x * w[2])
+        dy[o + 5] = 0.5 * (qw * w[2] + x * w[1] - qy * w[0])
+        dy[o + 6] = -0.5 * (x * w[0] + qy * w[1] + z * w[2])
+        dy[o + 7:o + 10] = _centroid_acceleration(R, bodies.lever[b], v[iv:iv + 3], w, a[iv:iv + 3],
+                                                  a[iv + 3:iv + 6])
+        dy[o + 10:o + 13] = a[iv + 3:iv + 6]
+    return dy
+
+
+@njit
+def _error_norm(err, y0, y1, rtol, atol):
+    """RMS of err scaled by atol + rtol max(|y0|, |y1|), per component."""
+    total = 0.0
+    for i in range(err.shape[0]):
+        sc = atol + rtol * max(abs(y0[i]), abs(y1[i]))
+        total += (err[i] / sc) ** 2
+    return math.sqrt(total / err.shape[0])
+
+
+class StepSizeUnderflow(SimulationError):
+    """The adaptive step fell below its smallest allowed size: the run has diverged."""
+
+
+class RungeKutta:
+    """Explicit Runge-Kutta on the free bodies' centroid state, with contact.
+
+    Each stage evaluates the contact forces and ABA at its state, with the pair memory of the
+    step's start: [reading] a stage at t0 + c h bends each bristle by v_t c h from its start
+    deflection, and new pairs take the stage's approach speed. Only an accepted step commits
+    the memory, from its end state with the whole step (bending by v_t h); that evaluation is
+    also the next step's first stage. Rejected and repeated steps so leave it untouched.
+    The fingers move at the drive's rate through the step.
+    """
+
+    adaptive = False
+    moves_fingers = True
+
+    def __init__(self, model: pin.Model, spec=None):
+        self.bodies = free_bodies(model)
+        if len(self.bodies.joint) * 7 != model.nq:
+            raise ValueError(f"{self.name} integrates free bodies only; the model has other joints")
+        self.spec = spec
+        self.h = None  # adaptive: the step to try next
+        self.accepted = self.rejected = self.evaluations = 0
+        self._first = None  # (data, t, opening_rate, dy, contacts) of the last commit
+
+    def _stage(self, model, data, y, dt, commit):
+        """dy at state y, dt after the step's start, and the contacts there."""
+        _unpack(self.bodies, y, data.q, data.v)
+        data.opening = self._opening0 + dt * data.opening_rate
+        c = contact_stage(model, data, dt, commit=commit)
+        a = pin.aba(model.pin_model, data.pin_data, data.q, data.v, data.tau, data.f_ext)
+        self.evaluations += 1
+        return _derivative(self.bodies, y, data.q, data.v, a), c
+
+    def _start(self, model, data):
+        """The first stage: reused from the last commit when nothing changed since."""
+        f = self._first
+        if f is not None and f[0] is data and f[1] == data.t and np.array_equal(f[2], data.opening_rate):
+            return f[3]
+        self._opening0 = data.opening.copy()
+        y = _pack(self.bodies, data.q, data.v)
+        q, v = data.q.copy(), data.v.copy()
+        data.q, data.v = q, v
+        dy, _ = self._stage(model, data, y, 0.0, commit=False)
+        return dy
+
+    def _try(self, model, data, y0, k1, h):
+        """The stages of one step of h from y0: (y1, error estimate or None, stages)."""
+        A, b, c, e = self.A, self.b, self.c, self.e
+        k = [k1]
+        for i in range(1, len(c)):
+            y = y0 + h * sum(A[i][j] * k[j] for j in range(i) if A[i][j])
+            k.append(self._stage(model, data, y, c[i] * h, commit=False)[0])
+        y1 = y0 + h * sum(b[i] * k[i] for i in range(len(b)) if b[i])
+        err = None if e is None else h * sum(e[i] * k[i] for i in range(len(e)) if e[i])
+        return y1, err
+
+    def advance(self, model, data, h: float):
+        """One accepted step of at most h. Returns the contacts at its end and the step taken."""
+        opening0, q0, v0 = data.opening.copy(), data.q, data.v
+        k1 = self._start(model, data)
+        self._opening0 = opening0
+        y0 = _pack(self.bodies, q0, v0)
+        data.q, data.v = q0.copy(), v0.copy()
+        h = min(h, self.h) if self.adaptive and self.h else h
+        while True:
+            y1, err = self._try(model, data, y0, k1, h)
+            if err is None:
+                break
+            ratio = _error_norm(err, y0, y1, self.spec.rtol, self.spec.atol)
+            if ratio <= 1.0:
+                grow = 5.0 if ratio == 0.0 else min(5.0, max(0.2, 0.9 * ratio ** -0.2))
+                self.h = min(self.spec.h_max_s, h * grow)
+                break
+            self.rejected += 1
+            h *= max(0.2, 0.9 * ratio ** -0.2)
+            if h < self.spec.h_min_s:
+                raise StepSizeUnderflow(f"adaptive step fell below h_min_s = {self.spec.h_min_s:g} s")
+        self.accepted += 1
+        # the accepted end: commit the pair memory; this is the next step's first stage
+        dy, contacts = self._stage(model, data, y1, h, commit=True)
+        _unpack(self.bodies, y1, data.q, data.v)
+        data.opening = opening0 + h * data.opening_rate
+        self._first = (data, data.t + h, data.opening_rate.copy(), dy)
+        return contacts, h
+
+    def stats(self) -> dict:
+        return {"method": self.name, "accepted_steps": self.accepted, "rejected_steps": self.rejected,
+                "force_evaluations": self.evaluations}
+
+
+class RK4(RungeKutta):
+    """The classical fourth-order Runge-Kutta method, fixed step."""
+
+    name = "rk4"
+    order = 4
+    A = ((), (0.5,), (0.0, 0.5), (0.0, 0.0, 1.0))
+    b = (1 / 6, 1 / 3, 1 / 3, 1 / 6)
+    c = (0.0, 0.5, 0.5, 1.0)
+    e = None
+
+
+class DormandPrince(RungeKutta):
+    """Dormand-Prince 5(4): fifth order with an embedded fourth-order error estimate, adaptive
+    (relative and absolute tolerances, step limits, rejected steps counted)."""
+
+    name = "dopri5"
+    order = 5
+    adaptive = True
+    A = ((), (1 / 5,), (3 / 40, 9 / 40), (44 / 45, -56 / 15, 32 / 9),
+         (19372 / 6561, -25360 / 2187, 64448 / 6561, -212 / 729),
+         (9017 / 3168, -355 / 33, 46732 / 5247, 49 / 176, -5103 / 18656),
+         (35 / 384, 0.0, 500 / 1113, 125 / 192, -2187 / 6784, 11 / 84))
+    b = (35 / 384, 0.0, 500 / 1113, 125 / 192, -2187 / 6784, 11 / 84, 0.0)
+    c = (0.0, 1 / 5, 3 / 10, 4 / 5, 8 / 9, 1.0, 1.0)
+    e = tuple(x - y for x, y in zip(b, (5179 / 57600, 0.0, 7571 / 16695, 393 / 640, -92097 / 339200,
+                                        187 / 2100, 1 / 40)))
+
+
+INTEGRATORS = {k.name: k for k in (SymplecticEuler, RK4, DormandPrince)}
+
+
+def make_integrator(spec, model: pin.Model):
+    """The integrator of `spec` (a scenario's `simulation.integrator` block, or a method name)
+    for `model`."""
+    name = spec if isinstance(spec, str) else spec.method
     try:
-        return INTEGRATORS[name](model)
+        cls = INTEGRATORS[name]
     except KeyError:
         raise ValueError(f"unknown integrator {name!r}; valid: {', '.join(INTEGRATORS)}") from None
+    return cls(model, None if isinstance(spec, str) else spec)

@@ -14,9 +14,10 @@ from .contact.forces import raise_peaks
 from .contact.friction import SLIPPING, STICKING
 from .grasp import COMPLETE, PHASES, SELF_CENTRING
 from .contact.search import FacePair
-from .integrators import make_integrator
+from .integrators import StepSizeUnderflow, make_integrator
 from .model import Model, build_model, grasp_frame, groove_frame
 from .scenario import tolerance_warnings
+from .stability import ENERGY_FLOOR_J, ENERGY_GROWTH, mechanical_energy, stability_warnings
 from .step import StateOverflow, free_flight, make_data, step
 from .weld import twist_for_momentum, world_momentum
 
@@ -315,7 +316,8 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
     max_phi = min(model.params.r1, model.params.r2)
     status, message = INCOMPLETE, ""
     starts = [0.0]  # when each grasp's drive started
-    welds = []
+    welds, retired = [], []  # the integrators' counts of the models before each weld
+    e_passive = None  # mechanical energy when the current passive phase began, J
     rec.sample(model, data)
     bar = _progress(n_records, progress)
     wall0 = time.perf_counter()
@@ -326,12 +328,14 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
             # the dynamics substeps
             flight = not gravity and free_flight(model, data, sim.dt_s)
             free_steps += flight
-            for h in (sim.dt_s,) if flight else (h_contact,) * sim.substeps:
+            for h in _step_sizes(integrator, data, flight, sim.dt_s, h_contact, sim.substeps):
+                t_start = data.t
                 try:
                     c = step(model, data, h, integrator)
-                except StateOverflow as e:
+                except (StateOverflow, StepSizeUnderflow) as e:
                     status, message = DIVERGED, f"{e} at t = {data.t:.4f} s"
                     break
+                h = data.t - t_start  # an adaptive step may be shorter than asked
                 steps += 1
                 n = len(c.key)
                 pair_steps += n
@@ -360,6 +364,17 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
                     break
             if status == DIVERGED:
                 break
+            # a passive phase (the drive holding the fingers) may not gain energy
+            if data.drives[model.grasps[data.active][0]].stalled:
+                E = mechanical_energy(model, data)
+                if e_passive is None:
+                    e_passive = E
+                elif E > ENERGY_GROWTH * e_passive + ENERGY_FLOOR_J:
+                    status = DIVERGED
+                    message = (f"energy grew from {e_passive:.3g} J to {E:.3g} J while the drive held "
+                               f"the fingers (a passive phase) at t = {data.t:.4f} s")
+            else:
+                e_passive = None
             refresh_kinematics(model, data)
             rec.sample(model, data)
             P, L, p_b, l_b = free_momentum_W(model, data)
@@ -368,6 +383,8 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
             drift_ang = max(drift_ang, np.linalg.norm(L - L0 - JL))
             if bar is not None:
                 bar.update(1)
+            if status == DIVERGED:  # the energy check; the record above is kept
+                break
             if data.phase.phase == COMPLETE:
                 if data.active + 1 == len(model.grasps):
                     status = COMPLETED
@@ -375,8 +392,10 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
                     break
                 model, data = weld(model, data, source)
                 welds.append(data.t)
+                retired.append(integrator.stats())
                 integrator = make_integrator(sim.integrator, model.pin_model)
                 starts.append(data.t)
+                e_passive = None
                 refresh_kinematics(model, data)
             elif data.t - starts[-1] > scenario.completion.phase_timeout_s:
                 message = _why_incomplete(model, data, "the phase time-out")
@@ -390,9 +409,28 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
             bar.close()
     wall = time.perf_counter() - wall0
     series = rec.arrays()
+    integrator_stats = integrator.stats()
+    for old in retired:
+        for k, value in old.items():
+            if k != "method":
+                integrator_stats[k] += value
     summary = _summary(scenario, model, data, rec, series, status, message, wall, steps, free_steps,
-                       pair_steps, h_contact, starts, welds, drift_lin / max(p_max, 1e-300), drift_ang / max(l_max, 1e-300))
+                       pair_steps, h_contact, starts, welds, drift_lin / max(p_max, 1e-300),
+                       drift_ang / max(l_max, 1e-300), integrator_stats)
     return Result(scenario, model, summary, series, rec.replay_arrays())
+
+
+def _step_sizes(integrator, data, flight: bool, dt: float, h: float, substeps: int):
+    """The steps to try over one record interval of dt: one (free flight), `substeps` of h, or
+    an adaptive integrator's own until the interval is covered."""
+    if flight:
+        yield dt
+    elif not integrator.adaptive:
+        yield from (h,) * substeps
+    else:
+        t_end = data.t + dt
+        while t_end - data.t > 1e-9 * dt:
+            yield min(integrator.h or h, t_end - data.t)
 
 
 def _progress(total: int, enabled: bool):
@@ -421,7 +459,7 @@ def _why_incomplete(model: Model, data, limit: str) -> str:
 
 
 def _summary(s, model, data, rec, series, status, message, wall, steps, free_steps, pair_steps, h, starts,
-             welds, drift_lin, drift_ang):
+             welds, drift_lin, drift_ang, integrator_stats):
     grasps = []
     for g, (ee, k) in enumerate(model.grasps):
         times = data.phases[g].times
@@ -468,7 +506,7 @@ def _summary(s, model, data, rec, series, status, message, wall, steps, free_ste
         "dynamics_dt_s": h,
         # steps of a whole record interval, taken where no contact could start within it
         "free_flight_steps": free_steps,
-        "integrator": s.simulation.integrator,
+        "integrator": integrator_stats,
         "broad_phase": s.contact.broad_phase,
         "phases": {"approach": 0.0, **data.phases[0].times} if len(model.grasps) == 1 else
         [{"approach": starts[g] if g < len(starts) else None, **data.phases[g].times}
@@ -488,7 +526,7 @@ def _summary(s, model, data, rec, series, status, message, wall, steps, free_ste
         },
         "spheres": {"finger": int(len(model.master.centres_J)), "groove": int(len(model.slave.centres_J))},
         "fingers": rec.fingers,
-        "warnings": tolerance_warnings(s),
+        "warnings": tolerance_warnings(s) + stability_warnings(model),
     }
 
 

@@ -77,11 +77,21 @@ def key(default=dataclasses.MISSING, rule=None, doc=""):
 
 
 @dataclass(frozen=True, kw_only=True)
+class Integrator:
+    method: str = key("symplectic_euler", _choice("symplectic_euler", "rk4", "dopri5"),
+                      "symplectic_euler (the paper's fixed step), rk4 (fixed step), dopri5 (adaptive)")
+    rtol: float = key(1e-6, _positive, "dopri5: relative tolerance per state component")
+    atol: float = key(1e-9, _positive, "dopri5: absolute tolerance (m, rad, m/s, rad/s)")
+    h_min_s: float = key(1e-9, _positive, "dopri5: smallest step; below it the run is diverged")
+    h_max_s: float = key(1e-3, _positive, "dopri5: largest step")
+
+
+@dataclass(frozen=True, kw_only=True)
 class Simulation:
     dt_s: float = key(rule=_positive, doc="recorded step; the paper's is 1 ms")
     substeps: int = key(10, _positive, "dynamics steps per recorded step (dynamics at dt_s/substeps)")
     duration_s: float = key(rule=_positive, doc="time-out: a grasp not complete by then is incomplete")
-    integrator: str = key("symplectic_euler", _choice("symplectic_euler"), "time integrator")
+    integrator: Integrator = key(Integrator(), doc="time integrator")
     gravity_m_s2: tuple[float, float, float] = key((0.0, 0.0, 0.0), doc="gravity in world, m/s^2")
 
 
@@ -362,6 +372,9 @@ def from_dict(raw: Any, where: str = "<scenario>"):
     kind = raw.get("kind", "single_arm") if isinstance(raw, dict) else "single_arm"
     if kind not in SCENARIO_KINDS:
         raise ScenarioError([f"{where}: kind = {_fmt(kind)}: must be one of {', '.join(SCENARIO_KINDS)}"])
+    sim = raw.get("simulation") if isinstance(raw, dict) else None
+    if isinstance(sim, dict) and isinstance(sim.get("integrator"), str):  # `integrator: rk4` names the method
+        raw = {**raw, "simulation": {**sim, "integrator": {"method": sim["integrator"]}}}
     scenario = _build(SCENARIO_KINDS[kind], raw, "", problems, where)
     if scenario is not None:
         problems += _cross_checks(scenario, where)

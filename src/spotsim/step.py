@@ -40,6 +40,7 @@ class Contacts:
     force_W: np.ndarray = None  # on the master (finger); the slave gets the opposite
     speed: np.ndarray = None  # |relative velocity| at the contact point, m/s
     state: np.ndarray = None
+    memory: tuple = None  # (key, bristle deflection, onset approach speed) after this step
 
 
 @dataclass
@@ -223,15 +224,20 @@ def wrenches(model: Model, data: Data, c: Contacts) -> list:
     return data.f_ext
 
 
-def contact_stage(model: Model, data: Data, h: float) -> Contacts:
-    """kinematics -> broad phase -> sphere pairs -> forces -> wrenches, for one step.
+def contact_stage(model: Model, data: Data, h: float, commit: bool = True) -> Contacts:
+    """kinematics -> broad phase -> sphere pairs -> forces -> wrenches, for one step of h.
 
     The culled search runs the stages' kernels in one compiled call; the literal search
-    (the reference) runs them one by one.
+    (the reference) runs them one by one. commit=False leaves the pair memory as it was (a
+    Runge-Kutta stage); the new memory is then in the contacts' `memory`.
     """
     if model.params.broad_phase == "none":
         kinematics(model, data)
+        memory = (data.mem_key, data.mem_s, data.mem_vminus)
         c = contact_forces(model, data, sphere_pairs(model, data), h)
+        if not commit:
+            c.memory = (data.mem_key, data.mem_s, data.mem_vminus)
+            data.mem_key, data.mem_s, data.mem_vminus = memory
         wrenches(model, data, c)
         data.summary = contact_summary(data.joint_force_W, data.joint_torque_O_W, data.R_W, data.p_W,
                                        *model.watch_args[data.active], c.speed, c.phi)
@@ -246,7 +252,9 @@ def contact_stage(model: Model, data: Data, h: float) -> Contacts:
         data.opening_rate, data.mem_key, data.mem_s, data.mem_vminus, h, *model.watch_args[data.active],
         *model.contact_kernel_args)
     c = Contacts(*pairs[:10])
-    data.mem_key, data.mem_s, data.mem_vminus = c.key, pairs[10], pairs[11]
+    c.memory = (c.key, pairs[10], pairs[11])
+    if commit:
+        data.mem_key, data.mem_s, data.mem_vminus = c.memory
     for view, w in zip(data.f_views, local):  # written into the Force objects ABA reads
         view[:] = w
     return c
@@ -284,18 +292,17 @@ def _contact_kernels(q, v, R_W, p_W, w_W, vo_W, near, opening, opening_rate, mem
 
 
 def step(model: Model, data: Data, h: float, integrator) -> Contacts:
-    """Advance the scene by h seconds; returns the contacts that acted during the step."""
-    contacts = contact_stage(model, data, h)
-    m = model.pin_model
-    a = pin.aba(m, data.pin_data, data.q, data.v, data.tau, data.f_ext)
-    data.q, data.v = integrator.step(m, data.q, data.v, a, h)
+    """Advance the scene by h seconds (an adaptive integrator may take less: data.t tells);
+    returns the contacts that acted during the step."""
+    contacts, h = integrator.advance(model, data, h)  # forces -> dynamics -> integrate
     # the active grasp's drive sets its fingers' rate for the coming step from this step's
     # loads; the other end-effectors hold (their rates stay zero)
     active_ee = model.grasps[data.active][0]
     mine = model.drive_fingers[active_ee]
     if len(mine):
         data.opening_rate[mine] = data.drives[active_ee].opening_rate(data.finger_load[mine])
-    data.opening += h * data.opening_rate
+    if not integrator.moves_fingers:
+        data.opening += h * data.opening_rate
     data.t += h
     data.travel += h * travel_rate(model, data)
     data.contacts = contacts
