@@ -197,6 +197,38 @@ def _error_norm(err, y0, y1, rtol, atol):
     return math.sqrt(total / err.shape[0])
 
 
+def rk_try(method, f, y0, k1, h):
+    """One explicit Runge-Kutta step of h from y0 with the tableau of `method` (A, b, c, e):
+    (y1, the embedded error estimate or None). f(y, dt) is dy/dt at y, dt into the step;
+    k1 = f(y0, 0)."""
+    A, b, c, e = method.A, method.b, method.c, method.e
+    k = [k1]
+    for i in range(1, len(c)):
+        k.append(f(y0 + h * sum(A[i][j] * k[j] for j in range(i) if A[i][j]), c[i] * h))
+    y1 = y0 + h * sum(b[i] * k[i] for i in range(len(b)) if b[i])
+    return y1, None if e is None else h * sum(e[i] * k[i] for i in range(len(e)) if e[i])
+
+
+def adaptive_try(method, f, y0, k1, h, rtol, atol, h_min, h_max, trace=None):
+    """One accepted step of at most h with error control: (y1, the step taken, the step to
+    try next, the steps rejected on the way). Raises StepSizeUnderflow below h_min. `trace`,
+    a list f appends to, is cut back to k1's entries before each retry."""
+    rejected = 0
+    start = None if trace is None else len(trace)
+    while True:
+        y1, err = rk_try(method, f, y0, k1, h)
+        ratio = _error_norm(err, y0, y1, rtol, atol)
+        if ratio <= 1.0:
+            grow = 5.0 if ratio == 0.0 else min(5.0, max(0.2, 0.9 * ratio ** -0.2))
+            return y1, h, min(h_max, h * grow), rejected
+        rejected += 1
+        h *= max(0.2, 0.9 * ratio ** -0.2)
+        if h < h_min:
+            raise StepSizeUnderflow(f"adaptive step fell below h_min_s = {h_min:g} s")
+        if trace is not None:
+            del trace[start:]
+
+
 class StepSizeUnderflow(SimulationError):
     """The adaptive step fell below its smallest allowed size: the run has diverged."""
 
@@ -219,70 +251,68 @@ class RungeKutta:
         self.bodies = free_bodies(model)
         if len(self.bodies.joint) * 7 != model.nq:
             raise ValueError(f"{self.name} integrates free bodies only; the model has other joints")
+        if spec is None:
+            from .scenario import Integrator
+
+            spec = Integrator(method=self.name)
         self.spec = spec
         self.h = None  # adaptive: the step to try next
         self.accepted = self.rejected = self.evaluations = 0
         self._first = None  # (data, t, opening_rate, dy, contacts) of the last commit
 
     def _stage(self, model, data, y, dt, commit):
-        """dy at state y, dt after the step's start, and the contacts there."""
+        """dy at state y, dt after the step's start, and the contacts there; the external
+        force and moment on the free bodies there go to self._ext."""
         _unpack(self.bodies, y, data.q, data.v)
         data.opening = self._opening0 + dt * data.opening_rate
         c = contact_stage(model, data, dt, commit=commit)
         a = pin.aba(model.pin_model, data.pin_data, data.q, data.v, data.tau, data.f_ext)
         self.evaluations += 1
+        self._ext.append(np.concatenate([data.external_force_W, data.external_torque_O_W]))
         return _derivative(self.bodies, y, data.q, data.v, a), c
 
     def _start(self, model, data):
-        """The first stage: reused from the last commit when nothing changed since."""
+        """The first stage and its external load: reused from the last commit when nothing
+        changed since."""
         f = self._first
         if f is not None and f[0] is data and f[1] == data.t and np.array_equal(f[2], data.opening_rate):
-            return f[3]
+            return f[3], f[4]
         self._opening0 = data.opening.copy()
+        self._ext = []
         y = _pack(self.bodies, data.q, data.v)
         q, v = data.q.copy(), data.v.copy()
         data.q, data.v = q, v
         dy, _ = self._stage(model, data, y, 0.0, commit=False)
-        return dy
-
-    def _try(self, model, data, y0, k1, h):
-        """The stages of one step of h from y0: (y1, error estimate or None, stages)."""
-        A, b, c, e = self.A, self.b, self.c, self.e
-        k = [k1]
-        for i in range(1, len(c)):
-            y = y0 + h * sum(A[i][j] * k[j] for j in range(i) if A[i][j])
-            k.append(self._stage(model, data, y, c[i] * h, commit=False)[0])
-        y1 = y0 + h * sum(b[i] * k[i] for i in range(len(b)) if b[i])
-        err = None if e is None else h * sum(e[i] * k[i] for i in range(len(e)) if e[i])
-        return y1, err
+        return dy, self._ext[-1]
 
     def advance(self, model, data, h: float):
         """One accepted step of at most h. Returns the contacts at its end and the step taken."""
         opening0, q0, v0 = data.opening.copy(), data.q, data.v
-        k1 = self._start(model, data)
+        k1, ext1 = self._start(model, data)
         self._opening0 = opening0
         y0 = _pack(self.bodies, q0, v0)
         data.q, data.v = q0.copy(), v0.copy()
-        h = min(h, self.h) if self.adaptive and self.h else h
-        while True:
-            y1, err = self._try(model, data, y0, k1, h)
-            if err is None:
-                break
-            ratio = _error_norm(err, y0, y1, self.spec.rtol, self.spec.atol)
-            if ratio <= 1.0:
-                grow = 5.0 if ratio == 0.0 else min(5.0, max(0.2, 0.9 * ratio ** -0.2))
-                self.h = min(self.spec.h_max_s, h * grow)
-                break
-            self.rejected += 1
-            h *= max(0.2, 0.9 * ratio ** -0.2)
-            if h < self.spec.h_min_s:
-                raise StepSizeUnderflow(f"adaptive step fell below h_min_s = {self.spec.h_min_s:g} s")
+        self._ext = [ext1]
+
+        def f(y, dt):
+            return self._stage(model, data, y, dt, commit=False)[0]
+
+        if self.adaptive:
+            y1, h, self.h, rejected = adaptive_try(type(self), f, y0, k1, min(h, self.h or h), self.spec.rtol,
+                                                   self.spec.atol, self.spec.h_min_s, self.spec.h_max_s, self._ext)
+            self.rejected += rejected
+        else:
+            y1, _ = rk_try(type(self), f, y0, k1, h)
         self.accepted += 1
+        # the impulse of the external forces over the step: the stages' forces, weighted
+        ext = sum(w * x for w, x in zip(self.b, self._ext[-len(self.b):]) if w)
         # the accepted end: commit the pair memory; this is the next step's first stage
         dy, contacts = self._stage(model, data, y1, h, commit=True)
+        self._first = (data, data.t + h, data.opening_rate.copy(), dy,
+                       np.concatenate([data.external_force_W, data.external_torque_O_W]))
+        data.external_force_W, data.external_torque_O_W = ext[:3], ext[3:]
         _unpack(self.bodies, y1, data.q, data.v)
         data.opening = opening0 + h * data.opening_rate
-        self._first = (data, data.t + h, data.opening_rate.copy(), dy)
         return contacts, h
 
     def stats(self) -> dict:
