@@ -50,6 +50,42 @@ def free_bodies(model: pin.Model) -> FreeBodies:
                       np.array([model.inertias[j].inertia for j in joints]).reshape(-1, 3, 3))
 
 
+# 3x3 products written out: numba sends `@` to BLAS, whose call costs more than the product
+
+@njit
+def mv(R, x):
+    """R x for a 3x3 R and a 3-vector x."""
+    out = np.empty(3)
+    for a in range(3):
+        out[a] = R[a, 0] * x[0] + R[a, 1] * x[1] + R[a, 2] * x[2]
+    return out
+
+
+@njit
+def mtv(R, x):
+    """R^T x for a 3x3 R and a 3-vector x."""
+    out = np.empty(3)
+    for a in range(3):
+        out[a] = R[0, a] * x[0] + R[1, a] * x[1] + R[2, a] * x[2]
+    return out
+
+
+@njit
+def mm(A, B):
+    """A B for two 3x3 matrices."""
+    out = np.empty((3, 3))
+    for a in range(3):
+        for b in range(3):
+            out[a, b] = A[a, 0] * B[0, b] + A[a, 1] * B[1, b] + A[a, 2] * B[2, b]
+    return out
+
+
+@njit
+def cross(a, b):
+    """a x b for two 3-vectors."""
+    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+
+
 @njit
 def quat_to_rotation(x, y, z, w):
     """Rotation matrix (3, 3) of the unit quaternion (x, y, z, w)."""
@@ -91,7 +127,7 @@ def body_pose(bodies, b, q):
     iq = bodies.idx_q[b]
     Rq = quat_to_rotation(q[iq + 3], q[iq + 4], q[iq + 5], q[iq + 6])
     R_P = bodies.R_P[b]
-    return R_P @ Rq, R_P @ q[iq:iq + 3] + bodies.p_P[b]
+    return mm(R_P, Rq), mv(R_P, q[iq:iq + 3]) + bodies.p_P[b]
 
 
 @njit
@@ -103,8 +139,8 @@ def body_kinematics(bodies, q, v, R_W, p_W, w_W, vo_W):
         R, p = body_pose(bodies, b, q)
         R_W[j] = R
         p_W[j] = p
-        vo_W[j] = R @ v[iv:iv + 3]
-        w_W[j] = R @ v[iv + 3:iv + 6]
+        vo_W[j] = mv(R, v[iv:iv + 3])
+        w_W[j] = mv(R, v[iv + 3:iv + 6])
 
 
 @njit
@@ -119,10 +155,10 @@ def bodies_momentum(bodies, rows, q, v):
         R, p = body_pose(bodies, b, q)
         m, lever = bodies.mass[b], bodies.lever[b]
         w = v[iv + 3:iv + 6]
-        v_G = R @ (v[iv:iv + 3] + np.cross(w, lever))
-        p_G = p + R @ lever
+        v_G = mv(R, v[iv:iv + 3] + cross(w, lever))
+        p_G = p + mv(R, lever)
         p_b = m * v_G
-        l_b = np.cross(p_G, p_b) + R @ (bodies.inertia_G[b] @ w)
+        l_b = cross(p_G, p_b) + mv(R, mv(bodies.inertia_G[b], w))
         P += p_b
         L += l_b
         c += m * p_G
@@ -139,6 +175,6 @@ def kinetic_energy(bodies, q, v):
     for b in range(bodies.joint.shape[0]):
         iv = bodies.idx_v[b]
         w = v[iv + 3:iv + 6]
-        v_G = v[iv:iv + 3] + np.cross(w, bodies.lever[b])  # body axes; the norm is frame-free
-        total += 0.5 * bodies.mass[b] * (v_G @ v_G) + 0.5 * (w @ (bodies.inertia_G[b] @ w))
+        v_G = v[iv:iv + 3] + cross(w, bodies.lever[b])  # body axes; the norm is frame-free
+        total += 0.5 * bodies.mass[b] * np.sum(v_G * v_G) + 0.5 * np.sum(w * mv(bodies.inertia_G[b], w))
     return total

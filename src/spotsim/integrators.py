@@ -14,16 +14,10 @@ import math
 import numpy as np
 import pinocchio as pin
 
-from .bodies import body_pose, free_bodies, quat_times_exp, quat_to_rotation
+from .bodies import body_pose, cross, free_bodies, mm, mtv, mv, quat_times_exp, quat_to_rotation
 from .errors import SimulationError
 from .jit import njit
 from .step import contact_stage
-
-
-@njit
-def _cross(a, b):
-    """a x b for two 3-vectors."""
-    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
 
 
 @njit
@@ -33,14 +27,14 @@ def _centroid_state(bodies, b, q, v):
     R, p = body_pose(bodies, b, q)
     c = bodies.lever[b]
     v_O, w = v[iv:iv + 3], v[iv + 3:iv + 6]
-    return p + R @ c, R @ (v_O + _cross(w, c)), R, w.copy()
+    return p + mv(R, c), mv(R, v_O + cross(w, c)), R, w.copy()
 
 
 @njit
 def _centroid_acceleration(R, c, v_O, w, a_O, alpha):
     """d/dt of R (v_O + w x c): the centroid's world acceleration from the body-frame twist
     (v_O, w) and its derivative (a_O, alpha); c is the centroid in the body frame."""
-    return R @ (a_O + _cross(w, v_O) + _cross(alpha, c) + _cross(w, _cross(w, c)))
+    return mv(R, a_O + cross(w, v_O) + cross(alpha, c) + cross(w, cross(w, c)))
 
 
 @njit
@@ -52,9 +46,9 @@ def _set_centroid_state(bodies, b, q, v, p_G, v_G, quat, w):
     Rq = quat_to_rotation(quat[0], quat[1], quat[2], quat[3])
     R_P = bodies.R_P[b]
     # p_G = p_P + R_P (x + Rq c)
-    q[iq:iq + 3] = R_P.T @ (p_G - bodies.p_P[b]) - Rq @ c
+    q[iq:iq + 3] = mtv(R_P, p_G - bodies.p_P[b]) - mv(Rq, c)
     q[iq + 3:iq + 7] = quat
-    v[iv:iv + 3] = (R_P @ Rq).T @ v_G - _cross(w, c)
+    v[iv:iv + 3] = mtv(mm(R_P, Rq), v_G) - cross(w, c)
     v[iv + 3:iv + 6] = w
 
 

@@ -167,6 +167,19 @@ class Model:
         return free_bodies(self.pin_model)
 
     @cached_property
+    def groove_placements(self) -> list[tuple[int, pin.SE3]]:
+        """Each module's groove frame O_b as (joint, placement in it); a welded module's rides
+        on its end-effector's joint."""
+        out = []
+        for m in self.modules:
+            if m.joint:
+                out.append((m.joint, m.placement))
+            else:
+                f = _frame(self.pin_model, f"{m.prefix}module")
+                out.append((f.parentJoint, f.placement))
+        return out
+
+    @cached_property
     def body_row(self) -> dict[int, int]:
         """Each free joint's row in `bodies`."""
         return {int(j): b for b, j in enumerate(self.bodies.joint)}
@@ -502,8 +515,5 @@ def grasp_frame(model: Model, data: pin.Data, ee: int) -> pin.SE3:
 
 def groove_frame(model: Model, data: pin.Data, k: int) -> pin.SE3:
     """Module `k`'s groove frame O_b in world (a welded module rides on its end-effector)."""
-    m = model.modules[k]
-    if m.joint:
-        return data.oMi[m.joint] * m.placement
-    f = _frame(model.pin_model, f"{m.prefix}module")
-    return data.oMi[f.parentJoint] * f.placement
+    joint, placement = model.groove_placements[k]
+    return data.oMi[joint] * placement

@@ -123,7 +123,9 @@ class Recorder:
         """Record the state; data.pin_data must hold the kinematics of (q, v)."""
         r = self.rows
         ee, k = model.grasps[data.active]
-        oMa, oMb = grasp_frame(model, data.pin_data, ee), groove_frame(model, data.pin_data, k)
+        grooves = [groove_frame(model, data.pin_data, i) for i in range(len(model.modules))]
+        grasps = [grasp_frame(model, data.pin_data, i) for i in range(len(model.end_effectors))]
+        oMa, oMb = grasps[ee], grooves[k]
         aMb = oMa.actInv(oMb)
         j = model.modules[k].joint
         nu = data.pin_data.v[j]
@@ -155,12 +157,11 @@ class Recorder:
             r["base_pos_m"].append(base.translation.copy())
             r["base_quat_xyzw"].append(pin.SE3ToXYZQUAT(base)[3:])
             r["system_centroid_m"].append(centroid_W(model, data, model.free_joints))
-            for i, mod in enumerate(model.modules):
-                M = groove_frame(model, data.pin_data, i)
+            for mod, M in zip(model.modules, grooves, strict=True):
                 r[f"{mod.name}_pos_m"].append(M.translation.copy())
                 r[f"{mod.name}_quat_xyzw"].append(pin.SE3ToXYZQUAT(M)[3:])
-            for i, e in enumerate(model.end_effectors):
-                r[f"{e.name}_pos_m"].append(grasp_frame(model, data.pin_data, i).translation.copy())
+            for e, M in zip(model.end_effectors, grasps, strict=True):
+                r[f"{e.name}_pos_m"].append(M.translation.copy())
         if (len(r["t"]) - 1) % self.replay_every == 0:
             self.snapshot(model, data, len(r["t"]) - 1)
 

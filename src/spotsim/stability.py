@@ -26,6 +26,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .bodies import kinetic_energy
+from .jit import njit
+
 #: Pairs sharing the load in the estimate: the shipped runs peak at 20-100 pairs in contact
 #: (Case I ~ 20 at its impacts, the dual-arm second grasp 62).
 EXPECTED_PAIRS = 32
@@ -125,11 +128,17 @@ def mechanical_energy(model, data) -> float:
     """Kinetic energy of the free bodies plus the energy stored in the contacts, J: Hertz
     0.8 K (phi/2)^2.5 per pair (the integral of K (phi/2)^1.5 dphi) and 1/2 k_b |s|^2 per
     bristle."""
-    from .bodies import kinetic_energy
-
-    E = kinetic_energy(model.bodies, data.q, data.v)
     c = data.contacts
-    if c is not None and len(c.key):
-        E += 0.8 * model.params.K * float(np.sum((0.5 * c.phi) ** 2.5))
-        E += 0.5 * model.params.bristle.k_b * float(np.sum(data.mem_s**2))
+    phi = c.phi if c is not None and c.phi is not None else np.zeros(0)
+    return _mechanical_energy(model.bodies, data.q, data.v, phi, data.mem_s, model.params.K,
+                              model.params.bristle.k_b)
+
+
+@njit
+def _mechanical_energy(bodies, q, v, phi, s, K, k_b):
+    E = kinetic_energy(bodies, q, v)
+    for i in range(phi.shape[0]):
+        E += 0.8 * K * (0.5 * phi[i]) ** 2.5
+    for i in range(s.shape[0]):
+        E += 0.5 * k_b * (s[i, 0] ** 2 + s[i, 1] ** 2 + s[i, 2] ** 2)
     return E

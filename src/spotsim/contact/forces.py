@@ -11,6 +11,7 @@ import math
 
 import numpy as np
 
+from ..bodies import mm, mv
 from ..jit import njit
 from .detection import contact_point, penetration
 from .friction import bristle_step
@@ -178,8 +179,8 @@ def contact_summary(F, T_O, R_W, p_W, ee_joint, R_ee, module_joint, lever, speed
     speed, phi: (k,) the pairs' relative speeds and penetrations.
     """
     out = np.zeros(8)
-    R = R_W[ee_joint] @ R_ee
-    r_G = R_W[module_joint] @ lever + p_W[module_joint]
+    R = mm(R_W[ee_joint], R_ee)
+    r_G = mv(R_W[module_joint], lever) + p_W[module_joint]
     f = F[module_joint]
     tau = T_O[module_joint] - np.array([r_G[1] * f[2] - r_G[2] * f[1], r_G[2] * f[0] - r_G[0] * f[2],
                                         r_G[0] * f[1] - r_G[1] * f[0]])
