@@ -1,6 +1,8 @@
-"""`spotsim` command line (run, validate, plot, replay): a thin layer over the library.
+"""`spotsim` command line (run, validate, plot, replay, study): a thin layer over the library.
 
 Exit codes: 0 completed (or valid), 2 bad input, 3 incomplete, 4 diverged, 130 interrupted.
+`study` exits 0 when it ran to its end, 1 when a stability case failed (an uncaught exception
+or a silent NaN: what the simulator must never do), 2 on bad input, 130 when interrupted.
 """
 
 from __future__ import annotations
@@ -44,7 +46,136 @@ def _parser() -> argparse.ArgumentParser:
                      help="force arrow length per newton (default: a typical load draws 80 mm)")
     rep.add_argument("--no-loop", action="store_true", help="play once instead of looping")
     rep.add_argument("--no-browser", action="store_true", help="do not open a browser")
+    _study_parser(sub)
     return p
+
+
+def _study_parser(sub) -> None:
+    from .study import GRIDS, STABILITY_WALL_LIMIT_S
+
+    study = sub.add_parser("study", help="accuracy against run time, or stability, over many runs")
+    verbs = study.add_subparsers(dest="study", required=True)
+    acc = verbs.add_parser("accuracy", help="work-precision: a confirmed reference, then integrator x step")
+    stab = verbs.add_parser("stability", help="stiff and extreme cases: predicted stable step and verdict")
+    for v in (acc, stab):
+        v.add_argument("config", nargs="?", help=f"scenario YAML (default: config/{DEFAULT_SCENARIO})")
+        v.add_argument("--out", help="output directory (default: results/study/<scenario name>)")
+        v.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE",
+                       help="override a scenario key for every run (repeatable)")
+        v.add_argument("--duration", type=float, metavar="S", help="simulation.duration_s of every run")
+        v.add_argument("--quiet", action="store_true", help="no progress bar")
+    acc.add_argument("--grid", choices=list(GRIDS), default="default",
+                     help="the settings swept and the reference (default: default; see the README)")
+    acc.add_argument("--quick", action="store_true", help="the suite's grid: Case I's first contact, 7 runs")
+    acc.add_argument("--methods", metavar="M,M", help="only these of symplectic_euler, rk4, dopri5")
+    acc.add_argument("--substeps", metavar="N,N", help="the fixed-step methods' substeps (replaces the grid's)")
+    acc.add_argument("--rtols", metavar="R,R", help="dopri5's relative tolerances (replaces the grid's)")
+    acc.add_argument("--sphere-scales", metavar="F,F", help="factors on both sphere radii (default: the grid's)")
+    acc.add_argument("--reference", metavar="METHOD:VALUE",
+                     help="the reference, e.g. dopri5:1e-7 or symplectic_euler:80; its refinement confirms it")
+    acc.add_argument("--wall-limit", type=float, metavar="S", help="wall-time budget of each run (default: none)")
+    acc.add_argument("--no-plot", action="store_true", help="skip the work-precision plot")
+    stab.add_argument("--cases", metavar="NAME,NAME",
+                      help="cases or groups (stiff, extreme, baseline); spaces ignored, e.g. 'Ex100,y_a+10mm'")
+    stab.add_argument("--quick", action="store_true", help="the suite's cases, each 1.5 s simulated")
+    stab.add_argument("--wall-limit", type=float, metavar="S", default=STABILITY_WALL_LIMIT_S,
+                      help=f"wall-time budget of each case (default {STABILITY_WALL_LIMIT_S:g} s)")
+
+
+def _numbers(text: str | None, kind, what: str):
+    """A comma-separated list of numbers, or None; ValueError names the option."""
+    if text is None:
+        return None
+    try:
+        values = tuple(kind(x) for x in text.split(",") if x.strip())
+    except ValueError:
+        raise ValueError(f"{what} {text}: must be comma-separated {kind.__name__}s") from None
+    if not values or any(not v > 0 for v in values):
+        raise ValueError(f"{what} {text}: every value must be > 0")
+    return values
+
+
+def _study(args) -> int:
+    """`spotsim study accuracy|stability`: exit 2 on bad input, 130 if interrupted, 1 if a
+    stability case failed, else 0."""
+    from . import study
+
+    overrides = list(args.set)
+    duration = args.duration
+    try:
+        if duration is not None and not duration > 0:
+            raise ValueError(f"--duration {duration}: must be > 0")
+        if args.study == "accuracy":
+            grid = study.GRIDS["quick" if args.quick else args.grid]
+            methods = args.methods.split(",") if args.methods else None
+            bad = [m for m in methods or () if m not in ("symplectic_euler", "rk4", "dopri5")]
+            if bad:
+                raise ValueError(f"--methods {args.methods}: unknown {', '.join(bad)}; valid: symplectic_euler, "
+                                 f"rk4, dopri5")
+            substeps = _numbers(args.substeps, int, "--substeps")
+            rtols = _numbers(args.rtols, float, "--rtols")
+            scales = _numbers(args.sphere_scales, float, "--sphere-scales")
+            reference = study.parse_setting(args.reference) if args.reference else grid.reference
+            if args.wall_limit is not None and not args.wall_limit > 0:
+                raise ValueError(f"--wall-limit {args.wall_limit}: must be > 0")
+            fixed = {m: substeps or n for m, n in grid.substeps.items()}
+            if substeps:  # a method the grid leaves out is swept too when asked for by name
+                fixed.update({m: substeps for m in methods or () if m != "dopri5"})
+            if methods:
+                fixed = {m: n for m, n in fixed.items() if m in methods}
+            chosen = study.Grid(fixed, (rtols or grid.rtols) if not methods or "dopri5" in methods else (),
+                                reference, scales or grid.sphere_scales)
+            duration = duration or grid.duration_s
+        else:
+            if args.wall_limit is not None and not args.wall_limit > 0:
+                raise ValueError(f"--wall-limit {args.wall_limit}: must be > 0")
+            names = args.cases.split(",") if args.cases else list(study.QUICK_CASES) if args.quick else None
+            cases = study.select_cases(names) if names else study.stability_cases()
+            duration = duration or (study.QUICK_DURATION_S if args.quick else None)
+    except ValueError as e:
+        print(e, file=sys.stderr)
+        return 2
+    if duration is not None:
+        overrides.append(f"simulation.duration_s={duration}")
+    path = _config_path(args.config)
+    try:
+        scenario, _ = _load(path, overrides)
+    except ScenarioError as e:
+        for line in e.problems:
+            print(line, file=sys.stderr)
+        return 2
+    except SpotsimError as e:
+        print(f"{path}: {e}", file=sys.stderr)
+        return 2
+    out = Path(args.out) if args.out else Path("results") / "study" / scenario.name
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        print(f"{out}: cannot write results: {e.strerror}", file=sys.stderr)
+        return 2
+    progress = not args.quiet
+    try:
+        if args.study == "accuracy":
+            report = study.accuracy_study(scenario, chosen.settings(), chosen.reference, out, source=str(path),
+                                          progress=progress, wall_limit_s=args.wall_limit, plot=not args.no_plot)
+            print(f"{scenario.name}: accuracy, {len(report.rows)} runs")
+            print(f"  {report.confirmation_text()}")
+            print(f"  {report.fastest_text()}")
+        else:
+            report = study.stability_study(scenario, cases, out, source=str(path), progress=progress,
+                                           wall_limit_s=args.wall_limit)
+            print(f"{scenario.name}: stability, {len(report.rows)} cases")
+            for r in report.rows:
+                print(f"  {r['case']}: {r['verdict']} - {r['message']}")
+    except OSError as e:
+        print(f"{out}: cannot write results: {e.strerror}", file=sys.stderr)
+        return 2
+    for f in report.files:
+        print(f"  {f}")
+    if report.interrupted:
+        print("interrupted: the rows written are the runs that finished", file=sys.stderr)
+        return 130
+    return 1 if args.study == "stability" and report.failures else 0
 
 
 def _replay(result_dir, args, run_code=None) -> int:
@@ -129,6 +260,8 @@ def main(argv=None) -> int:
     args = _parser().parse_args(argv)
     if args.command == "replay":
         return _replay(args.result_dir, args)
+    if args.command == "study":
+        return _study(args)
     if args.command == "plot":
         from .results import replot
 

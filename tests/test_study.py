@@ -1,0 +1,188 @@
+"""The accuracy and stability studies: their tables are complete, their verdicts honest, and
+their runs bounded."""
+
+import csv
+import math
+
+import pytest
+
+import spotsim
+from conftest import CASE_I
+from spotsim import study
+from spotsim.cli import main
+
+#: Columns a row may leave as nan, because the quantity does not exist for it: the step of the
+#: adaptive method and the tolerances of the fixed-step ones, the completion time of a run that
+#: did not complete.
+NOT_FOR_EVERY_SETTING = {"substeps", "step_ms", "rtol", "atol", "completed_s"}
+#: ... and every error of a run with nothing to compare (diverged, rejected, stopped).
+ERRORS = ("_err_mm", "_err_rel")
+
+
+def read_csv(path):
+    with open(path, newline="") as f:
+        return list(csv.DictReader(f))
+
+
+@pytest.fixture(scope="module")
+def accuracy(tmp_path_factory):
+    """The suite's accuracy study of Case I (the quick grid: its first 120 ms of contact)."""
+    out = tmp_path_factory.mktemp("accuracy")
+    code = main(["study", "accuracy", str(CASE_I), "--quick", "--out", str(out), "--quiet"])
+    return code, out, read_csv(out / "accuracy.csv")
+
+
+@pytest.fixture(scope="module")
+def stability(tmp_path_factory):
+    """The suite's stability study of Case I (five cases and one rerun, 1.5 s each)."""
+    out = tmp_path_factory.mktemp("stability")
+    code = main(["study", "stability", str(CASE_I), "--quick", "--out", str(out), "--quiet"])
+    return code, out, read_csv(out / "stability.csv")
+
+
+def test_accuracy_study_fills_every_column(accuracy):
+    """Every cell of the accuracy CSV holds a value; nan only where the quantity does not exist."""
+    code, out, rows = accuracy
+    assert code == 0
+    assert [r["role"] for r in rows[:3]] == ["reference", "confirmation", "perturbed"]
+    assert {"paper", "default"} <= {r["role"] for r in rows}
+    assert "centroid_err_mm" not in rows[0]  # single arm: no centroid columns at all
+    for r in rows:
+        for column, value in r.items():
+            assert value != "", (r["setting"], column)
+            if value == "nan":
+                comparable = r["status"] in study.COMPARABLE
+                assert column in NOT_FOR_EVERY_SETTING or (not comparable and column.endswith(ERRORS)), \
+                    (r["setting"], column)
+    assert (out / "accuracy.md").exists() and (out / "work_precision.png").exists()
+
+
+def test_accuracy_errors_are_measured_against_the_reference(accuracy):
+    """The reference's own error is zero; the confirmation's is the change the report states."""
+    _, out, rows = accuracy
+    ref, confirmation = rows[0], rows[1]
+    assert float(ref["offset_err_mm"]) == 0.0 and float(ref["max_err_rel"]) == 0.0
+    change = float(confirmation["max_err_rel"])
+    assert change > 0
+    text = (out / "accuracy.md").read_text()
+    assert f"{100 * change:.3g} %" in text
+    assert ("reference confirmed" in text) == (change < study.CONFIRM_REL)
+
+
+def test_paper_setting_is_reported_diverged_with_partial_results(accuracy):
+    """Symplectic Euler at the paper's 1 ms diverges on Case I's first impacts (~0.49 s): the
+    study reports it as diverged, with the record up to then and no error."""
+    _, out, rows = accuracy
+    paper = next(r for r in rows if r["role"] == "paper")
+    assert paper["setting"] == "symplectic_euler h 1 ms" and paper["status"] == "diverged"
+    assert 0.4 < float(paper["sim_time_s"]) < 0.55  # after first contact (0.43 s), before the end
+    assert math.isfinite(float(paper["offset_norm_mm"])) and int(paper["steps"]) > 0
+    assert paper["offset_err_mm"] == "nan" and paper["within_1pct"] == "no"
+    assert "diverged" in (out / "accuracy.md").read_text()
+
+
+def test_stability_study_fills_every_column(stability):
+    """Every cell of the stability CSV holds a value, and every case has a verdict."""
+    _, out, rows = stability
+    assert [r["case"] for r in rows if ", gap" not in r["case"]] == list(study.QUICK_CASES)
+    for r in rows:
+        assert all(v != "" for v in r.values()), r
+        assert r["verdict"] in ("converged", "not captured", "diverged (detected)", "rejected at start",
+                                "FAILED: exception", "FAILED: silent NaN")
+    assert (out / "stability.md").exists()
+
+
+def test_stability_verdicts(stability):
+    """Case I as given converges; a +10 mm start across the groove interpenetrates with the
+    9 mm start gap, is rejected with the reason, and runs again from a gap that clears it; the
+    predicted stable step shrinks with E."""
+    _, _, rows = stability
+    by = {r["case"]: r for r in rows}
+    assert by["baseline"]["verdict"] == "converged" and float(by["baseline"]["residual_offset_mm"]) < 0.3
+    assert by["y_a +10 mm"]["verdict"] == "rejected at start"
+    assert "interpenetrate" in by["y_a +10 mm"]["message"]
+    assert by["y_a +10 mm, gap 12 mm"]["verdict"] != "rejected at start"
+    assert float(by["E x100"]["predicted_stable_step_ms"]) < float(by["baseline"]["predicted_stable_step_ms"])
+
+
+def test_stability_study_reports_an_exception_instead_of_dying(stability):
+    """Whatever a case ends in, the study writes its row: an exception out of simulate is a
+    verdict (FAILED), and the exit code says a case failed."""
+    code, _, rows = stability
+    failed = [r for r in rows if r["verdict"].startswith("FAILED")]
+    assert code == (1 if failed else 0)
+    for r in failed:
+        assert "raised by simulate" in r["message"]
+
+
+@pytest.mark.xfail(strict=True, reason="the module 100x lighter is flung out of range and the broad phase's "
+                                       "StateOverflow escapes simulate from free_flight (run.py), "
+                                       "outside the divergence checks")
+def test_no_stability_case_ends_in_an_exception_or_a_silent_nan(stability):
+    """No case ends in an uncaught exception or a silent NaN: a blown-up run is diverged."""
+    _, _, rows = stability
+    assert not [r["case"] for r in rows if r["verdict"].startswith("FAILED")]
+
+
+def test_a_run_past_its_wall_limit_ends_with_what_it_recorded(case_I):
+    """A run that outlives its wall-time budget stops as Ctrl-C stops it: no verdict, no hang."""
+    o = study.run_once(case_I, wall_limit_s=0.3)
+    assert o.status == study.WALL_LIMIT and "wall limit of 0.3 s" in o.message
+    assert study.verdict(o) == "no verdict: wall limit"
+
+
+def test_ctrl_c_keeps_the_rows_written(case_I, tmp_path, monkeypatch):
+    """Ctrl-C during a study stops it; the rows of the runs that finished stay in the CSV."""
+    calls = []
+    real = study.run_once
+
+    def interrupt_third(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(study, "run_once", interrupt_third)
+    monkeypatch.setattr(study, "warm_up", lambda *a, **k: None)
+    short = spotsim.replace(case_I, simulation={"duration_s": 0.05})
+    report = study.stability_study(short, study.select_cases(["baseline", "Ex10", "Ex100"]), tmp_path)
+    assert report.interrupted and len(read_csv(tmp_path / "stability.csv")) == 2
+    assert "interrupted" in (tmp_path / "stability.md").read_text()
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["accuracy", "--rtols", "1e-4,x"], "--rtols"),
+    (["accuracy", "--substeps", "0"], "must be > 0"),
+    (["accuracy", "--reference", "euler:10"], "METHOD:VALUE"),
+    (["accuracy", "--methods", "leapfrog"], "valid: symplectic_euler"),
+    (["stability", "--cases", "E x1000"], "valid: groups"),
+    (["stability", "--duration", "-1"], "must be > 0"),
+    (["accuracy", "--set", "contact.restitution=1.7"], "must be in (0, 1]"),
+])
+def test_bad_study_input_is_exit_2(argv, message, capsys, tmp_path):
+    """Bad options and bad scenarios are reported before anything runs, exit 2."""
+    assert main(["study", *argv, "--out", str(tmp_path), "--quiet"]) == 2
+    assert message in capsys.readouterr().err
+
+
+def test_settings_refine_and_parse():
+    """A reference's refinement halves the step or divides the tolerance by ten."""
+    assert study.Setting("rk4", 40).refined() == study.Setting("rk4", 80)
+    assert study.Setting("dopri5", rtol=1e-6).refined().rtol == pytest.approx(1e-7)
+    assert study.parse_setting("dopri5:1e-7") == study.Setting("dopri5", rtol=1e-7)
+    assert study.parse_setting("symplectic_euler:80") == study.Setting("symplectic_euler", 80)
+    s = study.Setting("dopri5", rtol=1e-5).apply(spotsim.load_scenario(CASE_I))
+    assert s.simulation.integrator.method == "dopri5" and s.simulation.integrator.atol == pytest.approx(1e-8)
+
+
+def test_errors_are_vector_differences():
+    """The offset error is the norm of the vector difference, relative to the reference's norm."""
+    import numpy as np
+
+    ref = study.Outcome("completed", "", offsets=[np.array([0.0, 3.0, 0.0])], peaks=[50.0], centroids=[None])
+    o = study.Outcome("completed", "", offsets=[np.array([0.0, 0.0, 4.0])], peaks=[55.0], centroids=[None])
+    e = study.errors(o, ref, [""], centroid=False)
+    assert e["offset_err_mm"] == pytest.approx(5.0) and e["offset_err_rel"] == pytest.approx(5 / 3)
+    assert e["peak_force_err_rel"] == pytest.approx(0.1) and e["max_err_rel"] == pytest.approx(5 / 3)
+    diverged = study.Outcome("diverged", "", offsets=[np.zeros(3)], peaks=[1e9], centroids=[None])
+    assert math.isnan(study.errors(diverged, ref, [""], centroid=False)["max_err_rel"])
