@@ -499,12 +499,14 @@ def perturbed(s, d_mm: float = PERTURBATION_MM):
 
 
 def warm_up(scenario, methods, duration_s: float = 0.5) -> None:
-    """Run each method briefly, so that no timed run pays for loading its compiled kernels."""
+    """Run each method briefly (dopri5 at a loose tolerance), so that no timed run pays for
+    loading its compiled kernels."""
     for method in methods:
-        s = replace(scenario, simulation={"duration_s": min(duration_s, scenario.simulation.duration_s),
-                                          "integrator": {**to_dict(scenario.simulation.integrator),
-                                                         "method": method}})
-        run_once(s)
+        integrator = {**to_dict(scenario.simulation.integrator), "method": method}
+        if method == "dopri5":
+            integrator.update(rtol=1e-3, atol=1e-6)
+        run_once(replace(scenario, simulation={"duration_s": min(duration_s, scenario.simulation.duration_s),
+                                               "integrator": integrator}))
 
 
 def accuracy_study(scenario, settings: list[Setting], reference: Setting, out_dir, *,
