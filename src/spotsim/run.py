@@ -327,8 +327,14 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
         for _ in range(n_records):
             # nothing can touch before the next record (zero gravity): one step to it; else
             # the dynamics substeps
-            flight = not gravity and free_flight(model, data, sim.dt_s)
+            try:
+                flight = not gravity and free_flight(model, data, sim.dt_s)
+            except StateOverflow as e:  # its broad phase met a state coal cannot bound
+                status, message = DIVERGED, f"{e} at t = {data.t:.4f} s"
+                break
             free_steps += flight
+            # the active drive held the fingers still through every step of this interval
+            held = data.drives[model.grasps[data.active][0]].stalled
             for h in _step_sizes(integrator, data, flight, sim.dt_s, h_contact, sim.substeps):
                 t_start = data.t
                 try:
@@ -337,6 +343,7 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
                     status, message = DIVERGED, f"{e} at t = {data.t:.4f} s"
                     break
                 h = data.t - t_start  # an adaptive step may be shorter than asked
+                held = held and data.drives[model.grasps[data.active][0]].stalled
                 steps += 1
                 n = len(c.key)
                 pair_steps += n
@@ -365,8 +372,9 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
                     break
             if status == DIVERGED:
                 break
-            # a passive phase (the drive holding the fingers) may not gain energy
-            if data.drives[model.grasps[data.active][0]].stalled:
+            # a passive phase (the drive holding the fingers through the whole interval) may
+            # not gain energy
+            if held:
                 E = mechanical_energy(model, data)
                 if e_passive is None:
                     e_passive = E
