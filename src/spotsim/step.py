@@ -66,7 +66,7 @@ class Data:
     opening_rate: np.ndarray = None  # (n_fingers,) its rate during the current step, m/s
     finger_load: np.ndarray = None
     contacts: Contacts = None
-    f_ext: list = None  # (njoints,) pin.Force on each body, its joint's frame
+    f_ext: pin.StdVec_Force = None  # (njoints,) pin.Force on each body, its joint's frame
     f_views: list = None  # a writable view of each one's 6-vector
     tau: np.ndarray = None  # joint torques: none, every joint is free or reduced away
     summary: np.ndarray = field(default_factory=lambda: np.zeros(8))  # contact_summary of the step
@@ -105,7 +105,9 @@ def make_data(model: Model) -> Data:
     phases = [GraspPhase(c.hold_s, c.max_contact_speed_m_s, c.max_net_force_N) for _ in model.grasps]
     nj = m.njoints
     n_f = len(model.fingers)
-    f_ext = [pin.Force.Zero() for _ in range(nj)]
+    f_ext = pin.StdVec_Force()  # ABA takes it as it is; a Python list is converted each call
+    for _ in range(nj):
+        f_ext.append(pin.Force.Zero())
     return Data(0.0, model.q0.copy(), model.v0.copy(), pdata, gdata, manager, phases,
                 np.tile(np.eye(3), (nj, 1, 1)), np.zeros((nj, 3)), np.zeros((nj, 3)),
                 np.zeros((nj, 3)), finger_load=np.zeros(n_f),
@@ -113,7 +115,7 @@ def make_data(model: Model) -> Data:
                         for _ in model.end_effectors],
                 joint_force_W=np.zeros((nj, 3)), joint_torque_O_W=np.zeros((nj, 3)),
                 opening=np.array([f.opening_start for f in model.fingers]),
-                opening_rate=np.zeros(n_f), f_ext=f_ext, f_views=[f.vector for f in f_ext],
+                opening_rate=np.zeros(n_f), f_ext=f_ext, f_views=[f_ext[j].vector for j in range(nj)],
                 tau=np.zeros(m.nv))
 
 
