@@ -16,7 +16,7 @@ import pinocchio as pin
 
 from .bodies import body_pose, cross, free_bodies, mm, mtv, mv, quat_times_exp, quat_to_rotation
 from .errors import SimulationError
-from .jit import njit
+from .jit import direct, njit
 from .step import contact_stage
 
 
@@ -103,12 +103,13 @@ class SymplecticEuler:
         self.bodies = free_bodies(model)
         self.only_free = len(self.bodies.joint) * 7 == model.nq
         self.h = None
+        self._update = direct(_symplectic_euler)  # this model's argument types, fixed
 
     def step(self, model: pin.Model, q: np.ndarray, v: np.ndarray, a: np.ndarray,
              h: float) -> tuple[np.ndarray, np.ndarray]:
         """(q, v) after h, given the acceleration a at (q, v)."""
         if self.only_free:
-            return _symplectic_euler(self.bodies, q, v, a, h)
+            return self._update(self.bodies, q, v, a, h)
         v_new = v + h * a
         q_new = pin.integrate(model, q, h * v_new)
         _symplectic_euler_bodies(self.bodies, q, v, a, h, q_new, v_new)

@@ -144,6 +144,15 @@ class Model:
         return face_table(self.face_pairs)
 
     @cached_property
+    def contact_call(self):
+        """`step._contact_kernels`, called directly once compiled (`jit.direct`): its
+        arguments' types are fixed by this model."""
+        from .jit import direct
+        from .step import _contact_kernels
+
+        return direct(_contact_kernels)
+
+    @cached_property
     def contact_kernel_args(self) -> tuple:
         """The model's arguments of the compiled contact stage (`step.contact_kernel_args`)."""
         from .step import contact_kernel_args

@@ -249,7 +249,7 @@ def contact_stage(model: Model, data: Data, h: float, commit: bool = True) -> Co
     if data.travel > model.params.skin:
         refresh_broad_phase(model, data)
     pairs, (local, data.joint_force_W, data.joint_torque_O_W, data.external_force_W, data.external_torque_O_W,
-            data.finger_load), data.summary = _contact_kernels(
+            data.finger_load), data.summary = model.contact_call(
         data.q, data.v, data.R_W, data.p_W, data.w_W, data.vo_W, data.near_pairs, data.opening,
         data.opening_rate, data.mem_key, data.mem_s, data.mem_vminus, h, *model.watch_args[data.active],
         *model.contact_kernel_args)
