@@ -10,20 +10,18 @@
   start) and the run's outcome.
 
 Both write their CSV a row at a time as runs finish, so that Ctrl-C keeps what was computed,
-then a markdown table (and the accuracy study a work-precision plot). A run is never trusted
-to end by itself: each has a wall-time budget, enforced with SIGALRM, past which it ends as
-Ctrl-C ends it, with what it recorded.
+then a markdown table (and the accuracy study a work-precision plot). A run may be given a
+wall-time budget (the stability study's default): it then runs in a child process, killed
+when the budget is spent.
 """
 
 from __future__ import annotations
 
 import csv
 import math
-import signal
+import multiprocessing
 import textwrap
-import threading
 import traceback
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 from dataclasses import replace as dc_replace
 from pathlib import Path
@@ -45,7 +43,7 @@ PERTURBATION_MM = 1e-6
 #: ~0.1-1 m from the origin and its speeds ~10 mm/s, so atol (m, m/s) must sit well below
 #: rtol x position for the speeds to be controlled at all (the scenario default is 1e-6 / 1e-9).
 ATOL_PER_RTOL = 1e-3
-#: A stability case's wall-time budget, s: ten times the slowest shipped case's run.
+#: A stability case's wall-time budget, s: a hundred times Case I's run at its default step.
 STABILITY_WALL_LIMIT_S = 300.0
 
 #: What a run ended as, besides the simulator's statuses.
@@ -93,6 +91,12 @@ class Setting:
     def refined(self) -> Setting:
         """The next refinement: a tenth of the tolerance, or half the step."""
         return dc_replace(self, rtol=self.rtol / 10) if self.adaptive else dc_replace(self, substeps=2 * self.substeps)
+
+    def coarsened(self) -> Setting | None:
+        """The setting one refinement coarser (None below one substep)."""
+        if self.adaptive:
+            return dc_replace(self, rtol=self.rtol * 10) if self.rtol < 0.1 else None
+        return dc_replace(self, substeps=self.substeps // 2) if self.substeps % 2 == 0 else None
 
     def apply(self, s):
         """The scenario `s` run at this setting (validated again)."""
@@ -157,48 +161,24 @@ class Grid:
         return out
 
 
-#: The grids, costs measured on Case I (README): `default` takes ~N min, `reduced` a third.
+#: The grids. The default reference is symplectic Euler at 12.5 us: dopri5 at rtol 1e-6 takes
+#: ~40 s on Case I and at 1e-7 more than 15 min (every contact onset and stick-slip switch is a
+#: kink its error control steps through), while RK4 at 12.5 us and symplectic Euler at 6.25 us
+#: end diverged (energy growth in a passive phase). Costs on Case I in the README.
 GRIDS = {
     # the suite's: Case I's first 120 ms of contact, in which the paper's setting diverges (0.49 s)
     "quick": Grid({"symplectic_euler": (1, 5, 10), "rk4": (10,)}, (1e-4,), Setting("symplectic_euler", 40),
                   duration_s=0.55),
-    "reduced": Grid({"symplectic_euler": (1, 2, 5, 10, 20), "rk4": (5, 10)}, (1e-4, 1e-5),
-                    Setting("dopri5", rtol=1e-7)),
-    "default": Grid({"symplectic_euler": (1, 2, 5, 10, 20, 40, 80), "rk4": (5, 10, 20, 40)},
-                    (1e-3, 1e-4, 1e-5, 1e-6), Setting("dopri5", rtol=1e-7)),
-    "full": Grid({"symplectic_euler": (1, 2, 5, 10, 20, 40, 80, 160), "rk4": (2, 5, 10, 20, 40, 80)},
-                 (1e-3, 1e-4, 1e-5, 1e-6, 1e-7), Setting("dopri5", rtol=1e-8), sphere_scales=(1.0, 0.75, 1.5)),
+    "reduced": Grid({"symplectic_euler": (1, 2, 5, 10, 20), "rk4": (10, 20)}, (1e-4, 1e-5),
+                    Setting("symplectic_euler", 40)),
+    "default": Grid({"symplectic_euler": (1, 2, 5, 10, 20, 40), "rk4": (5, 10, 20, 40)},
+                    (1e-3, 1e-4, 1e-5, 1e-6), Setting("symplectic_euler", 80)),
+    "full": Grid({"symplectic_euler": (1, 2, 5, 10, 20, 40, 80), "rk4": (2, 5, 10, 20, 40, 80)},
+                 (1e-3, 1e-4, 1e-5), Setting("dopri5", rtol=1e-6), sphere_scales=(1.0, 0.75)),
 }
 
 
 # ----------------------------------------------------------------------------- one run
-
-
-class WallLimit(KeyboardInterrupt):
-    """A run outlived its wall-time budget. A KeyboardInterrupt, so that `simulate` ends the run
-    as it ends one on Ctrl-C: status interrupted, what was recorded kept."""
-
-
-@contextmanager
-def wall_limit(seconds: float | None):
-    """Raise WallLimit in the main thread once `seconds` of wall time have passed; yields a
-    dict whose `fired` says whether it did. No limit when None, or off the main thread."""
-    state = {"fired": False}
-    if not seconds or threading.current_thread() is not threading.main_thread():
-        yield state
-        return
-
-    def fire(signum, frame):
-        state["fired"] = True
-        raise WallLimit
-
-    previous = signal.signal(signal.SIGALRM, fire)
-    signal.setitimer(signal.ITIMER_REAL, seconds)
-    try:
-        yield state
-    finally:
-        signal.setitimer(signal.ITIMER_REAL, 0)
-        signal.signal(signal.SIGALRM, previous)
 
 
 @dataclass
@@ -232,43 +212,86 @@ def run_once(scenario, source: str = "<study>", wall_limit_s: float | None = Non
     """Build, check and simulate `scenario`; never raises but on the user's Ctrl-C.
 
     A scenario the model or the start check rejects is status `rejected`; any exception out
-    of `simulate` is status `exception` (it must never raise: a bug the study reports); a run
-    past `wall_limit_s` is status `wall limit` with what it recorded.
+    of `simulate` is status `exception` (it must never raise: a bug the study reports).
+
+    With `wall_limit_s`, the run goes on in a forked child process, which is killed once the
+    budget is spent (status `wall limit`; what it recorded is lost with it). A signal raised
+    into the run instead would land inside numba's callbacks, which turn it into a SystemError;
+    and a child also survives what the simulator must never do, a crash in compiled code.
     """
+    if not wall_limit_s:
+        return _run_once(scenario, source)
+    ctx = multiprocessing.get_context("fork")  # the child inherits the loaded kernels
+    receive, send = ctx.Pipe(duplex=False)
+    child = ctx.Process(target=_child, args=(send, scenario, source), daemon=True)
+    child.start()
+    send.close()
+    try:
+        if receive.poll(wall_limit_s):
+            o = receive.recv()
+        else:
+            o = Outcome(WALL_LIMIT, f"wall limit of {wall_limit_s:g} s reached: the run was stopped")
+    except EOFError:  # the child died without a word
+        child.join()
+        o = Outcome(EXCEPTION, f"the run's process died (exit code {child.exitcode})")
+    finally:
+        if child.is_alive():
+            child.kill()
+        child.join()
+        receive.close()
+    if o.status == "interrupted":
+        raise KeyboardInterrupt  # the user's Ctrl-C reached the child too: the study stops
+    if o.prediction is None and o.status in (WALL_LIMIT, EXCEPTION):
+        o.prediction = _prediction(scenario, source)
+    return o
+
+
+def _child(send, scenario, source) -> None:
+    try:
+        o = _run_once(scenario, source)
+    except KeyboardInterrupt:
+        o = Outcome("interrupted", "interrupted by the user")
+    send.send(o)
+    send.close()
+
+
+def _prediction(scenario, source):
+    """stability.predict_step of the scenario's model, or None if it cannot be built."""
+    from .model import build_model
+    from .stability import predict_step
+
+    try:
+        return predict_step(build_model(scenario, source))
+    except SpotsimError:
+        return None
+
+
+def _run_once(scenario, source: str) -> Outcome:
     from .model import build_model
     from .run import check_start, simulate
     from .stability import predict_step
 
-    prediction, result = None, None
+    prediction = None
     try:
-        with wall_limit(wall_limit_s) as timer:
-            try:
-                model = build_model(scenario, source)
-                prediction = predict_step(model)
-                check_start(model, source)
-            except SpotsimError as e:  # the scenario's own problem, found before anything ran
-                return Outcome(REJECTED, str(e).replace("\n", "; "), prediction=prediction)
-            result = simulate(scenario, model=model, source=source)
-    except WallLimit:
-        return Outcome(WALL_LIMIT, f"wall limit of {wall_limit_s:g} s reached before the run began",
-                       prediction=prediction)
-    except KeyboardInterrupt:
-        raise
+        model = build_model(scenario, source)
+        prediction = predict_step(model)
+        check_start(model, source)
+    except SpotsimError as e:  # the scenario's own problem, found before anything ran
+        return Outcome(REJECTED, str(e).replace("\n", "; "), prediction=prediction)
+    try:
+        result = simulate(scenario, model=model, source=source)
     except Exception as e:  # noqa: BLE001 - simulate must never raise: the study reports it, not dies of it
         where = traceback.extract_tb(e.__traceback__)[-1]
         return Outcome(EXCEPTION, f"{type(e).__name__} raised by simulate: {e} "
                                   f"({Path(where.filename).name}:{where.lineno})", prediction=prediction)
     s = result.summary
-    status, message = s["status"], s["message"]
-    if status == "interrupted":
-        if not timer["fired"]:
-            raise KeyboardInterrupt  # the user's Ctrl-C: the study stops
-        status, message = WALL_LIMIT, f"wall limit of {wall_limit_s:g} s reached at t = {s['sim_time_s']:.4f} s"
+    if s["status"] == "interrupted":
+        raise KeyboardInterrupt  # the user's Ctrl-C: the study stops
     integrator = s["integrator"]
     done = [g["completed_s"] for g in s["grasps"]]
     return Outcome(
-        status, message, s["wall_time_s"], s["sim_time_s"],
-        done[-1] if status == "completed" else math.nan,
+        s["status"], s["message"], s["wall_time_s"], s["sim_time_s"],
+        done[-1] if s["status"] == "completed" else math.nan,
         s["steps"], integrator.get("force_evaluations", s["steps"]), integrator.get("rejected_steps", 0),
         [None if g["final_offset_mm"] is None else np.array(g["final_offset_mm"]) for g in s["grasps"]],
         [g["peak_force_norm_N"] for g in s["grasps"]],
@@ -404,6 +427,15 @@ class AccuracyReport:
     rows: list[dict]
     sensitivity_rel: float = math.nan  # the same, reference to the reference started PERTURBATION_MM off
     sensitivity_what: str = ""
+    # when the confirmation ends with nothing to compare: the setting one refinement coarser
+    coarser: Setting | None = None
+    coarser_change_rel: float = math.nan
+    coarser_change_what: str = ""
+
+    @property
+    def uncertainty_rel(self) -> float:
+        """How far the reference may be from the converged answer, as far as the study can tell."""
+        return self.coarser_change_rel if math.isnan(self.change_rel) else self.change_rel
     interrupted: bool = False
     files: list[Path] = field(default_factory=list)
 
@@ -419,8 +451,12 @@ class AccuracyReport:
         if self.confirmation_outcome is None:
             return f"reference not confirmed: the study stopped before its confirmation ({c}) ran"
         if math.isnan(self.change_rel):
-            return (f"reference not confirmed: its refinement {c} ended {self.confirmation_outcome.status} "
+            text = (f"reference not confirmed: its refinement {c} ended {self.confirmation_outcome.status} "
                     f"({self.confirmation_outcome.message})")
+            if self.coarser is not None and not math.isnan(self.coarser_change_rel):
+                text += (f"; the setting one refinement coarser, {self.coarser.label(self.dt_s)}, differs from "
+                         f"it by up to {100 * self.coarser_change_rel:.3g} % ({self.coarser_change_what})")
+            return text
         verdict = "confirmed" if self.confirmed else "not confirmed"
         return (f"reference {verdict}: refining {r} to {c} changes the reported quantities by at most "
                 f"{100 * self.change_rel:.3g} % ({self.change_what}; the bound is {100 * CONFIRM_REL:g} %)")
@@ -441,9 +477,11 @@ class AccuracyReport:
         best = self.fastest_within()
         if not self.reference_outcome.comparable:
             return "fastest setting within 1 % of the reference: none (no usable reference)"
-        resolution = "" if self.change_rel <= WITHIN_REL else (
-            f"; the reference itself is uncertain by {100 * self.change_rel:.3g} %, more than 1 %, so this "
-            f"is within 1 % of the reference, not of the converged answer")
+        u = self.uncertainty_rel
+        resolution = "" if u <= WITHIN_REL else (
+            f"; the reference itself is uncertain by {100 * u:.3g} %, more than 1 %, so this is within 1 % "
+            f"of the reference, not of the converged answer" if not math.isnan(u) else
+            "; how far the reference is from the converged answer is not known")
         if best is None:
             return f"fastest setting within 1 % of the reference: none of the settings swept{resolution}"
         return (f"fastest setting within 1 % of the reference: {best['setting']} ({best['role']}), "
@@ -515,7 +553,9 @@ def accuracy_study(scenario, settings: list[Setting], reference: Setting, out_di
     """Run the reference and its confirmation, then every setting; write accuracy.csv (a row per
     run as it ends), accuracy.md and work_precision.png into `out_dir`.
 
-    Errors are against the reference run. A third run, the reference started PERTURBATION_MM
+    Errors are against the reference run. If the confirmation ends with nothing to compare
+    (diverged), the setting one refinement coarser is run next (role `coarser check`) and bounds
+    the reference's uncertainty instead. A further run, the reference started PERTURBATION_MM
     off, measures how sensitive the reported quantities are to the start. The paper's setting (symplectic Euler at dt = 1 ms)
     and the scenario's own setting are marked in the `role` column. Ctrl-C stops the study and
     keeps the rows written (report.interrupted).
@@ -555,6 +595,17 @@ def accuracy_study(scenario, settings: list[Setting], reference: Setting, out_di
         names, centroid = grasp_names(scenario), free_floating(scenario)
         change = errors(report.confirmation_outcome, report.reference_outcome, names, centroid)
         report.change_rel, report.change_what = change["max_err_rel"], worst(change)
+        coarser = reference.coarsened()
+        if math.isnan(report.change_rel) and report.reference_outcome.comparable and coarser is not None:
+            # the refinement gave nothing to compare (it diverged): bound the reference from below
+            if bar is not None:
+                bar.set_postfix_str(coarser.label(dt))
+            o = run_once(coarser.apply(scenario), source, wall_limit_s)
+            writer.write(accuracy_row(scenario, coarser, "coarser check", o, report.reference_outcome))
+            change = errors(o, report.reference_outcome, names, centroid)
+            report.coarser, report.coarser_change_rel, report.coarser_change_what = coarser, change["max_err_rel"], \
+                worst(change)
+            todo = [s for s in todo if s != coarser]
         if bar is not None:
             bar.set_postfix_str(f"{reference.label(dt)}, started {PERTURBATION_MM * 1e6:g} nm off")
         o = run_once(reference.apply(perturbed(scenario)), source, wall_limit_s)
