@@ -51,8 +51,6 @@ WALL_LIMIT, REJECTED, EXCEPTION = "wall limit", "rejected", "exception"
 #: Statuses whose record may be compared with the reference's.
 COMPARABLE = ("completed", "incomplete")
 
-PAPER = "paper"  # the paper's setting: symplectic Euler at dt = 1 ms, no substeps
-
 
 # ----------------------------------------------------------------------------- settings
 
@@ -68,7 +66,7 @@ class Setting:
 
     method: str
     substeps: int = 0
-    rtol: float = math.nan
+    rtol: float | None = None
     sphere_scale: float = 1.0
 
     @property
@@ -76,8 +74,8 @@ class Setting:
         return self.method == "dopri5"
 
     @property
-    def atol(self) -> float:
-        return self.rtol * ATOL_PER_RTOL
+    def atol(self) -> float | None:
+        return None if self.rtol is None else self.rtol * ATOL_PER_RTOL
 
     def step_s(self, dt_s: float) -> float:
         """The dynamics step, s (nan for the adaptive method)."""
@@ -139,7 +137,8 @@ def parse_setting(text: str) -> Setting:
             raise ValueError
         return Setting(method, substeps)
     except ValueError:
-        raise ValueError(f"{text}: {'rtol must be a number in (0, 1)' if method == 'dopri5' else 'substeps must be an integer >= 1'}") from None
+        rule = "rtol must be a number in (0, 1)" if method == "dopri5" else "substeps must be an integer >= 1"
+        raise ValueError(f"{text}: {rule}") from None
 
 
 @dataclass(frozen=True)
@@ -506,7 +505,7 @@ def accuracy_row(scenario, setting: Setting, role: str, o: Outcome, ref: Outcome
     names, centroid = grasp_names(scenario), free_floating(scenario)
     row = {"role": role, "setting": setting.label(dt), "method": setting.method,
            "substeps": math.nan if setting.adaptive else setting.substeps,
-           "step_ms": setting.step_s(dt) * 1e3, "rtol": setting.rtol, "atol": setting.atol,
+           "step_ms": setting.step_s(dt) * 1e3, "rtol": setting.rtol or math.nan, "atol": setting.atol or math.nan,
            "sphere_scale": setting.sphere_scale, "status": o.status, "completed_s": o.completed_s,
            "sim_time_s": o.sim_time_s, "wall_time_s": o.wall_time_s, "steps": o.steps,
            "force_evaluations": o.force_evaluations, "rejected_steps": o.rejected_steps,
