@@ -87,8 +87,8 @@ def test_stability_study_fills_every_column(stability):
     assert [r["case"] for r in rows if ", gap" not in r["case"]] == list(study.QUICK_CASES)
     for r in rows:
         assert all(v != "" for v in r.values()), r
-        assert r["verdict"] in ("converged", "not captured", "diverged (detected)", "rejected at start",
-                                "FAILED: exception", "FAILED: silent NaN")
+        assert r["verdict"] in ("converged", "converged, off centre", "not captured", "diverged (detected)",
+                                "rejected at start", "FAILED: exception", "FAILED: silent NaN")
     assert (out / "stability.md").exists()
 
 
@@ -180,6 +180,22 @@ def test_settings_refine_and_parse():
     assert study.parse_setting("symplectic_euler:80") == study.Setting("symplectic_euler", 80)
     s = study.Setting("dopri5", rtol=1e-5).apply(spotsim.load_scenario(CASE_I))
     assert s.simulation.integrator.method == "dopri5" and s.simulation.integrator.atol == pytest.approx(1e-8)
+
+
+def test_verdicts_name_what_a_run_ended_as():
+    """A completed run is converged (off centre beyond 0.3 mm), an incomplete one not captured,
+    a diverged one detected; a non-finite record in a run not reported diverged is a failure."""
+    import numpy as np
+
+    def outcome(status, e_mm=0.05, finite=True):
+        return study.Outcome(status, "", offsets=[np.array([0.0, e_mm, 0.0])], finite=finite)
+
+    assert study.verdict(outcome("completed")) == "converged"
+    assert study.verdict(outcome("completed", e_mm=2.0)) == "converged, off centre"
+    assert study.verdict(outcome("incomplete")) == "not captured"
+    assert study.verdict(outcome("diverged", finite=False)) == "diverged (detected)"
+    assert study.verdict(outcome("completed", finite=False)) == "FAILED: silent NaN"
+    assert study.verdict(study.Outcome(study.REJECTED, "")) == "rejected at start"
 
 
 def test_errors_are_vector_differences():
