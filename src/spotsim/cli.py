@@ -159,8 +159,7 @@ def _study(args) -> int:
             report = study.accuracy_study(scenario, chosen.settings(), chosen.reference, out, source=str(path),
                                           progress=progress, wall_limit_s=args.wall_limit, plot=not args.no_plot)
             print(f"{scenario.name}: accuracy, {len(report.rows)} runs")
-            for line in (report.confirmation_text(), report.sensitivity_text(), report.fastest_text(),
-                         report.ladder_text()):
+            for line in (report.confirmation_text(), report.sensitivity_text(), report.fastest_text()):
                 print(f"  {line}")
         else:
             report = study.stability_study(scenario, cases, out, source=str(path), progress=progress,

@@ -36,8 +36,8 @@ from .scenario import TOLERANCE_DEG, TOLERANCE_OFFSET_MM, modules_of, replace, t
 CONFIRM_REL = 1e-3
 #: "Within 1 % of the reference": every reported quantity within this share of the reference's.
 WITHIN_REL = 1e-2
-#: Looser bounds whose fastest settings the report names too: 1 % may lie below what the
-#: reference can resolve.
+#: Looser bounds whose fastest settings the report names too, on every quantity and on each:
+#: 1 % may lie below what the reference can resolve.
 LADDER_REL = (0.05, 0.1, 0.2)
 #: How far the sensitivity run moves each module's start, mm (1 nm, along y_a): a change of
 #: the reported quantities under it is the floor below which no setting can agree.
@@ -470,22 +470,37 @@ class AccuracyReport:
                 f"quantities by at most {100 * self.sensitivity_rel:.3g} % ({self.sensitivity_what}); no setting "
                 f"can be expected to agree with the reference more closely than that")
 
-    def fastest_within(self, rel: float = WITHIN_REL) -> dict | None:
-        """The row of the fastest setting whose every reported quantity is within `rel` of the
-        reference's (not the reference, nor its perturbed twin)."""
+    def fastest_within(self, rel: float = WITHIN_REL, key: str = "max_err_rel") -> dict | None:
+        """The row of the fastest setting whose error `key` (by default the largest of every
+        reported quantity) is within `rel` of the reference (not the reference, nor its
+        perturbed twin)."""
         ref = self.reference_outcome.status
         ok = [r for r in self.rows if r["role"] not in ("reference", "perturbed") and r["status"] == ref
-              and not math.isnan(r["max_err_rel"]) and r["max_err_rel"] <= rel]
+              and not math.isnan(r[key]) and r[key] <= rel]
         return min(ok, key=lambda r: r["wall_time_s"]) if ok else None
 
-    def ladder_text(self) -> str:
-        """The fastest settings within the looser bounds of LADDER_REL."""
-        parts = []
-        for rel in LADDER_REL:
-            best = self.fastest_within(rel)
-            parts.append(f"{100 * rel:g} %: " + ("none" if best is None else
-                         f"{best['setting']} ({best['wall_time_s']:.3g} s, {100 * best['max_err_rel']:.3g} %)"))
-        return "fastest within " + "; within ".join(parts)
+    def ladder_table(self) -> str:
+        """The fastest setting within 1 % and each of LADDER_REL, on every quantity at once and
+        on each alone, next to how much refining and perturbing the reference changes each: a
+        markdown table."""
+        keys = ["max_err_rel"] + [k for k in self.rows[0] if k.endswith("_err_rel") and k != "max_err_rel"]
+        bounds = (WITHIN_REL, *LADDER_REL)
+        by_role = {r["role"]: r for r in self.rows}
+        checks = {"confirmation": "refining the reference changes it by",
+                  "coarser check": "the coarser check differs by",
+                  "perturbed": f"a {PERTURBATION_MM * 1e6:g} nm start changes it by"}
+        checks = {role: text for role, text in checks.items() if role in by_role}
+        rows = []
+        for key in keys:
+            cells = [_pct(by_role[role][key]) for role in checks]
+            for rel in bounds:
+                best = self.fastest_within(rel, key)
+                cells.append("none" if best is None else
+                             f"{best['setting']} ({best['wall_time_s']:.3g} s, {100 * best[key]:.2g} %)")
+            name = "every quantity" if key == "max_err_rel" else key.removesuffix("_err_rel").replace("_", " ")
+            rows.append([name, *cells])
+        return markdown_table(["error of", *checks.values(), *(f"fastest within {100 * b:g} %" for b in bounds)],
+                              rows)
 
     def fastest_text(self) -> str:
         best = self.fastest_within()
@@ -677,11 +692,13 @@ def accuracy_markdown(scenario, report: AccuracyReport) -> str:
             f"of the vector difference. Wall time is the simulation loop's.", "",
             f"- {report.confirmation_text()}",
             f"- {report.sensitivity_text()}",
-            f"- {report.fastest_text()}",
-            f"- {report.ladder_text()}"]
+            f"- {report.fastest_text()}"]
     if report.interrupted:
         text.append("- **interrupted**: the study was stopped; the rows below are the runs that finished")
-    return "\n".join(text) + "\n\n" + markdown_table(header, rows)
+    ladder = ("\n\nPer quantity: how well the reference is known, and the fastest setting within each "
+              "bound of it (wall time, error):\n\n"
+              + report.ladder_table().rstrip()) if report.rows else ""
+    return "\n".join(text) + ladder + "\n\nEvery run:\n\n" + markdown_table(header, rows)
 
 
 def work_precision_plot(scenario, report: AccuracyReport, path: Path) -> None:
