@@ -103,6 +103,8 @@ def test_stability_verdicts(stability):
     assert "interpenetrate" in by["y_a +10 mm"]["message"]
     assert by["y_a +10 mm, gap 12 mm"]["verdict"] != "rejected at start"
     assert float(by["E x100"]["predicted_stable_step_ms"]) < float(by["baseline"]["predicted_stable_step_ms"])
+    for r in rows:  # a diverged case is run again at a finer step, and only a diverged one
+        assert (r["finer_verdict"] != "not run") == (r["status"] == "diverged"), r["case"]
 
 
 def test_stability_study_reports_an_exception_instead_of_dying(stability):

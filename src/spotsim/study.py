@@ -993,10 +993,23 @@ def verdict(o: Outcome) -> str:
 STABILITY_COLUMNS = ["case", "group", "change", "dynamics_step_ms", "predicted_stable_step_ms", "omega_h",
                      "damping_h", "predicted_stable", "verdict", "prediction_held", "status", "completed_s",
                      "residual_offset_mm", "final_offset_mm", "peak_force_N", "sim_time_s", "wall_time_s",
-                     "finite", "message"]
+                     "finite", "message", "finer_verdict", "finer_message"]
+#: A diverged case runs again this many times finer (fixed step; dopri5: rtol / this): if it
+#: still diverges, the cause is not the step.
+FINER = 4
 
 
-def stability_row(case: Case, o: Outcome, changed=None) -> dict:
+def finer(s):
+    """`s` with its dynamics step FINER times smaller (dopri5: its rtol and atol)."""
+    i = s.simulation.integrator
+    if i.method == "dopri5":
+        return replace(s, simulation={"integrator": {**to_dict(i), "rtol": i.rtol / FINER, "atol": i.atol / FINER}})
+    return replace(s, simulation={"substeps": s.simulation.substeps * FINER})
+
+
+def stability_row(case: Case, o: Outcome, changed=None, fine: Outcome | None = None) -> dict:
+    """A stability CSV row: the case, its prediction, verdict and outcome, and (`fine`) the
+    verdict of the same case FINER times finer when it diverged ("not run" otherwise)."""
     p = o.prediction
     v = verdict(o)
     if p is None or o.status not in (*COMPARABLE, "diverged"):
@@ -1016,7 +1029,8 @@ def stability_row(case: Case, o: Outcome, changed=None) -> dict:
             "final_offset_mm": max(finals, default=math.nan), "peak_force_N": max(o.peaks, default=math.nan),
             "sim_time_s": o.sim_time_s, "wall_time_s": o.wall_time_s,
             "finite": "n/a" if o.status not in COMPARABLE else ("yes" if o.finite else "no"),
-            "message": o.message}
+            "message": o.message, "finer_verdict": "not run" if fine is None else verdict(fine),
+            "finer_message": "not run" if fine is None else fine.message}
 
 
 @dataclass
@@ -1032,12 +1046,18 @@ class StabilityReport:
         return [r for r in self.rows if r["verdict"].startswith("FAILED")]
 
 
+def check_finer(o: Outcome, s, source: str, wall_limit_s) -> Outcome | None:
+    """A diverged run's case again, FINER times finer; None for any other outcome."""
+    return run_once(finer(s), source, wall_limit_s) if o.status == "diverged" else None
+
+
 def stability_study(scenario, cases: list[Case], out_dir, *, source: str = "<study>", progress: bool = False,
                     wall_limit_s: float | None = STABILITY_WALL_LIMIT_S) -> StabilityReport:
     """Run every case of `scenario`; write stability.csv (a row per case as it ends) and
     stability.md into `out_dir`. A misaligned start rejected for interpenetrating is run once
-    more with the start gap that clears it (a second row). Ctrl-C stops the study and keeps the
-    rows written."""
+    more with the start gap that clears it (a second row). A diverged case runs again FINER
+    times finer (`finer_verdict`): one that still diverges does not diverge for its step.
+    Ctrl-C stops the study and keeps the rows written."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     writer = RowWriter(out / "stability.csv", STABILITY_COLUMNS)
@@ -1054,12 +1074,14 @@ def stability_study(scenario, cases: list[Case], out_dir, *, source: str = "<stu
                 s, o = None, Outcome(REJECTED, str(e).replace("\n", "; "))
             else:
                 o = run_once(s, source, wall_limit_s)
-            writer.write(stability_row(case, o, s))
+            writer.write(stability_row(case, o, s, check_finer(o, s, source, wall_limit_s)))
             gap = clearing_gap(s) if case.misalignment and o.status == REJECTED and s is not None else None
             if gap is not None:  # the same start, with fingers opened wide enough to clear it
                 wide = dc_replace(case, name=f"{case.name}, gap {gap:g} mm",
                                   what=f"{case.what}; start gap {s.end_effector.start_gap_mm:g} -> {gap:g} mm")
-                writer.write(stability_row(wide, run_once(widened(s, gap), source, wall_limit_s), s))
+                s = widened(s, gap)
+                o = run_once(s, source, wall_limit_s)
+                writer.write(stability_row(wide, o, s, check_finer(o, s, source, wall_limit_s)))
             if bar is not None:
                 bar.update(1)
     except KeyboardInterrupt:
@@ -1075,10 +1097,11 @@ def stability_study(scenario, cases: list[Case], out_dir, *, source: str = "<stu
 
 def stability_markdown(scenario, report: StabilityReport) -> str:
     header = ["case", "change", "predicted stable step (ms)", "ω·h", "verdict", "residual offset (mm)",
-              "peak force (N)", "sim / wall (s)", "outcome"]
+              "peak force (N)", "sim / wall (s)", "outcome", f"diverged: at h/{FINER}"]
     rows = [[r["case"], r["change"], _g(r["predicted_stable_step_ms"]), _g(r["omega_h"]), r["verdict"],
              _g(r["residual_offset_mm"]), _g(r["peak_force_N"]), f"{_g(r['sim_time_s'])} / {_g(r['wall_time_s'])}",
-             r["message"]] for r in report.rows]
+             r["message"], "" if r["finer_verdict"] == "not run" else f"{r['finer_verdict']}: {r['finer_message']}"]
+            for r in report.rows]
     counts = {}
     for r in report.rows:
         counts[r["verdict"]] = counts.get(r["verdict"], 0) + 1
@@ -1087,7 +1110,8 @@ def stability_markdown(scenario, report: StabilityReport) -> str:
             f"Dynamics step {_g(step)} ms ({scenario.simulation.integrator.method}). The predicted stable step "
             f"is stability.predict_step's; ω·h is the stiffest contact mode times the step (the integrator's "
             f"limit on the imaginary axis is 2 for symplectic Euler). A converged grasp left more than "
-            f"{CENTRED_MM:g} mm off is \"converged, off centre\".", "",
+            f"{CENTRED_MM:g} mm off is \"converged, off centre\". A diverged case runs again with a step "
+            f"{FINER} times smaller: if it still diverges, the step is not the cause.", "",
             "- verdicts: " + ", ".join(f"{n} {v}" for v, n in counts.items())]
     if report.failures:
         text.append(f"- **{len(report.failures)} case(s) FAILED** (an exception or a silent NaN): "
