@@ -9,7 +9,6 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
-from .bodies import bodies_momentum
 from .contact.forces import raise_peaks
 from .contact.friction import SLIPPING, STICKING
 from .grasp import COMPLETE, PHASES, SELF_CENTRING
@@ -22,6 +21,7 @@ from .step import StateOverflow, free_flight, make_data, step
 from .weld import twist_for_momentum, world_momentum
 
 COMPLETED, INCOMPLETE, DIVERGED, INTERRUPTED = "completed", "incomplete", "diverged", "interrupted"
+NO_WRENCH = np.zeros(3)
 
 #: Contact snapshots per simulated second kept for `spotsim replay`: its highest display rate.
 #: 100 Hz is ten samples of a 10 ms bounce; a snapshot takes ~50 us, under 0.5 % of a Case I
@@ -65,13 +65,16 @@ def body_momentum_W(model: Model, data, j: int) -> pin.Force:
 def free_momentum_W(model: Model, data) -> tuple[np.ndarray, np.ndarray, float, float]:
     """Total linear and angular momentum (about the world origin) of the free bodies, and the
     largest single body's linear and angular momentum magnitudes. From (q, v) directly."""
-    return bodies_momentum(model.bodies, np.arange(len(model.bodies.joint)), data.q, data.v)[:4]
+    return model.momentum_call(model.bodies, model.all_bodies, data.q, data.v)[:4]
 
 
 def centroid_W(model: Model, data, joints) -> np.ndarray:
     """Centroid (world) of the free bodies of `joints`, from q."""
-    rows = np.array([model.body_row[j] for j in joints], dtype=np.int64)
-    return bodies_momentum(model.bodies, rows, data.q, data.v)[4]
+    joints = tuple(joints)
+    rows = model.row_cache.get(joints)
+    if rows is None:
+        rows = model.row_cache[joints] = np.array([model.body_row[j] for j in joints], dtype=np.int64)
+    return model.momentum_call(model.bodies, rows, data.q, data.v)[4]
 
 
 class Recorder:
@@ -111,7 +114,7 @@ class Recorder:
 
     def substep(self, model: Model, data, n_pairs: int) -> None:
         if n_pairs == 0:
-            self.force_a, self.torque_a = np.zeros(3), np.zeros(3)
+            self.force_a = self.torque_a = NO_WRENCH  # never written to
             return
         # the combined wrench on the active module, in O_a: force, and moment about its centroid
         self.force_a, self.torque_a = data.summary[:3], data.summary[3:6]
@@ -150,7 +153,7 @@ class Recorder:
         r["pairs_sticking"].append(states[STICKING])
         r["phase"].append(PHASES.index(data.phase.phase))
         r["grasp"].append(data.active)
-        r["max_penetration_um"].append(c.phi.max() * 1e6 if c is not None and len(c.key) else 0.0)
+        r["max_penetration_um"].append(data.summary[7] * 1e6 if c is not None and len(c.key) else 0.0)
         if model.robot_joint:
             base = data.pin_data.oMi[model.robot_joint]
             r["robot_centroid_m"].append(centroid_W(model, data, [model.robot_joint]))
@@ -311,6 +314,7 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
     refresh_kinematics(model, data)
     P0, L0, p_max, l_max = free_momentum_W(model, data)
     J, JL = np.zeros(3), np.zeros(3)
+    fixed_contact = model.fixed_contact
     g_W = np.array(sim.gravity_m_s2)
     gravity = bool(np.any(g_W))
     drift_lin = drift_ang = 0.0
@@ -350,8 +354,9 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
                 rec.substep(model, data, n)
                 # impulse of the external forces on the free bodies: the contact forces from
                 # fixed bodies (a fixed base) and gravity
-                J += h * data.external_force_W
-                JL += h * data.external_torque_O_W
+                if fixed_contact:  # between free bodies every contact force is internal
+                    J += h * data.external_force_W
+                    JL += h * data.external_torque_O_W
                 if gravity:
                     for j in model.free_joints:
                         m_j = model.pin_model.inertias[j].mass
@@ -363,13 +368,12 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
                     message = (f"penetration {data.summary[7] * 1e3:.3f} mm exceeds the sphere radius "
                                f"{max_phi * 1e3:.3f} mm at t = {data.t:.4f} s")
                     break
-                # a NaN or an infinity anywhere makes the sum non-finite
-                if not math.isfinite(data.q.sum() + data.v.sum()):
-                    status = DIVERGED
-                    message = f"state became non-finite at t = {data.t:.4f} s"
-                    break
                 if data.phase.phase == COMPLETE or data.t - starts[-1] > scenario.completion.phase_timeout_s:
                     break
+            # a NaN or an infinity anywhere makes the sum non-finite; checked once a record
+            if status != DIVERGED and not math.isfinite(data.q.sum() + data.v.sum()):
+                status = DIVERGED
+                message = f"state became non-finite by t = {data.t:.4f} s"
             if status == DIVERGED:
                 break
             # a passive phase (the drive holding the fingers through the whole interval) may
@@ -388,8 +392,8 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
             rec.sample(model, data)
             P, L, p_b, l_b = free_momentum_W(model, data)
             p_max, l_max = max(p_max, p_b), max(l_max, l_b)
-            drift_lin = max(drift_lin, np.linalg.norm(P - P0 - J))
-            drift_ang = max(drift_ang, np.linalg.norm(L - L0 - JL))
+            drift_lin = max(drift_lin, math.hypot(*(P - P0 - J)))
+            drift_ang = max(drift_ang, math.hypot(*(L - L0 - JL)))
             if bar is not None:
                 bar.update(1)
             if status == DIVERGED:  # the energy check; the record above is kept
@@ -403,6 +407,7 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
                 welds.append(data.t)
                 retired.append(integrator.stats())
                 integrator = make_integrator(sim.integrator, model.pin_model)
+                fixed_contact = model.fixed_contact
                 starts.append(data.t)
                 e_passive = None
                 refresh_kinematics(model, data)
