@@ -1014,6 +1014,8 @@ def stability_row(case: Case, o: Outcome, changed=None, fine: Outcome | None = N
     v = verdict(o)
     if p is None or o.status not in (*COMPARABLE, "diverged"):
         held = "n/a"
+    elif p.stable and o.status == "diverged" and fine is not None and fine.status == "diverged":
+        held = "yes (not the step's divergence)"  # the step was not the cause: nothing to predict
     else:
         held = "yes" if p.stable == (o.status != "diverged") else "no"
     finals = [float(np.linalg.norm(x)) for x in o.offsets if x is not None]
@@ -1096,9 +1098,10 @@ def stability_study(scenario, cases: list[Case], out_dir, *, source: str = "<stu
 
 
 def stability_markdown(scenario, report: StabilityReport) -> str:
-    header = ["case", "change", "predicted stable step (ms)", "ω·h", "verdict", "residual offset (mm)",
-              "peak force (N)", "sim / wall (s)", "outcome", f"diverged: at h/{FINER}"]
+    header = ["case", "change", "predicted stable step (ms)", "ω·h", "verdict", "prediction held",
+              "residual offset (mm)", "peak force (N)", "sim / wall (s)", "outcome", f"diverged: at h/{FINER}"]
     rows = [[r["case"], r["change"], _g(r["predicted_stable_step_ms"]), _g(r["omega_h"]), r["verdict"],
+             r["prediction_held"],
              _g(r["residual_offset_mm"]), _g(r["peak_force_N"]), f"{_g(r['sim_time_s'])} / {_g(r['wall_time_s'])}",
              r["message"], "" if r["finer_verdict"] == "not run" else f"{r['finer_verdict']}: {r['finer_message']}"]
             for r in report.rows]
