@@ -164,8 +164,8 @@ class Grid:
 
 
 #: The grids. The references are fine fixed steps of symplectic Euler: on Case I, 12.5 us takes
-#: ~5 s and its confirmation at 6.25 us ~10 s, where dopri5 takes ~40 s at rtol 1e-6 and did not
-#: finish in 19 min at 1e-7 (every contact onset and stick-slip switch is a kink its error
+#: ~5 s and its confirmation at 6.25 us ~10 s, where dopri5 takes ~200 s at rtol 1e-6 and did
+#: not finish in 19 min at 1e-7 (every contact onset and stick-slip switch is a kink its error
 #: control steps through). Costs on Case I in the README.
 GRIDS = {
     # the suite's: Case I's first 120 ms of contact, in which the paper's setting diverges (0.49 s)
