@@ -159,6 +159,19 @@ def test_ctrl_c_keeps_the_rows_written(case_I, tmp_path, monkeypatch):
     assert "interrupted" in (tmp_path / "stability.md").read_text()
 
 
+def test_ctrl_c_inside_a_compiled_callback_still_stops_the_study():
+    """Ctrl-C landing inside numba's callbacks surfaces as a SystemError caused by the
+    KeyboardInterrupt: the study recognises it as Ctrl-C, not as a failed run."""
+    try:
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as ki:
+            raise SystemError("returned a result with an exception set") from ki
+    except SystemError as e:
+        assert study._caused_by_ctrl_c(e)
+    assert not study._caused_by_ctrl_c(ValueError("coal"))
+
+
 @pytest.mark.parametrize("argv, message", [
     (["accuracy", "--rtols", "1e-4,x"], "--rtols"),
     (["accuracy", "--substeps", "0"], "must be > 0"),

@@ -268,6 +268,18 @@ def _prediction(scenario, source):
         return None
 
 
+def _caused_by_ctrl_c(e: BaseException) -> bool:
+    """Whether a KeyboardInterrupt lies in `e`'s chain of causes: Ctrl-C landing inside one of
+    numba's callbacks comes out as a SystemError."""
+    seen = set()
+    while e is not None and id(e) not in seen:
+        if isinstance(e, KeyboardInterrupt):
+            return True
+        seen.add(id(e))
+        e = e.__cause__ or e.__context__
+    return False
+
+
 def _run_once(scenario, source: str) -> Outcome:
     from .model import build_model
     from .run import check_start, simulate
@@ -283,6 +295,8 @@ def _run_once(scenario, source: str) -> Outcome:
     try:
         result = simulate(scenario, model=model, source=source)
     except Exception as e:  # noqa: BLE001 - simulate must never raise: the study reports it, not dies of it
+        if _caused_by_ctrl_c(e):
+            raise KeyboardInterrupt from e
         where = traceback.extract_tb(e.__traceback__)[-1]
         return Outcome(EXCEPTION, f"{type(e).__name__} raised by simulate: {e} "
                                   f"({Path(where.filename).name}:{where.lineno})", prediction=prediction)
