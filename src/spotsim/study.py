@@ -294,7 +294,7 @@ def _run_once(scenario, source: str) -> Outcome:
         return Outcome(REJECTED, str(e).replace("\n", "; "), prediction=prediction)
     try:
         result = simulate(scenario, model=model, source=source)
-    except Exception as e:  # noqa: BLE001 - simulate must never raise: the study reports it, not dies of it
+    except Exception as e:  # simulate must never raise: the study reports it rather than dies of it
         if _caused_by_ctrl_c(e):
             raise KeyboardInterrupt from e
         where = traceback.extract_tb(e.__traceback__)[-1]
@@ -380,7 +380,7 @@ class RowWriter:
 
     def __init__(self, path: Path, columns: list[str]):
         self.path, self.columns = path, columns
-        self._file = open(path, "w", newline="")
+        self._file = open(path, "w", newline="")  # noqa: SIM115 - open across rows, closed by close()
         self._csv = csv.writer(self._file)
         self._csv.writerow(columns)
         self._file.flush()
@@ -599,9 +599,9 @@ def accuracy_study(scenario, settings: list[Setting], reference: Setting, out_di
     Errors are against the reference run. If the confirmation ends with nothing to compare
     (diverged), the setting one refinement coarser is run next (role `coarser check`) and bounds
     the reference's uncertainty instead. A further run, the reference started PERTURBATION_MM
-    off, measures how sensitive the reported quantities are to the start. The paper's setting (symplectic Euler at dt = 1 ms)
-    and the scenario's own setting are marked in the `role` column. Ctrl-C stops the study and
-    keeps the rows written (report.interrupted).
+    off, measures how sensitive the reported quantities are to the start. The paper's setting
+    (symplectic Euler at dt = 1 ms) and the scenario's own setting are marked in the `role`
+    column. Ctrl-C stops the study and keeps the rows written (report.interrupted).
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -701,9 +701,9 @@ def accuracy_markdown(scenario, report: AccuracyReport) -> str:
                   f"{_g(r['linear_drift_rel'], 2)} / {_g(r['angular_drift_rel'], 2)}"]
         rows.append(cells)
     text = [f"# Accuracy study: {report.scenario}", "",
-            f"Errors against the reference, {report.reference.label(report.dt_s)}. The offset is O_b from "
-            f"O_a at the end of the run (the residual offset of a completed grasp); its error is the norm "
-            f"of the vector difference. Wall time is the simulation loop's.", "",
+            (f"Errors against the reference, {report.reference.label(report.dt_s)}. The offset is O_b from "
+             f"O_a at the end of the run (the residual offset of a completed grasp); its error is the norm "
+             f"of the vector difference. Wall time is the simulation loop's."), "",
             f"- {report.confirmation_text()}",
             f"- {report.sensitivity_text()}",
             f"- {report.fastest_text()}"]
@@ -735,7 +735,7 @@ def work_precision_plot(scenario, report: AccuracyReport, path: Path) -> None:
     ref = next((r for r in report.rows if r["role"] == "reference"), None)
     moved = next((r for r in report.rows if r["role"] == "perturbed"), None)
     for ax, (key, label) in zip(axes[0], panels):
-        def err(r):
+        def err(r, key=key):
             return max((r[f"{p}{key}"] for p in names), default=math.nan)
 
         good = [err(r) for r in rows if not math.isnan(err(r))]
@@ -950,7 +950,9 @@ def stability_cases() -> list[Case]:
         what = f"{'offset' if o else 'rpy'} {o or a} {'mm' if o else 'deg'}, past the claimed tolerance"
         cases.append(Case(f"{name} {value}", "extreme", what, _misaligned(offset=o or (0, 0, 0), rpy=a or (0, 0, 0)),
                           misalignment=True))
-    load = lambda s: f"{s.end_effector.grasp_load_N:.4g} N"  # noqa: E731
+    def load(s):
+        return f"{s.end_effector.grasp_load_N:.4g} N"
+
     cases += [
         Case("closing 5 mm/s", "extreme", "closing speed 5 mm/s (duration and phase time-out x speed ratio)",
              _closing(0.005)),
@@ -1124,11 +1126,11 @@ def stability_markdown(scenario, report: StabilityReport) -> str:
         counts[r["verdict"]] = counts.get(r["verdict"], 0) + 1
     step = next((r["dynamics_step_ms"] for r in report.rows if not math.isnan(r["dynamics_step_ms"])), math.nan)
     text = [f"# Stability study: {report.scenario}", "",
-            f"Dynamics step {_g(step)} ms ({scenario.simulation.integrator.method}). The predicted stable step "
-            f"is stability.predict_step's; ω·h is the stiffest contact mode times the step (the integrator's "
-            f"limit on the imaginary axis is 2 for symplectic Euler). A converged grasp left more than "
-            f"{CENTRED_MM:g} mm off is \"converged, off centre\". A diverged case runs again with a step "
-            f"{FINER} times smaller: if it still diverges, the step is not the cause.", "",
+            (f"Dynamics step {_g(step)} ms ({scenario.simulation.integrator.method}). The predicted stable step "
+             f"is stability.predict_step's; ω·h is the stiffest contact mode times the step (the integrator's "
+             f"limit on the imaginary axis is 2 for symplectic Euler). A converged grasp left more than "
+             f"{CENTRED_MM:g} mm off is \"converged, off centre\". A diverged case runs again with a step "
+             f"{FINER} times smaller: if it still diverges, the step is not the cause."), "",
             "- verdicts: " + ", ".join(f"{n} {v}" for v, n in counts.items())]
     if report.failures:
         text.append(f"- **{len(report.failures)} case(s) FAILED** (an exception or a silent NaN): "
