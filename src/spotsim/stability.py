@@ -117,10 +117,15 @@ def stability_warnings(model) -> list[str]:
             f"on {pred.mass_kg:.3g} kg): expect divergence; raise simulation.substeps"]
 
 
-#: A passive phase (the drive holding, no work done on the bodies) may not gain energy; the
-#: run is diverged once its mechanical energy exceeds this factor of its value when the phase
-#: began, plus ENERGY_FLOOR_J (so that a phase starting at rest is not judged on round-off).
-ENERGY_GROWTH = 2.0
+#: A passive phase (the drive holding, no work done on the bodies) gains no energy physically;
+#: the run is diverged once its mechanical energy exceeds this factor of its value when the
+#: phase began, plus ENERGY_FLOOR_J (so that a phase starting at rest is not judged on
+#: round-off). Not 1: the paper's pair law takes its common normal from the face normals, not
+#: from the spheres' geometry, so it is not exactly conservative when faces rock against each
+#: other. Converged Case I runs gain up to 2.1x in passive phases (12.5 and 6.25 us steps, RK4
+#: alike), where a step past the stability limit gains hundreds of times (0.5 ms: 0.0026 J ->
+#: 1.9 J); 10x lies between.
+ENERGY_GROWTH = 10.0
 ENERGY_FLOOR_J = 1e-6
 
 
