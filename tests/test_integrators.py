@@ -113,6 +113,10 @@ def test_each_integrator_converges_at_its_order_on_a_smooth_free_motion(model_I)
         assert errors[0] / errors[1] >= least, (method, errors)
 
 
+#: The issue's agreement for the closed-form Hertz impact; the crossings are resolved to 2e-4.
+ORACLE_RTOL = 1e-3
+
+
 def test_undamped_hertz_impact_matches_its_closed_form_with_the_adaptive_integrator():
     """One sphere pair, c_r = 1: peak approach, peak force and contact time to 1e-3.
 
@@ -159,13 +163,18 @@ def test_undamped_hertz_impact_matches_its_closed_form_with_the_adaptive_integra
     # the crossings of phi = 0, linearly between the steps around them
     t_in = times[a - 1] + (times[a] - times[a - 1]) * -phis[a - 1] / (phis[a] - phis[a - 1])
     t_out = times[b] + (times[b + 1] - times[b]) * phis[b] / (phis[b] - phis[b + 1])
-    assert phis.max() == pytest.approx(d_max, rel=1e-3)
-    assert max(forces) == pytest.approx(F_max, rel=1e-3)
-    assert t_out - t_in == pytest.approx(T_c, rel=1e-3)
-    assert y[1] == pytest.approx(v0, rel=1e-3)  # c_r = 1: it leaves at the speed it came
+    assert phis.max() == pytest.approx(d_max, rel=ORACLE_RTOL)
+    assert max(forces) == pytest.approx(F_max, rel=ORACLE_RTOL)
+    assert t_out - t_in == pytest.approx(T_c, rel=ORACLE_RTOL)
+    assert y[1] == pytest.approx(v0, rel=ORACLE_RTOL)  # c_r = 1: it leaves at the speed it came
 
 
 BLOCK_LOAD_HELD, BLOCK_LOAD_SLIDING = 2.5, 3.5  # N, either side of mu_s F_n = 3 N
+#: The issue's bound on a held block's drift over 10 s, m.
+HOLD_DRIFT_M = 1e-6
+#: A sliding bristle lies at s_max, so the friction is exactly mu_k F_n: the acceleration is
+#: constant up to round-off in differencing the velocity.
+SLIDE_ACCEL_RTOL = 1e-9
 
 
 def pressed_block(load, seconds, dt=1e-4, mass=0.1, F_n=10.0):
@@ -189,7 +198,7 @@ def test_pressed_block_holds_still_below_static_friction_for_10_s():
     """Pulled with 2.5 N < mu_s F_n, the block settles and then moves less than 1 um in 10 s."""
     x, _ = pressed_block(BLOCK_LOAD_HELD, 11.0)
     settled = x[round(1.0 / 1e-4)]  # after the bristle's transient (~10 ms)
-    assert np.abs(x[round(1.0 / 1e-4):] - settled).max() < 1e-6
+    assert np.abs(x[round(1.0 / 1e-4):] - settled).max() < HOLD_DRIFT_M
 
 
 def test_pressed_block_slides_with_kinetic_friction_above_static():
@@ -197,4 +206,4 @@ def test_pressed_block_slides_with_kinetic_friction_above_static():
     dt, mass = 1e-4, 0.1
     _, v = pressed_block(BLOCK_LOAD_SLIDING, 1.0, dt=dt, mass=mass)
     a = np.diff(v[-1000:]) / dt
-    assert np.allclose(a, (BLOCK_LOAD_SLIDING - 0.26 * 10.0) / mass, rtol=1e-9)
+    assert np.allclose(a, (BLOCK_LOAD_SLIDING - 0.26 * 10.0) / mass, rtol=SLIDE_ACCEL_RTOL)

@@ -91,24 +91,24 @@ def geometry(obj, child, attribute):
 # ------------------------------------------------------------------------------ fixtures
 
 
-@pytest.fixture(scope="module")
-def single(tmp_path_factory):
-    """A short Case I run, its replay page and the commands the page embeds."""
-    d = tmp_path_factory.mktemp("single")
-    run_to(CASE_I, SINGLE_S, d / "run")
+def replayed(d, config, seconds):
+    """A run of `config` for `seconds` in d/run, its replay page and the commands it embeds."""
+    run_to(config, seconds, d / "run")
     page = d / "replay.html"
     assert main(["replay", str(d / "run"), "--html", str(page)]) == 0
     return d / "run", page, html_commands(page.read_text())
+
+
+@pytest.fixture(scope="module")
+def single(tmp_path_factory):
+    """A short Case I run, its replay page and the commands the page embeds."""
+    return replayed(tmp_path_factory.mktemp("single"), CASE_I, SINGLE_S)
 
 
 @pytest.fixture(scope="module")
 def dual(tmp_path_factory):
     """A dual-arm run through the weld into the second grasp, its page and its commands."""
-    d = tmp_path_factory.mktemp("dual")
-    run_to(DUAL, DUAL_S, d / "run")
-    page = d / "replay.html"
-    assert main(["replay", str(d / "run"), "--html", str(page)]) == 0
-    return d / "run", page, html_commands(page.read_text())
+    return replayed(tmp_path_factory.mktemp("dual"), DUAL, DUAL_S)
 
 
 @pytest.fixture(scope="module")

@@ -138,15 +138,10 @@ def _study(args) -> int:
     if duration is not None:
         overrides.append(f"simulation.duration_s={duration}")
     path = _config_path(args.config)
-    try:
-        scenario, _ = _load(path, overrides)
-    except ScenarioError as e:
-        for line in e.problems:
-            print(line, file=sys.stderr)
+    loaded = _load_or_report(path, overrides)
+    if loaded is None:
         return 2
-    except SpotsimError as e:
-        print(f"{path}: {e}", file=sys.stderr)
-        return 2
+    scenario, _ = loaded
     out = Path(args.out) if args.out else Path("results") / "study" / scenario.name
     try:
         out.mkdir(parents=True, exist_ok=True)
@@ -256,6 +251,18 @@ def _load(path: Path, overrides):
     return scenario, model
 
 
+def _load_or_report(path: Path, overrides):
+    """(scenario, model) of a config, or None after printing every problem with it."""
+    try:
+        return _load(path, overrides)
+    except ScenarioError as e:
+        for line in e.problems:
+            print(line, file=sys.stderr)
+    except SpotsimError as e:
+        print(f"{path}: {e}", file=sys.stderr)
+    return None
+
+
 def main(argv=None) -> int:
     args = _parser().parse_args(argv)
     if args.command == "replay":
@@ -273,17 +280,11 @@ def main(argv=None) -> int:
             return 2
         return 0
     path = _config_path(getattr(args, "config", None))
-    try:
-        scenario, model = _load(path, args.set)
-    except ScenarioError as e:
-        for line in e.problems:
-            print(line, file=sys.stderr)
+    loaded = _load_or_report(path, args.set)
+    if loaded is None:
         return 2
-    except SpotsimError as e:
-        print(f"{path}: {e}", file=sys.stderr)
-        return 2
+    scenario, model = loaded
     from .scenario import to_yaml, tolerance_warnings
-
     from .stability import stability_warnings
 
     for w in tolerance_warnings(scenario) + stability_warnings(model):

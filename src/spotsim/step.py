@@ -87,10 +87,6 @@ class Data:
         """Combined contact force on the active grasp's module, world, N."""
         return self.joint_force_W[model.modules[model.grasps[self.active][1]].joint]
 
-    def module_torque_O_W(self, model: Model) -> np.ndarray:
-        """Its moment about the world origin, N m."""
-        return self.joint_torque_O_W[model.modules[model.grasps[self.active][1]].joint]
-
 
 def make_data(model: Model) -> Data:
     m = model.pin_model
