@@ -418,11 +418,11 @@ def _pct(x) -> str:
 
 
 def _progress(total: int, enabled: bool, what: str):
-    if not enabled:
-        return None
+    """A progress bar on stderr (none when not enabled or stderr is not a terminal: then its
+    calls do nothing)."""
     from tqdm import tqdm
 
-    return tqdm(total=total, unit="run", desc=what, leave=False, disable=None)
+    return tqdm(total=total, unit="run", desc=what, leave=False, disable=None if enabled else True)
 
 
 # ----------------------------------------------------------------------------- accuracy
@@ -624,8 +624,7 @@ def accuracy_study(scenario, settings: list[Setting], reference: Setting, out_di
     try:
         warm_up(scenario, sorted({s.method for s in (*settings, reference)}))
         for setting, name in ((reference, "reference"), (confirmation, "confirmation")):
-            if bar is not None:
-                bar.set_postfix_str(setting.label(dt))
+            bar.set_postfix_str(setting.label(dt))
             o = run_once(setting.apply(scenario), source, wall_limit_s)
             if name == "reference":
                 report.reference_outcome = o
@@ -633,42 +632,35 @@ def accuracy_study(scenario, settings: list[Setting], reference: Setting, out_di
                 report.confirmation_outcome = o
             row = accuracy_row(scenario, setting, name, o, report.reference_outcome)
             writer.write(row)
-            if bar is not None:
-                bar.update(1)
+            bar.update(1)
         names, centroid = grasp_names(scenario), free_floating(scenario)
         change = errors(report.confirmation_outcome, report.reference_outcome, names, centroid)
         report.change_rel, report.change_what = change["max_err_rel"], worst(change)
         coarser = reference.coarsened()
         if math.isnan(report.change_rel) and report.reference_outcome.comparable and coarser is not None:
             # the refinement gave nothing to compare (it diverged): bound the reference from below
-            if bar is not None:
-                bar.set_postfix_str(coarser.label(dt))
+            bar.set_postfix_str(coarser.label(dt))
             o = run_once(coarser.apply(scenario), source, wall_limit_s)
             writer.write(accuracy_row(scenario, coarser, "coarser check", o, report.reference_outcome))
             change = errors(o, report.reference_outcome, names, centroid)
             report.coarser, report.coarser_change_rel, report.coarser_change_what = coarser, change["max_err_rel"], \
                 worst(change)
             todo = [s for s in todo if s != coarser]
-        if bar is not None:
-            bar.set_postfix_str(f"{reference.label(dt)}, started {PERTURBATION_MM * 1e6:g} nm off")
+        bar.set_postfix_str(f"{reference.label(dt)}, started {PERTURBATION_MM * 1e6:g} nm off")
         o = run_once(reference.apply(perturbed(scenario)), source, wall_limit_s)
         writer.write(accuracy_row(scenario, reference, "perturbed", o, report.reference_outcome))
         change = errors(o, report.reference_outcome, names, centroid)
         report.sensitivity_rel, report.sensitivity_what = change["max_err_rel"], worst(change)
-        if bar is not None:
-            bar.update(1)
+        bar.update(1)
         for setting in todo:
-            if bar is not None:
-                bar.set_postfix_str(setting.label(dt))
+            bar.set_postfix_str(setting.label(dt))
             o = run_once(setting.apply(scenario), source, wall_limit_s)
             writer.write(accuracy_row(scenario, setting, role(setting), o, report.reference_outcome))
-            if bar is not None:
-                bar.update(1)
+            bar.update(1)
     except KeyboardInterrupt:
         report.interrupted = True
     finally:
-        if bar is not None:
-            bar.close()
+        bar.close()
         writer.close()
     report.files = [writer.path, out / "accuracy.md"]
     (out / "accuracy.md").write_text(accuracy_markdown(scenario, report))
@@ -1084,8 +1076,7 @@ def stability_study(scenario, cases: list[Case], out_dir, *, source: str = "<stu
     try:
         warm_up(scenario, [scenario.simulation.integrator.method])
         for case in cases:
-            if bar is not None:
-                bar.set_postfix_str(case.name)
+            bar.set_postfix_str(case.name)
             try:
                 s = case.apply(scenario)
             except SpotsimError as e:
@@ -1100,13 +1091,11 @@ def stability_study(scenario, cases: list[Case], out_dir, *, source: str = "<stu
                 s = widened(s, gap)
                 o = run_once(s, source, wall_limit_s)
                 writer.write(stability_row(wide, o, s, check_finer(o, s, source, wall_limit_s)))
-            if bar is not None:
-                bar.update(1)
+            bar.update(1)
     except KeyboardInterrupt:
         report.interrupted = True
     finally:
-        if bar is not None:
-            bar.close()
+        bar.close()
         writer.close()
     (out / "stability.md").write_text(stability_markdown(scenario, report))
     report.files = [writer.path, out / "stability.md"]
