@@ -324,7 +324,7 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
     welds, retired = [], []  # the integrators' counts of the models before each weld
     e_passive = None  # mechanical energy when the current passive phase began, J
     rec.sample(model, data)
-    bar = _progress(n_records, progress)
+    bar = progress_bar(n_records, progress)
     wall0 = time.perf_counter()
     steps = free_steps = pair_steps = 0
     try:
@@ -394,8 +394,7 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
             p_max, l_max = max(p_max, p_b), max(l_max, l_b)
             drift_lin = max(drift_lin, math.hypot(*(P - P0 - J)))
             drift_ang = max(drift_ang, math.hypot(*(L - L0 - JL)))
-            if bar is not None:
-                bar.update(1)
+            bar.update(1)
             if status == DIVERGED:  # the energy check; the record above is kept
                 break
             if data.phase.phase == COMPLETE:
@@ -419,8 +418,7 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
     except KeyboardInterrupt:
         status, message = INTERRUPTED, f"interrupted by the user at t = {data.t:.4f} s"
     finally:
-        if bar is not None:
-            bar.close()
+        bar.close()
     wall = time.perf_counter() - wall0
     series = rec.arrays()
     integrator_stats = integrator.stats()
@@ -447,13 +445,12 @@ def _step_sizes(integrator, data, flight: bool, dt: float, h: float, substeps: i
             yield min(integrator.h or h, t_end - data.t)
 
 
-def _progress(total: int, enabled: bool):
-    if not enabled:
-        return None
+def progress_bar(total: int, enabled: bool, what: str = "simulating", unit: str = "ms"):
+    """A progress bar on stderr; when not enabled, or stderr is not a terminal (CI logs,
+    pipes), a disabled one whose calls do nothing."""
     from tqdm import tqdm
 
-    # disable=None: no bar when stderr is not a terminal (CI logs, pipes)
-    return tqdm(total=total, unit="ms", desc="simulating", leave=False, disable=None)
+    return tqdm(total=total, unit=unit, desc=what, leave=False, disable=None if enabled else True)
 
 
 def _why_incomplete(model: Model, data, limit: str) -> str:

@@ -417,14 +417,6 @@ def _pct(x) -> str:
     return f"{100 * x:.3g} %"
 
 
-def _progress(total: int, enabled: bool, what: str):
-    """A progress bar on stderr (none when not enabled or stderr is not a terminal: then its
-    calls do nothing)."""
-    from tqdm import tqdm
-
-    return tqdm(total=total, unit="run", desc=what, leave=False, disable=None if enabled else True)
-
-
 # ----------------------------------------------------------------------------- accuracy
 
 
@@ -616,7 +608,9 @@ def accuracy_study(scenario, settings: list[Setting], reference: Setting, out_di
     todo = [s for s in dict.fromkeys(settings) if s not in (reference, confirmation)]
     report = AccuracyReport(scenario.name, dt, reference, Outcome("interrupted", "not run"), confirmation,
                             None, math.nan, "", writer.rows)
-    bar = _progress(len(todo) + 3, progress, f"{scenario.name}: accuracy")
+    from .run import progress_bar
+
+    bar = progress_bar(len(todo) + 3, progress, f"{scenario.name}: accuracy", "run")
 
     def role(s: Setting) -> str:
         return "paper" if s == paper else "default" if s == default else "sweep"
@@ -1072,7 +1066,9 @@ def stability_study(scenario, cases: list[Case], out_dir, *, source: str = "<stu
     out.mkdir(parents=True, exist_ok=True)
     writer = RowWriter(out / "stability.csv", STABILITY_COLUMNS)
     report = StabilityReport(scenario.name, writer.rows)
-    bar = _progress(len(cases), progress, f"{scenario.name}: stability")
+    from .run import progress_bar
+
+    bar = progress_bar(len(cases), progress, f"{scenario.name}: stability", "run")
     try:
         warm_up(scenario, [scenario.simulation.integrator.method])
         for case in cases:
