@@ -158,6 +158,15 @@ def refresh_broad_phase(model: Model, data: Data) -> None:
     data.near_pairs, data.travel = broad_phase(model, data), 0.0
 
 
+def near_face_pairs(model: Model, data: Data) -> np.ndarray:
+    """The broad phase's face pairs, reused while they are valid (Verlet skin): a face pair
+    coal left out was at least the margin apart, and stays beyond contact reach until the
+    spheres have moved the skin relative to each other."""
+    if data.travel > model.params.skin:
+        refresh_broad_phase(model, data)
+    return data.near_pairs
+
+
 def candidate_pairs(model: Model, data: Data, near) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(master, slave, key) sphere pairs in contact, sorted by key: a local grid search inside
     the face pairs `near` (indices into model.face_pairs)."""
@@ -182,27 +191,25 @@ def sphere_pairs(model: Model, data: Data) -> Contacts:
         key = m_idx * len(model.slave.centres_J) + s_idx
         order = np.argsort(key, kind="stable")
         return Contacts(m_idx[order], s_idx[order], key[order])
-    # Verlet skin: a face pair coal left out was at least the margin apart, and stays
-    # beyond contact reach until the spheres have moved the skin relative to each other
-    if data.travel > model.params.skin:
-        refresh_broad_phase(model, data)
-    return Contacts(*candidate_pairs(model, data, data.near_pairs))
+    return Contacts(*candidate_pairs(model, data, near_face_pairs(model, data)))
 
 
-def contact_forces(model: Model, data: Data, c: Contacts, h: float) -> Contacts:
+def contact_forces(model: Model, data: Data, c: Contacts, h: float, commit: bool = True) -> Contacts:
     """Normal (Eq. 11-13) and bristle friction (Eq. 14-17) force of each pair, on the master.
 
     Pairs that are not in contact are dropped; each remaining pair's bristle deflection and
-    onset approach speed carry over from the last step (new pairs start from zero).
+    onset approach speed carry over from the last step (new pairs start from zero). The new
+    memory is the contacts' `memory`, and with commit, data's.
     """
     M, S, p = model.master, model.slave, model.params
     out = pair_forces(c.master, c.slave, c.key, M.centres_J, M.normals_J, M.joint, model.master_finger,
                       model.master_axis_J, S.centres_J, S.normals_J, S.joint, data.R_W, data.p_W,
                       data.w_W, data.vo_W, data.opening, data.opening_rate, data.mem_key, data.mem_s, data.mem_vminus,
                       p.r1, p.r2, p.K, p.damping_factor, p.approach_speed_floor, h, p.bristle)
-    c = Contacts(*out[:3])
-    c.phi, c.point_W, c.c1_W, c.c2_W, c.force_W, c.speed, c.state = out[3:10]
-    data.mem_key, data.mem_s, data.mem_vminus = c.key, out[10], out[11]
+    c = Contacts(*out[:10])
+    c.memory = (c.key, out[10], out[11])
+    if commit:
+        data.mem_key, data.mem_s, data.mem_vminus = c.memory
     return c
 
 
@@ -231,22 +238,15 @@ def contact_stage(model: Model, data: Data, h: float, commit: bool = True) -> Co
     """
     if model.params.broad_phase == "none":
         kinematics(model, data)
-        memory = (data.mem_key, data.mem_s, data.mem_vminus)
-        c = contact_forces(model, data, sphere_pairs(model, data), h)
-        if not commit:
-            c.memory = (data.mem_key, data.mem_s, data.mem_vminus)
-            data.mem_key, data.mem_s, data.mem_vminus = memory
+        c = contact_forces(model, data, sphere_pairs(model, data), h, commit)
         wrenches(model, data, c)
         data.summary = contact_summary(data.joint_force_W, data.joint_torque_O_W, data.R_W, data.p_W,
                                        *model.watch_args[data.active], c.speed, c.phi)
         return c
-    # Verlet skin: a face pair coal left out was at least the margin apart, and stays
-    # beyond contact reach until the spheres have moved the skin relative to each other
-    if data.travel > model.params.skin:
-        refresh_broad_phase(model, data)
+    near = near_face_pairs(model, data)
     pairs, (local, data.joint_force_W, data.joint_torque_O_W, data.external_force_W, data.external_torque_O_W,
             data.finger_load), data.summary = model.contact_call(
-        data.q, data.v, data.R_W, data.p_W, data.w_W, data.vo_W, data.near_pairs, data.opening,
+        data.q, data.v, data.R_W, data.p_W, data.w_W, data.vo_W, near, data.opening,
         data.opening_rate, data.mem_key, data.mem_s, data.mem_vminus, h, *model.watch_args[data.active],
         *model.contact_kernel_args)
     c = Contacts(*pairs[:10])
@@ -323,9 +323,7 @@ def free_flight(model: Model, data: Data, H: float) -> bool:
     """
     if model.params.broad_phase == "none":
         return False
-    if data.travel > model.params.skin:
-        refresh_broad_phase(model, data)
-    return len(data.near_pairs) == 0 and \
+    return len(near_face_pairs(model, data)) == 0 and \
         data.travel + FREE_FLIGHT_SAFETY * H * travel_rate(model, data) <= model.params.skin
 
 
