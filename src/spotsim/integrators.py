@@ -253,7 +253,7 @@ class RungeKutta:
         self.spec = spec
         self.h = None  # adaptive: the step to try next
         self.accepted = self.rejected = self.evaluations = 0
-        self._first = None  # (data, t, opening_rate, dy, contacts) of the last commit
+        self._first = None  # (data, t, opening rates, dy, external load) of the last commit
 
     def _stage(self, model, data, y, dt, commit):
         """dy at state y, dt after the step's start, and the contacts there; the external
@@ -266,28 +266,19 @@ class RungeKutta:
         self._ext.append(np.concatenate([data.external_force_W, data.external_torque_O_W]))
         return _derivative(self.bodies, y, data.q, data.v, a), c
 
-    def _start(self, model, data):
-        """The first stage and its external load: reused from the last commit when nothing
-        changed since."""
-        f = self._first
-        if f is not None and f[0] is data and f[1] == data.t and np.array_equal(f[2], data.opening_rate):
-            return f[3], f[4]
-        self._opening0 = data.opening.copy()
-        self._ext = []
-        y = _pack(self.bodies, data.q, data.v)
-        q, v = data.q.copy(), data.v.copy()
-        data.q, data.v = q, v
-        dy, _ = self._stage(model, data, y, 0.0, commit=False)
-        return dy, self._ext[-1]
-
     def advance(self, model, data, h: float):
         """One accepted step of at most h. Returns the contacts at its end and the step taken."""
-        opening0, q0, v0 = data.opening.copy(), data.q, data.v
-        k1, ext1 = self._start(model, data)
-        self._opening0 = opening0
-        y0 = _pack(self.bodies, q0, v0)
-        data.q, data.v = q0.copy(), v0.copy()
-        self._ext = [ext1]
+        self._opening0 = data.opening.copy()
+        y0 = _pack(self.bodies, data.q, data.v)
+        data.q, data.v = data.q.copy(), data.v.copy()  # the stages write into these copies
+        self._ext = []
+        last = self._first  # the last commit is this step's first stage if nothing changed since
+        if last is not None and last[0] is data and last[1] == data.t and \
+                np.array_equal(last[2], data.opening_rate):
+            k1 = last[3]
+            self._ext.append(last[4])
+        else:
+            k1 = self._stage(model, data, y0, 0.0, commit=False)[0]
 
         def f(y, dt):
             return self._stage(model, data, y, dt, commit=False)[0]
@@ -302,12 +293,10 @@ class RungeKutta:
         # the impulse of the external forces over the step: the stages' forces, weighted
         ext = sum(w * x for w, x in zip(self.b, self._ext[-len(self.b):]) if w)
         # the accepted end: commit the pair memory; this is the next step's first stage
+        # (it leaves data at y1, the fingers at their opening after h)
         dy, contacts = self._stage(model, data, y1, h, commit=True)
-        self._first = (data, data.t + h, data.opening_rate.copy(), dy,
-                       np.concatenate([data.external_force_W, data.external_torque_O_W]))
+        self._first = (data, data.t + h, data.opening_rate.copy(), dy, self._ext[-1])
         data.external_force_W, data.external_torque_O_W = ext[:3], ext[3:]
-        _unpack(self.bodies, y1, data.q, data.v)
-        data.opening = opening0 + h * data.opening_rate
         return contacts, h
 
     def stats(self) -> dict:
