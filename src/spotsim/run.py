@@ -17,7 +17,7 @@ from .integrators import StepSizeUnderflow, make_integrator
 from .model import Model, build_model, grasp_frame, groove_frame
 from .scenario import tolerance_warnings
 from .stability import ENERGY_FLOOR_J, ENERGY_GROWTH, mechanical_energy, stability_warnings
-from .step import StateOverflow, free_flight, make_data, step
+from .step import StateOverflow, completion_inputs, free_flight, make_data, step
 from .weld import twist_for_momentum, world_momentum
 
 COMPLETED, INCOMPLETE, DIVERGED, INTERRUPTED = "completed", "incomplete", "diverged", "interrupted"
@@ -460,8 +460,7 @@ def _why_incomplete(model: Model, data, limit: str) -> str:
     if data.phase.phase != SELF_CENTRING:
         return f"{who}: no contact by {limit} t = {t:.3f} s: the fingers never reached the groove"
     c = data.contacts
-    speed = float(c.speed.max()) if len(c.key) else 0.0
-    criteria = data.phase.criteria(data.drives[ee].stalled, speed, float(np.linalg.norm(data.module_force_W(model))))
+    criteria = data.phase.criteria(*completion_inputs(model, data))
     unmet = [name for name, ok in criteria.items() if not ok]
     if not len(c.key):
         unmet.insert(0, "contact lost")

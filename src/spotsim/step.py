@@ -83,10 +83,6 @@ class Data:
         """The phase of the grasp under way."""
         return self.phases[self.active]
 
-    def module_force_W(self, model: Model) -> np.ndarray:
-        """Combined contact force on the active grasp's module, world, N."""
-        return self.joint_force_W[model.modules[model.grasps[self.active][1]].joint]
-
 
 def make_data(model: Model) -> Data:
     m = model.pin_model
@@ -343,9 +339,16 @@ def _travel_rate(idx_v, rows, reach, v, opening_rate):
     return rate
 
 
+def completion_inputs(model: Model, data: Data) -> tuple[bool, float, float]:
+    """What the completion criteria read from the last step: whether the active drive has
+    stalled, the fastest relative speed at a contact (m/s) and the net contact force on the
+    module (N)."""
+    w = data.summary
+    return (data.drives[model.grasps[data.active][0]].stalled, float(w[6]),
+            math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]))
+
+
 def grasp_phase(model: Model, data: Data, c: Contacts) -> None:
     """Advance the active grasp's phase on this step's contacts (approach -> self-centring ->
     complete)."""
-    w = data.summary
-    data.phase.update(data.t, len(c.key), data.drives[model.grasps[data.active][0]].stalled, w[6],
-                      math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]))
+    data.phase.update(data.t, len(c.key), *completion_inputs(model, data))
