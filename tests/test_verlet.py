@@ -1,6 +1,7 @@
 """The broad phase's Verlet skin: reusing coal's face pairs never loses a contact."""
 
 import numpy as np
+import pinocchio as pin
 
 from conftest import restore
 from spotsim.step import broad_phase, candidate_pairs, kinematics, make_data, step, travel_rate
@@ -32,3 +33,68 @@ def test_travel_rate_bounds_the_fingers_and_the_module(model_I):
     integrator = make_integrator("symplectic_euler", model_I.pin_model)
     step(model_I, data, 1e-4, integrator)
     assert travel_rate(model_I, data) >= model_I.scenario.end_effector.closing_speed_m_s
+
+
+def _both_searches(model, data, near, travel):
+    """(grid search's pairs, the pair list's pairs, whether the list was rebuilt) at data's state."""
+    from spotsim.contact.search import listed_search
+
+    M, p = model.master, model.params
+    args = (np.asarray(near, dtype=np.int64), model.face_table, M.centres_J, M.normals_J, model.master_finger,
+            model.master_axis_J, data.opening, model.slave_maps, len(model.slave.centres_J), data.R_W, data.p_W,
+            p.r1, p.r2, p.cutoff)
+    listed, pair_list, new_travel = listed_search(*args, data.pair_list, travel)
+    return candidate_pairs(model, data, near), listed, pair_list, new_travel == 0.0
+
+
+def test_pair_list_finds_exactly_the_grid_search_pairs(model_I):
+    """Along Case I's self-centring, the pairs tested from the kept pair list are exactly the
+    grid search's, step by step, and the list is reused between its rebuilds."""
+    data = make_data(model_I)
+    integrator = make_integrator("symplectic_euler", model_I.pin_model)
+    h = 1e-4
+    reused = rebuilt = found = 0
+    while data.t < 0.75:
+        if data.t > 0.42 and len(data.near_pairs):
+            snap = restore(data)
+            kinematics(model_I, snap)
+            grid, listed, _, fresh = _both_searches(model_I, snap, data.near_pairs, data.list_travel)
+            for a, b in zip(grid, listed):
+                assert np.array_equal(a, b)
+            found += len(grid[2])
+            rebuilt += fresh
+            reused += not fresh
+        step(model_I, data, h, integrator)
+    assert found > 1000 and rebuilt > 10 and reused > rebuilt
+
+
+def test_pair_list_falls_back_to_the_grid_search_off_the_ball_regime(model_I, recorded_states):
+    """On poses of the module tilted and shifted at random about contact states (up to 60
+    degrees, where some face pairs leave the ball regime and are searched anew), a freshly
+    built list gives exactly the grid search's pairs."""
+    from spotsim.contact.search import _face_frame
+
+    rng = np.random.default_rng(7)
+    j = model_I.module_joint
+    iq = model_I.pin_model.idx_qs[j]
+    scanned = found = 0
+    for k in range(300):
+        data = restore(recorded_states[k % len(recorded_states)])
+        axis = rng.normal(size=3)
+        angle = np.radians(rng.uniform(0.0, 60.0 if k % 2 else 3.0))
+        turn = pin.Quaternion(pin.AngleAxis(angle, axis / np.linalg.norm(axis)))
+        quat = pin.Quaternion(data.q[iq + 6], *data.q[iq + 3:iq + 6]) * turn
+        data.q[iq + 3:iq + 7] = quat.coeffs()
+        data.q[iq:iq + 3] += rng.normal(scale=0.3e-3, size=3)
+        kinematics(model_I, data)
+        near = np.arange(len(model_I.face_pairs))
+        grid, listed, pair_list, _ = _both_searches(model_I, data, near, np.inf)
+        for a, b in zip(grid, listed):
+            assert np.array_equal(a, b)
+        found += len(grid[2])
+        # face pairs that face each other yet are searched anew: the fallback at work
+        M = model_I.master
+        scanned += any(pair_list[5][f] and _face_frame(f, model_I.face_table, M.normals_J, model_I.master_finger,
+                                                      model_I.master_axis_J, data.opening, data.R_W, data.p_W)[0]
+                       for f in near)
+    assert found > 100 and scanned > 0

@@ -15,7 +15,7 @@ import pinocchio as pin
 
 from .bodies import body_kinematics
 from .contact.forces import body_wrenches, contact_summary, pair_forces
-from .contact.search import all_pairs, grid_search
+from .contact.search import all_pairs, empty_pair_list, grid_search, listed_search
 from .jit import njit
 from .grasp import FingerDrive, GraspPhase
 from .errors import SimulationError
@@ -75,6 +75,8 @@ class Data:
     joint_torque_O_W: np.ndarray = None  # (njoints, 3) its moment about the world origin
     near_pairs: np.ndarray = None  # indices of the face pairs coal kept at its last run
     travel: float = np.inf  # bound on any two spheres' relative motion since then, m
+    pair_list: tuple = None  # the search's candidate pairs (contact.search.build_pair_list)
+    list_travel: float = np.inf  # bound on any two spheres' relative motion since its build, m
     external_force_W: np.ndarray = field(default_factory=lambda: np.zeros(3))
     external_torque_O_W: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
@@ -108,7 +110,7 @@ def make_data(model: Model) -> Data:
                 joint_force_W=np.zeros((nj, 3)), joint_torque_O_W=np.zeros((nj, 3)),
                 opening=np.array([f.opening_start for f in model.fingers]),
                 opening_rate=np.zeros(n_f), f_ext=f_ext, f_views=[f_ext[j].vector for j in range(nj)],
-                tau=np.zeros(m.nv))
+                tau=np.zeros(m.nv), pair_list=empty_pair_list(len(model.face_pairs)))
 
 
 # ------------------------------------------------------------------------------ stages
@@ -150,8 +152,9 @@ def broad_phase(model: Model, data: Data) -> np.ndarray:
 
 
 def refresh_broad_phase(model: Model, data: Data) -> None:
-    """Run the broad phase anew: its face pairs start a fresh skin."""
-    data.near_pairs, data.travel = broad_phase(model, data), 0.0
+    """Run the broad phase anew: its face pairs start a fresh skin, and the search a fresh
+    pair list."""
+    data.near_pairs, data.travel, data.list_travel = broad_phase(model, data), 0.0, np.inf
 
 
 def near_face_pairs(model: Model, data: Data) -> np.ndarray:
@@ -240,15 +243,19 @@ def contact_stage(model: Model, data: Data, h: float, commit: bool = True) -> Co
                                        *model.watch_args[data.active], c.speed, c.phi)
         return c
     near = near_face_pairs(model, data)
+    # a Runge-Kutta stage lies ahead of the state the list's travel bound covers: it builds
+    # a list of its own
+    travel = data.list_travel if commit else np.inf
     pairs, (local, data.joint_force_W, data.joint_torque_O_W, data.external_force_W, data.external_torque_O_W,
-            data.finger_load), data.summary = model.contact_call(
+            data.finger_load), data.summary, pair_list, travel = model.contact_call(
         data.q, data.v, data.R_W, data.p_W, data.w_W, data.vo_W, near, data.opening,
-        data.opening_rate, data.mem_key, data.mem_s, data.mem_vminus, h, *model.watch_args[data.active],
-        *model.contact_kernel_args)
+        data.opening_rate, data.mem_key, data.mem_s, data.mem_vminus, h, data.pair_list, travel,
+        *model.watch_args[data.active], *model.contact_kernel_args)
     c = Contacts(*pairs[:10])
     c.memory = (c.key, pairs[10], pairs[11])
     if commit:
         data.mem_key, data.mem_s, data.mem_vminus = c.memory
+        data.pair_list, data.list_travel = pair_list, travel
     for view, w in zip(data.f_views, local):  # written into the Force objects ABA reads
         view[:] = w
     return c
@@ -265,13 +272,15 @@ def contact_kernel_args(model: Model) -> tuple:
 
 @njit
 def _contact_kernels(q, v, R_W, p_W, w_W, vo_W, near, opening, opening_rate, mem_key, mem_s, mem_vminus, h,
-                     ee_joint, R_ee, module_joint, lever, bodies, table, maps, C1_J, N1_J, joint1, finger1, axis1_J, C2_J, N2_J, joint2,
+                     pair_list, list_travel, ee_joint, R_ee, module_joint, lever, bodies, table, maps, C1_J, N1_J, joint1, finger1, axis1_J, C2_J, N2_J, joint2,
                      r1, r2, K, damping, floor, cutoff, bristle, common_point, finger_parent, finger_axis_J):
-    """The kernels of `kinematics`, `candidate_pairs`, `contact_forces` and `wrenches`, chained,
-    and the `contact_summary` of the step."""
+    """The kernels of `kinematics`, `candidate_pairs` (from the pair list), `contact_forces` and
+    `wrenches`, chained, and the `contact_summary` of the step; then the pair list and its
+    travel."""
     body_kinematics(bodies, q, v, R_W, p_W, w_W, vo_W)
-    master, slave, key = grid_search(near, table, C1_J, N1_J, finger1, axis1_J, opening, maps,
-                                     C2_J.shape[0], R_W, p_W, r1, r2, cutoff)
+    (master, slave, key), pair_list, list_travel = listed_search(
+        near, table, C1_J, N1_J, finger1, axis1_J, opening, maps, C2_J.shape[0], R_W, p_W, r1, r2, cutoff,
+        pair_list, list_travel)
     pairs = pair_forces(master, slave, key, C1_J, N1_J, joint1, finger1, axis1_J, C2_J, N2_J, joint2,
                         R_W, p_W, w_W, vo_W, opening, opening_rate, mem_key, mem_s, mem_vminus,
                         r1, r2, K, damping, floor, h, bristle)
@@ -279,7 +288,7 @@ def _contact_kernels(q, v, R_W, p_W, w_W, vo_W, near, opening, opening_rate, mem
                           joint1, joint2, finger1, finger_parent, finger_axis_J, R_W, p_W, R_W.shape[0])
     summary = contact_summary(loads[1], loads[2], R_W, p_W, ee_joint, R_ee, module_joint, lever, pairs[8],
                               pairs[3])
-    return pairs, loads, summary
+    return pairs, loads, summary, pair_list, list_travel
 
 
 # -------------------------------------------------------------------------------- step
@@ -298,7 +307,9 @@ def step(model: Model, data: Data, h: float, integrator) -> Contacts:
     if not integrator.moves_fingers:
         data.opening += h * data.opening_rate
     data.t += h
-    data.travel += h * travel_rate(model, data)
+    moved = h * travel_rate(model, data)
+    data.travel += moved
+    data.list_travel += moved
     data.contacts = contacts
     grasp_phase(model, data, contacts)
     return contacts

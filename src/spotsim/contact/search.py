@@ -124,6 +124,81 @@ def _dot(a, b):
 
 
 @njit
+def _face_frame(f, table, N1_J, finger1, axis1_J, opening, R_W, p_W):
+    """Face pair f's search frame: whether its faces face each other (Eq. 6 defined), the
+    common normal in face coordinates (n_u, n_v, n_h), the affine map (A, off) taking a master
+    centre in its joint's frame to face coordinates (u, v, height above the face plane), and
+    the common normal in world (3,)."""
+    Rs, ps = R_W[table.slave_joint[f]], p_W[table.slave_joint[f]]
+    b0, b1, b2 = _rotate(Rs, table.t1_J[f]), _rotate(Rs, table.t2_J[f]), _rotate(Rs, table.n_J[f])
+    Rm, pm = R_W[table.master_joint[f]], p_W[table.master_joint[f]]
+    nm = _rotate(Rm, N1_J[table.master_start[f]])
+    dn = (b2[0] - nm[0], b2[1] - nm[1], b2[2] - nm[2])
+    norm = math.sqrt(_dot(dn, dn))
+    A = np.empty((3, 3))
+    n_W = np.zeros(3)
+    if norm <= NORMAL_EPS:
+        return False, 0.0, 0.0, 0.0, A, (0.0, 0.0, 0.0), n_W  # faces facing the same way never pair
+    for a in range(3):
+        n_W[a] = dn[a] / norm
+    # the common normal in face coordinates
+    nu, nv, nh = _dot(dn, b0) / norm, _dot(dn, b1) / norm, _dot(dn, b2) / norm
+    o = _rotate(Rs, table.origin_J[f])
+    # a master centre c (its joint's frame) in face coordinates is A c + off: the rows of A are
+    # the face axes in the master's frame, and off holds the master origin and the finger's
+    # opening, which shifts all the face's spheres alike (a face is on one finger)
+    for k in range(3):
+        A[0, k] = Rm[0, k] * b0[0] + Rm[1, k] * b0[1] + Rm[2, k] * b0[2]
+        A[1, k] = Rm[0, k] * b1[0] + Rm[1, k] * b1[1] + Rm[2, k] * b1[2]
+        A[2, k] = Rm[0, k] * b2[0] + Rm[1, k] * b2[1] + Rm[2, k] * b2[2]
+    first = table.master_start[f]
+    shift = opening[finger1[first]] * axis1_J[first]
+    e = (pm[0] - o[0] - ps[0], pm[1] - o[1] - ps[1], pm[2] - o[2] - ps[2])
+    off = (A[0, 0] * shift[0] + A[0, 1] * shift[1] + A[0, 2] * shift[2] + _dot(e, b0),
+           A[1, 0] * shift[0] + A[1, 1] * shift[1] + A[1, 2] * shift[2] + _dot(e, b1),
+           A[2, 0] * shift[0] + A[2, 1] * shift[1] + A[2, 2] * shift[2] + _dot(e, b2))
+    return True, nu, nv, nh, A, off, n_W
+
+
+@njit
+def _lift(A, off, c, radius):
+    """Height of master centre c (its joint's frame) above the plane of the slave centres, m
+    (they lie `radius` above the face plane)."""
+    return A[2, 0] * c[0] + A[2, 1] * c[1] + A[2, 2] * c[2] + off[2] - radius
+
+
+@njit
+def _grid_uv(A, off, c, radius):
+    """Master centre c's in-plane face coordinates in units of the slave grid step."""
+    return ((A[0, 0] * c[0] + A[0, 1] * c[1] + A[0, 2] * c[2] + off[0]) / radius,
+            (A[1, 0] * c[0] + A[1, 1] * c[1] + A[1, 2] * c[2] + off[1]) / radius)
+
+
+@njit
+def _node_hit(u, v, i, j, lift, w0, nu, nv, nh, radius, cutoff):
+    """Whether the pair of a master centre at (u, v, lift) and slave grid node (i, j) may be in
+    contact (Eq. 8-10 in face coordinates, a superset by SEARCH_SLACK); w0 = lift^2 - R^2."""
+    du = (u - i) * radius
+    dv = (v - j) * radius
+    chi = nu * du + nh * lift + nv * dv
+    disc = chi * chi - (du * du + w0 + dv * dv)
+    if disc < -SEARCH_SLACK * cutoff:
+        return False
+    # phi = -chi + sqrt(disc) > -SEARCH_SLACK, tested without the root
+    return not (chi > SEARCH_SLACK and max(disc, 0.0) <= (chi - SEARCH_SLACK) ** 2)
+
+
+@njit
+def _push(found_m, found_s, n_found, row, s):
+    """Append (row, s) to the growing buffers; returns them (reallocated when full)."""
+    if n_found == found_m.shape[0]:
+        found_m = np.concatenate((found_m, np.empty(n_found, dtype=np.int64)))
+        found_s = np.concatenate((found_s, np.empty(n_found, dtype=np.int64)))
+    found_m[n_found], found_s[n_found] = row, s
+    return found_m, found_s
+
+
+@njit
 def grid_search(near, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_slave, R_W, p_W, r1, radius,
                 cutoff):
     """Sphere pairs in contact (Eq. 6-10) inside the face pairs `near`, found locally.
@@ -143,47 +218,23 @@ def grid_search(near, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_slav
     Returns (master index, slave index, key = master * n_slave + slave) of the pairs, sorted
     by key (a superset by SEARCH_SLACK of the pairs in contact).
     """
-    cap = 64
-    found_m = np.empty(cap, dtype=np.int64)
-    found_s = np.empty(cap, dtype=np.int64)
+    found_m = np.empty(64, dtype=np.int64)
+    found_s = np.empty(64, dtype=np.int64)
     n_found = 0
     R = r1 + radius
     for f in near:
-        Rs, ps = R_W[table.slave_joint[f]], p_W[table.slave_joint[f]]
-        b0, b1, b2 = _rotate(Rs, table.t1_J[f]), _rotate(Rs, table.t2_J[f]), _rotate(Rs, table.n_J[f])
-        Rm, pm = R_W[table.master_joint[f]], p_W[table.master_joint[f]]
-        nm = _rotate(Rm, N1_J[table.master_start[f]])
-        dn = (b2[0] - nm[0], b2[1] - nm[1], b2[2] - nm[2])
-        norm = math.sqrt(_dot(dn, dn))
-        if norm <= NORMAL_EPS:
-            continue  # faces facing the same way never pair (Eq. 6 undefined)
-        # the common normal in face coordinates
-        nu, nv, nh = _dot(dn, b0) / norm, _dot(dn, b1) / norm, _dot(dn, b2) / norm
+        facing, nu, nv, nh, A, off, _ = _face_frame(f, table, N1_J, finger1, axis1_J, opening, R_W, p_W)
+        if not facing:
+            continue
         n_uv = math.hypot(nu, nv)
-        o = _rotate(Rs, table.origin_J[f])
         ni, nj = table.shape[f, 0], table.shape[f, 1]
         face = table.slave_face[f]
-        # a master centre c (its joint's frame) in face coordinates is A c + off: the rows of
-        # A are the face axes in the master's frame, and off holds the master origin and the
-        # finger's opening, which shifts all the face's spheres alike (a face is on one finger)
-        A = np.empty((3, 3))
-        for k in range(3):
-            A[0, k] = Rm[0, k] * b0[0] + Rm[1, k] * b0[1] + Rm[2, k] * b0[2]
-            A[1, k] = Rm[0, k] * b1[0] + Rm[1, k] * b1[1] + Rm[2, k] * b1[2]
-            A[2, k] = Rm[0, k] * b2[0] + Rm[1, k] * b2[1] + Rm[2, k] * b2[2]
-        first = table.master_start[f]
-        shift = opening[finger1[first]] * axis1_J[first]
-        e = (pm[0] - o[0] - ps[0], pm[1] - o[1] - ps[1], pm[2] - o[2] - ps[2])
-        off = (A[0, 0] * shift[0] + A[0, 1] * shift[1] + A[0, 2] * shift[2] + _dot(e, b0),
-               A[1, 0] * shift[0] + A[1, 1] * shift[1] + A[1, 2] * shift[2] + _dot(e, b1),
-               A[2, 0] * shift[0] + A[2, 1] * shift[1] + A[2, 2] * shift[2] + _dot(e, b2))
-        for row in range(first, table.master_stop[f]):
+        for row in range(table.master_start[f], table.master_stop[f]):
             c = C1_J[row]
-            lift = A[2, 0] * c[0] + A[2, 1] * c[1] + A[2, 2] * c[2] + off[2] - radius
+            lift = _lift(A, off, c, radius)
             if abs(lift) >= cutoff:  # slave centres lie `radius` above the face plane
                 continue
-            u = (A[0, 0] * c[0] + A[0, 1] * c[1] + A[0, 2] * c[2] + off[0]) / radius
-            v = (A[1, 0] * c[0] + A[1, 1] * c[1] + A[1, 2] * c[2] + off[1]) / radius
+            u, v = _grid_uv(A, off, c, radius)
             # within cutoff in 3-D means within sqrt(cutoff^2 - lift^2) in the face plane
             reach = math.sqrt(max(cutoff * cutoff - lift * lift, 0.0)) / radius
             if not (-reach < u < ni - 1 + reach and -reach < v < nj - 1 + reach):
@@ -204,31 +255,164 @@ def grid_search(near, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_slav
             for i in range(max(math.ceil(u - reach), 0), min(math.floor(u + reach), ni - 1) + 1):
                 # the nodes of this grid row within reach: a chord of the reach circle
                 half = math.sqrt(max(reach * reach - (u - i) ** 2, 0.0))
-                du = (u - i) * radius
-                chi_u = nu * du + nh * lift
-                w_u = du * du + w0
                 for j in range(max(math.ceil(v - half), 0), min(math.floor(v + half), nj - 1) + 1):
-                    # c1 - c2 in face coordinates, then Eq. (8)-(10) with the pair's normal:
-                    # phi = -chi + sqrt(disc) > -SEARCH_SLACK, tested without the root
-                    dv = (v - j) * radius
-                    chi = chi_u + nv * dv
-                    disc = chi * chi - (w_u + dv * dv)
-                    if disc < -SEARCH_SLACK * cutoff:
-                        continue
-                    if chi > SEARCH_SLACK and max(disc, 0.0) <= (chi - SEARCH_SLACK) ** 2:
-                        continue
                     s = maps[face, i, j]
-                    if s < 0:
-                        continue
-                    if n_found == cap:
-                        cap *= 2
-                        found_m = np.concatenate((found_m, np.empty(cap - n_found, dtype=np.int64)))
-                        found_s = np.concatenate((found_s, np.empty(cap - n_found, dtype=np.int64)))
-                    found_m[n_found], found_s[n_found] = row, s
-                    n_found += 1
+                    if s >= 0 and _node_hit(u, v, i, j, lift, w0, nu, nv, nh, radius, cutoff):
+                        found_m, found_s = _push(found_m, found_s, n_found, row, s)
+                        n_found += 1
     key = found_m[:n_found] * n_slave + found_s[:n_found]
     order = np.argsort(key)
     return found_m[:n_found][order], found_s[:n_found][order], key[order]
+
+
+#: The pair list's reach beyond contact, m: it keeps the candidate pairs whose centres lie
+#: within r1 + r2 + LIST_SKIN. Larger lists cost more per step, smaller ones are rebuilt more
+#: often; 30 um keeps ~2-10 candidates per pair in contact on the paper's 0.7/0.8 mm layers.
+LIST_SKIN = 30e-6
+#: The list is kept while the spheres may have moved at most LIST_SKIN / LIST_SAFETY relative
+#: to each other: the step's travel bound is taken at the step's end (see step.travel_rate).
+LIST_SAFETY = 2.0
+#: ... and while each listed face pair's common normal stays within this of the normal it was
+#: built with (|n - n_built|, unit vectors): the listed pairs are then those of the ball regime.
+LIST_NORMAL_TOL = 0.01
+
+
+def empty_pair_list(n_face_pairs: int) -> tuple:
+    """A pair list that holds nothing and must be built at its first use."""
+    none = np.zeros(0, dtype=np.int64)
+    return none, none, none, none, none, np.ones(n_face_pairs, dtype=np.bool_), np.zeros((n_face_pairs, 3))
+
+
+@njit
+def build_pair_list(near, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_slave, R_W, p_W, r1, radius,
+                    cutoff):
+    """The candidate pairs of the face pairs `near` that can come into contact while the
+    spheres move less than LIST_SKIN / LIST_SAFETY relative to each other (a Verlet list).
+
+    A face pair whose common normal makes chi = n . (c1 - c2) clearly positive for every pair
+    within reach is in the ball regime: a pair there touches only if its centres are closer
+    than r1 + r2 (+ round-off), so the list keeps the pairs closer than r1 + r2 + LIST_SKIN.
+    Chi moves by at most the travel plus the normal's turn times the cutoff, which the margin
+    covers. Any other face pair (faces tilted far from each other) is marked to be searched
+    anew at every step.
+    Arguments as `grid_search`. Returns (master, slave, face pair, grid row, grid column) of
+    the listed pairs, sorted by key; (n_table,) whether each face pair is searched anew; and
+    (n_table, 3) each face pair's common normal (world) at the build.
+    """
+    n_table = table.master_start.shape[0]
+    scan = np.ones(n_table, dtype=np.bool_)
+    normal_W = np.zeros((n_table, 3))
+    cap = 256
+    lm, ls, lf = np.empty(cap, dtype=np.int64), np.empty(cap, dtype=np.int64), np.empty(cap, dtype=np.int64)
+    li, lj = np.empty(cap, dtype=np.int64), np.empty(cap, dtype=np.int64)
+    n = 0
+    R = r1 + radius
+    reach_3d = R + LIST_SKIN
+    chi_margin = LIST_SKIN + LIST_NORMAL_TOL * cutoff + SEARCH_SLACK
+    inv = 1.0 / radius  # the list needs no exact grid coordinates: its skin absorbs round-off
+    for f in near:
+        facing, nu, nv, nh, A, off, n_W = _face_frame(f, table, N1_J, finger1, axis1_J, opening, R_W, p_W)
+        if not facing:
+            continue
+        n_uv = math.hypot(nu, nv)
+        ni, nj = table.shape[f, 0], table.shape[f, 1]
+        face = table.slave_face[f]
+        start, ball = n, True
+        for row in range(table.master_start[f], table.master_stop[f]):
+            c = C1_J[row]
+            lift = _lift(A, off, c, radius)
+            if abs(lift) >= cutoff + LIST_SKIN:  # no slave centre within the cutoff meanwhile
+                continue
+            if nh * lift - n_uv * (cutoff + LIST_SKIN) <= chi_margin:
+                ball = False
+                break
+            if lift >= reach_3d:
+                continue
+            r_sq = reach_3d * reach_3d - lift * lift  # in-plane reach squared, m^2
+            reach = math.sqrt(r_sq) * inv
+            u = (A[0, 0] * c[0] + A[0, 1] * c[1] + A[0, 2] * c[2] + off[0]) * inv
+            v = (A[1, 0] * c[0] + A[1, 1] * c[1] + A[1, 2] * c[2] + off[1]) * inv
+            j0, j1 = max(math.ceil(v - reach), 0), min(math.floor(v + reach), nj - 1)
+            for i in range(max(math.ceil(u - reach), 0), min(math.floor(u + reach), ni - 1) + 1):
+                du = (u - i) * radius
+                for j in range(j0, j1 + 1):
+                    dv = (v - j) * radius
+                    s = maps[face, i, j]
+                    if s < 0 or du * du + dv * dv >= r_sq:
+                        continue
+                    if n == lm.shape[0]:
+                        lm, ls, lf = _grow(lm), _grow(ls), _grow(lf)
+                        li, lj = _grow(li), _grow(lj)
+                    lm[n], ls[n], lf[n], li[n], lj[n] = row, s, f, i, j
+                    n += 1
+        if ball:
+            scan[f] = False
+            normal_W[f] = n_W
+        else:
+            n = start
+    order = np.argsort(lm[:n] * n_slave + ls[:n])
+    return lm[:n][order], ls[:n][order], lf[:n][order], li[:n][order], lj[:n][order], scan, normal_W
+
+
+@njit
+def _grow(a):
+    return np.concatenate((a, np.empty(a.shape[0], dtype=a.dtype)))
+
+
+@njit
+def listed_search(near, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_slave, R_W, p_W, r1, radius,
+                  cutoff, pair_list, travel):
+    """`grid_search`'s pairs, tested only among the candidates of a pair list kept between
+    steps (`build_pair_list`), which is rebuilt when the spheres may have moved too far
+    (`travel`, m, since the build: infinite forces a build) or a face pair's normal turned.
+
+    Returns (master, slave, key) as `grid_search` does, the pair list and the travel since
+    its build (0 after a rebuild).
+    """
+    lm, ls, lf, li, lj, scan, normal_W = pair_list
+    n_table = table.master_start.shape[0]
+    slot = np.full(n_table, -1, dtype=np.int64)
+    k = near.shape[0]
+    A_k, off_k, n_k = np.empty((k, 3, 3)), np.empty((k, 3)), np.empty((k, 5))
+    valid = travel <= LIST_SKIN / LIST_SAFETY
+    for m in range(k):
+        f = near[m]
+        slot[f] = m
+        facing, nu, nv, nh, A, off, n_W = _face_frame(f, table, N1_J, finger1, axis1_J, opening, R_W, p_W)
+        A_k[m] = A
+        off_k[m, 0], off_k[m, 1], off_k[m, 2] = off
+        n_k[m, 0], n_k[m, 1], n_k[m, 2], n_k[m, 3] = nu, nv, nh, 1.0 if facing else 0.0
+        if not scan[f] and (not facing or math.sqrt((n_W[0] - normal_W[f, 0]) ** 2 + (n_W[1] - normal_W[f, 1]) ** 2
+                                                    + (n_W[2] - normal_W[f, 2]) ** 2) > LIST_NORMAL_TOL):
+            valid = False
+    if not valid:
+        pair_list = build_pair_list(near, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_slave, R_W, p_W,
+                                    r1, radius, cutoff)
+        lm, ls, lf, li, lj, scan, normal_W = pair_list
+        travel = 0.0
+    R = r1 + radius
+    out_m, out_s = np.empty(lm.shape[0], dtype=np.int64), np.empty(lm.shape[0], dtype=np.int64)
+    n = 0
+    for idx in range(lm.shape[0]):
+        m = slot[lf[idx]]
+        row = lm[idx]
+        c = C1_J[row]
+        lift = _lift(A_k[m], off_k[m], c, radius)
+        u, v = _grid_uv(A_k[m], off_k[m], c, radius)
+        if _node_hit(u, v, li[idx], lj[idx], lift, lift * lift - R * R, n_k[m, 0], n_k[m, 1], n_k[m, 2], radius,
+                     cutoff):
+            out_m[n], out_s[n] = row, ls[idx]
+            n += 1
+    out_m, out_s = out_m[:n], out_s[:n]
+    searched = np.array([f for f in near if scan[f]], dtype=np.int64)
+    if searched.shape[0]:  # face pairs outside the ball regime: searched anew, merged by key
+        sm, ss, _ = grid_search(searched, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_slave, R_W, p_W,
+                                r1, radius, cutoff)
+        out_m, out_s = np.concatenate((out_m, sm)), np.concatenate((out_s, ss))
+        key = out_m * n_slave + out_s
+        order = np.argsort(key)
+        return (out_m[order], out_s[order], key[order]), pair_list, travel
+    return (out_m, out_s, out_m * n_slave + out_s), pair_list, travel
 
 
 def face_slices(layers: LayerSet) -> list[slice]:
