@@ -178,3 +178,48 @@ def kinetic_energy(bodies, q, v):
         v_G = v[iv:iv + 3] + cross(w, bodies.lever[b])  # body axes; the norm is frame-free
         total += 0.5 * bodies.mass[b] * np.sum(v_G * v_G) + 0.5 * np.sum(w * mv(bodies.inertia_G[b], w))
     return total
+
+
+@njit
+def _solve3(M, b):
+    """M^-1 b for a symmetric positive-definite 3x3 M (a rotational inertia), by Cholesky."""
+    l00 = math.sqrt(M[0, 0])
+    l10 = M[1, 0] / l00
+    l20 = M[2, 0] / l00
+    l11 = math.sqrt(M[1, 1] - l10 * l10)
+    l21 = (M[2, 1] - l20 * l10) / l11
+    l22 = math.sqrt(M[2, 2] - l20 * l20 - l21 * l21)
+    y0 = b[0] / l00
+    y1 = (b[1] - l10 * y0) / l11
+    y2 = (b[2] - l20 * y0 - l21 * y1) / l22
+    x2 = y2 / l22
+    x1 = (y1 - l21 * x2) / l11
+    x0 = (y0 - l10 * x1 - l20 * x2) / l00
+    return np.array([x0, x1, x2])
+
+
+@njit
+def free_body_accelerations(bodies, q, v, f_local, g_W):
+    """ABA of a model made of free bodies only, each a free-flyer child of the world: with no
+    joint between them, each body's articulated inertia is its own, and the algorithm reduces
+    to the Newton-Euler equations of each body. Returns a (nv,) in Pinocchio's convention (the
+    time derivative of each free-flyer's body-frame twist (v_O, omega)).
+
+    f_local: (njoints, 6) external wrench on each joint's body, (force, moment about the joint
+    origin) in the joint frame, N and N m. g_W: (3,) gravity, m/s^2.
+    """
+    a = np.zeros(v.shape[0])
+    for b in range(bodies.joint.shape[0]):
+        j, iv = bodies.joint[b], bodies.idx_v[b]
+        R, _ = body_pose(bodies, b, q)
+        m, c, I_G = bodies.mass[b], bodies.lever[b], bodies.inertia_G[b]
+        v_O, w = v[iv:iv + 3], v[iv + 3:iv + 6]
+        f, tau_O = f_local[j, :3], f_local[j, 3:]
+        # Newton about the centroid (world) and Euler about it (body axes)
+        a_G = f / m + mtv(R, g_W)
+        alpha = _solve3(I_G, tau_O - cross(c, f) - cross(w, mv(I_G, w)))
+        # the centroid's acceleration is that of the origin plus alpha x c + w x (w x c); the
+        # twist's linear part is the origin's velocity in the turning body frame (- w x v_O)
+        a[iv:iv + 3] = a_G - cross(alpha, c) - cross(w, cross(w, c)) - cross(w, v_O)
+        a[iv + 3:iv + 6] = alpha
+    return a

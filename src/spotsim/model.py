@@ -160,6 +160,13 @@ class Model:
         return contact_kernel_args(self)
 
     @cached_property
+    def loop_args(self) -> tuple:
+        """The model's constant arguments of the compiled loop (`compiled.loop_args`)."""
+        from .compiled import loop_args
+
+        return loop_args(self)
+
+    @cached_property
     def watch_args(self) -> list[tuple]:
         """Per grasp, the end-effector's joint and grasp-frame rotation, the module's joint and
         centroid: the frames `contact.forces.contact_summary` reads."""

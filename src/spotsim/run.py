@@ -9,6 +9,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
+from . import compiled
 from .contact.forces import raise_peaks
 from .contact.friction import SLIPPING, STICKING
 from .grasp import COMPLETE, PHASES, SELF_CENTRING
@@ -339,7 +340,21 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
             free_steps += flight
             # the active drive held the fingers still through every step of this interval
             held = data.drives[model.grasps[data.active][0]].stalled
-            for h in _step_sizes(integrator, data, flight, sim.dt_s, h_contact, sim.substeps):
+            if not flight and compiled.applies(model, integrator):  # the substeps in one call
+                try:
+                    n_steps, n_pairs, event, held = compiled.run_substeps(
+                        model, data, sim.substeps, h_contact, rec.peaks[data.active], J, JL, starts[-1],
+                        scenario.completion.phase_timeout_s, max_phi, held)
+                except StateOverflow as e:
+                    status, message = DIVERGED, f"{e} at t = {data.t:.4f} s"
+                    break
+                steps += n_steps
+                pair_steps += n_pairs
+                rec.substep(model, data, len(data.contacts.key))
+                if event == compiled.TOO_DEEP:
+                    status, message = DIVERGED, _too_deep(data, max_phi)
+            for h in () if not flight and compiled.applies(model, integrator) else \
+                    _step_sizes(integrator, data, flight, sim.dt_s, h_contact, sim.substeps):
                 t_start = data.t
                 try:
                     c = step(model, data, h, integrator)
@@ -364,9 +379,7 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
                         J += h * m_j * g_W
                         JL += h * np.cross(r_G, m_j * g_W)
                 if n and data.summary[7] > max_phi:
-                    status = DIVERGED
-                    message = (f"penetration {data.summary[7] * 1e3:.3f} mm exceeds the sphere radius "
-                               f"{max_phi * 1e3:.3f} mm at t = {data.t:.4f} s")
+                    status, message = DIVERGED, _too_deep(data, max_phi)
                     break
                 if data.phase.phase == COMPLETE or data.t - starts[-1] > scenario.completion.phase_timeout_s:
                     break
@@ -430,6 +443,11 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
                        pair_steps, h_contact, starts, welds, drift_lin / max(p_max, 1e-300),
                        drift_ang / max(l_max, 1e-300), integrator_stats)
     return Result(scenario, model, summary, series, rec.replay_arrays())
+
+
+def _too_deep(data, max_phi: float) -> str:
+    return (f"penetration {data.summary[7] * 1e3:.3f} mm exceeds the sphere radius {max_phi * 1e3:.3f} mm "
+            f"at t = {data.t:.4f} s")
 
 
 def _step_sizes(integrator, data, flight: bool, dt: float, h: float, substeps: int):

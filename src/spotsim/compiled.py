@@ -1,0 +1,195 @@
+"""The default step, compiled whole: the substeps of a record interval in one call.
+
+For the default setting (symplectic Euler, the culled search, a scene of free bodies only)
+the stages of `step.step` run in one compiled loop: contact (`step._contact_kernels`), the
+dynamics (`bodies.free_body_accelerations`, ABA for free bodies), the update
+(`integrators._symplectic_euler`), the finger drive, the travel bounds, the grasp phase, and
+the run loop's per-substep bookkeeping (peaks, external impulses, divergence by penetration).
+The loop returns to Python when the interval is done, when coal's face pairs must be
+refreshed (the Verlet skin is used up), when the grasp phase completes or times out, or when a
+pair penetrates too deep. It does what `step.step` and the run loop do, in the same order and
+with the same arithmetic; the tests hold the two to that.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .bodies import cross, free_body_accelerations, mv
+from .contact.forces import raise_peaks
+from .grasp import PHASES
+from .integrators import SymplecticEuler, _symplectic_euler
+from .jit import direct, njit
+from .step import Contacts, _contact_kernels, _travel_rate, refresh_broad_phase
+
+#: Why `substeps` returned: all its steps ran, the skin is used up (refresh coal and go on),
+#: the grasp phase completed or timed out, or a pair penetrated deeper than a sphere radius.
+RAN, REFRESH, STOPPED, TOO_DEEP = range(4)
+
+# slots of the loop's scalar state, read and written in place
+(T, TRAVEL, LIST_TRAVEL, STALLED, PHASE, HELD_SINCE, T_CENTRING, T_COMPLETE, HELD, STEPS, PAIR_STEPS,
+ PEAK_PAIRS) = range(12)
+N_SCALARS = 12
+
+
+def applies(model, integrator) -> bool:
+    """Whether the compiled loop can run this scene: symplectic Euler, the culled search and
+    free bodies only (`SymplecticEuler.only_free`)."""
+    return (isinstance(integrator, SymplecticEuler) and integrator.only_free
+            and model.params.broad_phase != "none")
+
+
+def loop_args(model) -> tuple:
+    """The model's constant arguments of `substeps`, in its order."""
+    rows, reach = model.reach_table
+    return (model.bodies, np.array(model.pin_model.gravity.linear), rows, reach, model.fixed_contact,
+            model.contact_kernel_args)
+
+
+@njit
+def substeps(n, h, q, v, R_W, p_W, w_W, vo_W, near, opening, opening_rate, mem_key, mem_s, mem_vminus,
+             pair_list, s, peak_f, peak_t, peak_n, J, JL, mine, watch, limits, consts):
+    """Up to n steps of h (s) of `step.step` with symplectic Euler, and the run loop's
+    bookkeeping of each, compiled.
+
+    s: (N_SCALARS,) the scalar state (slots T ... PEAK_PAIRS), in place. peak_f, peak_t,
+    peak_n: the active grasp's peaks (`contact.forces.raise_peaks`), in place. J, JL: (3,)
+    external impulse on the free bodies and its moment about the world origin, in place.
+    mine: the active drive's fingers. watch: the active grasp's `Model.watch_args`. limits:
+    (skin, deepest penetration, phase start, phase time-out, hold time, contact speed limit,
+    net force limit, closing speed, grasp load, resume fraction), SI units. consts:
+    `loop_args`. Returns the new q, v, pair memory and pair list, the last step's pairs,
+    loads and summary (as `step._contact_kernels`), and why it returned (RAN ... TOO_DEEP).
+    """
+    bodies, g_W, rows, reach, fixed_contact, contact_args = consts
+    skin, max_phi, start, timeout, hold_s, max_speed, max_force, speed, grasp_load, resume = limits
+    ee_joint, R_ee, module_joint, lever = watch
+    gravity = g_W[0] != 0.0 or g_W[1] != 0.0 or g_W[2] != 0.0
+    event = RAN
+    for k in range(n):
+        # forces -> dynamics -> integrate (SymplecticEuler.advance)
+        pairs, loads, summary, pair_list, s[LIST_TRAVEL] = _contact_kernels(
+            q, v, R_W, p_W, w_W, vo_W, near, opening, opening_rate, mem_key, mem_s, mem_vminus, h, pair_list,
+            s[LIST_TRAVEL], ee_joint, R_ee, module_joint, lever, *contact_args)
+        mem_key, mem_s, mem_vminus = pairs[2], pairs[10], pairs[11]
+        a = free_body_accelerations(bodies, q, v, loads[0], g_W)
+        q, v = _symplectic_euler(bodies, q, v, a, h)
+        # the active drive sets its fingers' rate from this step's loads (grasp.FingerDrive)
+        if mine.shape[0]:
+            force = 0.0
+            for i in mine:
+                force += loads[5][i]
+            force /= mine.shape[0]
+            if force >= grasp_load:
+                s[STALLED] = 1.0
+            elif force < resume * grasp_load:
+                s[STALLED] = 0.0
+            rate = 0.0 if s[STALLED] else -speed
+            for i in mine:
+                opening_rate[i] = rate
+        for i in range(opening.shape[0]):
+            opening[i] += h * opening_rate[i]
+        s[T] += h
+        moved = h * _travel_rate(bodies.idx_v, rows, reach, v, opening_rate)
+        s[TRAVEL] += moved
+        s[LIST_TRAVEL] += moved
+        # the grasp phase (grasp.GraspPhase.update)
+        n_pairs = pairs[2].shape[0]
+        t = s[T]
+        if s[PHASE] == 0 and n_pairs > 0:
+            s[PHASE], s[T_CENTRING] = 1, t
+        if s[PHASE] == 1:
+            net = math.sqrt(summary[0] * summary[0] + summary[1] * summary[1] + summary[2] * summary[2])
+            if n_pairs > 0 and s[STALLED] and summary[6] <= max_speed and net <= max_force:
+                if math.isnan(s[HELD_SINCE]):
+                    s[HELD_SINCE] = t
+                if t - s[HELD_SINCE] >= hold_s - 1e-12:
+                    s[PHASE], s[T_COMPLETE] = 2, t
+            else:
+                s[HELD_SINCE] = np.nan
+        # the run loop's bookkeeping of the step
+        if not s[STALLED]:
+            s[HELD] = 0.0
+        s[STEPS] += 1
+        s[PAIR_STEPS] += n_pairs
+        if n_pairs:
+            raise_peaks(peak_f, peak_t, peak_n, summary)
+            s[PEAK_PAIRS] = max(s[PEAK_PAIRS], n_pairs)
+        if fixed_contact:
+            J += h * loads[3]
+            JL += h * loads[4]
+        if gravity:
+            for b in range(bodies.joint.shape[0]):
+                j = bodies.joint[b]
+                r_G = p_W[j] + mv(R_W[j], bodies.lever[b])
+                J += h * bodies.mass[b] * g_W
+                JL += h * cross(r_G, bodies.mass[b] * g_W)
+        if n_pairs and summary[7] > max_phi:
+            event = TOO_DEEP
+            break
+        if s[PHASE] == 2 or t - start > timeout:
+            event = STOPPED
+            break
+        if s[TRAVEL] > skin and k + 1 < n:
+            event = REFRESH
+            break
+    return q, v, mem_key, mem_s, mem_vminus, pair_list, pairs, loads, summary, event
+
+
+_substeps = direct(substeps)
+
+
+def run_substeps(model, data, n: int, h: float, peaks: dict, J: np.ndarray, JL: np.ndarray, start: float,
+                 timeout: float, max_phi: float, held: bool) -> tuple[int, int, int, bool]:
+    """n steps of h of the active grasp (fewer if its phase ends or a pair goes too deep), with
+    coal refreshed as the skin requires; data is left as `step.step` leaves it.
+
+    peaks: the active grasp's peaks (the recorder's), raised in place; J, JL: the external
+    impulse and its moment, added to in place; start, timeout: the phase's start and time-out,
+    s; max_phi: the deepest penetration allowed, m; held: whether the drive has held so far in
+    this record interval. Returns (steps taken, pair steps, why it returned, whether the
+    drive held throughout). Raises StateOverflow when coal cannot bound the state.
+    """
+    s = np.zeros(N_SCALARS)
+    ee, _ = model.grasps[data.active]
+    drive, phase = data.drives[ee], data.phase
+    limits = (model.params.skin, max_phi, start, timeout, phase.hold_s, phase.max_contact_speed,
+              phase.max_net_force, drive.speed, drive.grasp_load, drive.resume_fraction)
+    s[T], s[TRAVEL], s[LIST_TRAVEL] = data.t, data.travel, data.list_travel
+    s[STALLED], s[PHASE], s[HELD] = drive.stalled, PHASES.index(phase.phase), held
+    s[HELD_SINCE] = np.nan if phase._held_since is None else phase._held_since
+    s[PEAK_PAIRS] = peaks["pairs"]
+    event = REFRESH
+    while event == REFRESH and s[STEPS] < n:
+        if data.travel > model.params.skin:
+            refresh_broad_phase(model, data)
+            s[TRAVEL], s[LIST_TRAVEL] = data.travel, data.list_travel
+        (data.q, data.v, data.mem_key, data.mem_s, data.mem_vminus, data.pair_list, pairs, loads, summary,
+         event) = _substeps(n - int(s[STEPS]), h, data.q, data.v, data.R_W, data.p_W, data.w_W, data.vo_W,
+                            data.near_pairs, data.opening, data.opening_rate, data.mem_key, data.mem_s,
+                            data.mem_vminus, data.pair_list, s, peaks["force"], peaks["torque"], peaks["norms"],
+                            J, JL, model.drive_fingers[ee], model.watch_args[data.active], limits,
+                            model.loop_args)
+        _leave(data, s, pairs, loads, summary)
+    drive.stalled = bool(s[STALLED])
+    phase.phase = PHASES[int(s[PHASE])]
+    phase._held_since = None if math.isnan(s[HELD_SINCE]) else float(s[HELD_SINCE])
+    for slot, name in ((T_CENTRING, PHASES[1]), (T_COMPLETE, PHASES[2])):
+        if s[slot] and name not in phase.times:
+            phase.times[name] = float(s[slot])
+    peaks["pairs"] = int(s[PEAK_PAIRS])
+    return int(s[STEPS]), int(s[PAIR_STEPS]), event, bool(s[HELD])
+
+
+def _leave(data, s, pairs, loads, summary) -> None:
+    """Put the loop's last step into data as `step.step` leaves it."""
+    data.t, data.travel, data.list_travel = s[T], s[TRAVEL], s[LIST_TRAVEL]
+    data.contacts = Contacts(*pairs[:10])
+    data.contacts.memory = (data.contacts.key, pairs[10], pairs[11])
+    (local, data.joint_force_W, data.joint_torque_O_W, data.external_force_W, data.external_torque_O_W,
+     data.finger_load) = loads
+    for view, w in zip(data.f_views, local):
+        view[:] = w
+    data.summary = summary
