@@ -50,14 +50,61 @@ def free_bodies(model: pin.Model) -> FreeBodies:
                       np.array([model.inertias[j].inertia for j in joints]).reshape(-1, 3, 3))
 
 
-# 3x3 products written out: numba sends `@` to BLAS, whose call costs more than the product
+# 3x3 products written out: numba sends `@` to BLAS, whose call costs more than the product.
+# The tuple forms (mv3 ...) allocate nothing (a small array costs ~25 ns to allocate); the
+# array forms wrap them.
+
+@njit
+def mv3(R, x):
+    """R x for a 3x3 R and a 3-vector x, as a 3-tuple."""
+    return (R[0, 0] * x[0] + R[0, 1] * x[1] + R[0, 2] * x[2],
+            R[1, 0] * x[0] + R[1, 1] * x[1] + R[1, 2] * x[2],
+            R[2, 0] * x[0] + R[2, 1] * x[1] + R[2, 2] * x[2])
+
+
+@njit
+def mtv3(R, x):
+    """R^T x for a 3x3 R and a 3-vector x, as a 3-tuple."""
+    return (R[0, 0] * x[0] + R[1, 0] * x[1] + R[2, 0] * x[2],
+            R[0, 1] * x[0] + R[1, 1] * x[1] + R[2, 1] * x[2],
+            R[0, 2] * x[0] + R[1, 2] * x[1] + R[2, 2] * x[2])
+
+
+@njit
+def cross3(a, b):
+    """a x b for two 3-vectors, as a 3-tuple."""
+    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+
+
+@njit
+def add3(a, b):
+    """a + b for two 3-vectors, as a 3-tuple."""
+    return (a[0] + b[0], a[1] + b[1], a[2] + b[2])
+
+
+@njit
+def sub3(a, b):
+    """a - b for two 3-vectors, as a 3-tuple."""
+    return (a[0] - b[0], a[1] - b[1], a[2] - b[2])
+
+
+@njit
+def axpy3(k, x, y):
+    """y + k x for a scalar k and two 3-vectors, as a 3-tuple."""
+    return (y[0] + k * x[0], y[1] + k * x[1], y[2] + k * x[2])
+
+
+@njit
+def put3(out, i, x):
+    """out[i:i + 3] = x for a 3-vector x, in place."""
+    out[i], out[i + 1], out[i + 2] = x[0], x[1], x[2]
+
 
 @njit
 def mv(R, x):
     """R x for a 3x3 R and a 3-vector x."""
     out = np.empty(3)
-    for a in range(3):
-        out[a] = R[a, 0] * x[0] + R[a, 1] * x[1] + R[a, 2] * x[2]
+    put3(out, 0, mv3(R, x))
     return out
 
 
@@ -65,8 +112,7 @@ def mv(R, x):
 def mtv(R, x):
     """R^T x for a 3x3 R and a 3-vector x."""
     out = np.empty(3)
-    for a in range(3):
-        out[a] = R[0, a] * x[0] + R[1, a] * x[1] + R[2, a] * x[2]
+    put3(out, 0, mtv3(R, x))
     return out
 
 
@@ -83,7 +129,9 @@ def mm(A, B):
 @njit
 def cross(a, b):
     """a x b for two 3-vectors."""
-    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+    out = np.empty(3)
+    put3(out, 0, cross3(a, b))
+    return out
 
 
 @njit
@@ -122,12 +170,25 @@ def quat_times_exp(q, t0, t1, t2):
 
 
 @njit
+def body_rotation(bodies, b, q):
+    """Rotation (3, 3) of free body b in the world, from q."""
+    iq = bodies.idx_q[b]
+    return mm(bodies.R_P[b], quat_to_rotation(q[iq + 3], q[iq + 4], q[iq + 5], q[iq + 6]))
+
+
+@njit
+def body_origin3(bodies, b, q):
+    """Origin of free body b in the world, from q, as a 3-tuple."""
+    iq = bodies.idx_q[b]
+    return add3(mv3(bodies.R_P[b], q[iq:iq + 3]), bodies.p_P[b])
+
+
+@njit
 def body_pose(bodies, b, q):
     """Rotation (3, 3) and origin (3,) of free body b in the world, from q."""
-    iq = bodies.idx_q[b]
-    Rq = quat_to_rotation(q[iq + 3], q[iq + 4], q[iq + 5], q[iq + 6])
-    R_P = bodies.R_P[b]
-    return mm(R_P, Rq), mv(R_P, q[iq:iq + 3]) + bodies.p_P[b]
+    p = np.empty(3)
+    put3(p, 0, body_origin3(bodies, b, q))
+    return body_rotation(bodies, b, q), p
 
 
 @njit
@@ -136,11 +197,11 @@ def body_kinematics(bodies, q, v, R_W, p_W, w_W, vo_W):
     written into rows bodies.joint of R_W, p_W, w_W, vo_W (njoints, ...)."""
     for b in range(bodies.joint.shape[0]):
         j, iv = bodies.joint[b], bodies.idx_v[b]
-        R, p = body_pose(bodies, b, q)
+        R = body_rotation(bodies, b, q)
         R_W[j] = R
-        p_W[j] = p
-        vo_W[j] = mv(R, v[iv:iv + 3])
-        w_W[j] = mv(R, v[iv + 3:iv + 6])
+        put3(p_W[j], 0, body_origin3(bodies, b, q))
+        put3(vo_W[j], 0, mv3(R, v[iv:iv + 3]))
+        put3(w_W[j], 0, mv3(R, v[iv + 3:iv + 6]))
 
 
 @njit
@@ -182,7 +243,8 @@ def kinetic_energy(bodies, q, v):
 
 @njit
 def _solve3(M, b):
-    """M^-1 b for a symmetric positive-definite 3x3 M (a rotational inertia), by Cholesky."""
+    """M^-1 b for a symmetric positive-definite 3x3 M (a rotational inertia), by Cholesky, as a
+    3-tuple."""
     l00 = math.sqrt(M[0, 0])
     l10 = M[1, 0] / l00
     l20 = M[2, 0] / l00
@@ -195,7 +257,7 @@ def _solve3(M, b):
     x2 = y2 / l22
     x1 = (y1 - l21 * x2) / l11
     x0 = (y0 - l10 * x1 - l20 * x2) / l00
-    return np.array([x0, x1, x2])
+    return (x0, x1, x2)
 
 
 @njit
@@ -211,15 +273,16 @@ def free_body_accelerations(bodies, q, v, f_local, g_W):
     a = np.zeros(v.shape[0])
     for b in range(bodies.joint.shape[0]):
         j, iv = bodies.joint[b], bodies.idx_v[b]
-        R, _ = body_pose(bodies, b, q)
+        R = body_rotation(bodies, b, q)
         m, c, I_G = bodies.mass[b], bodies.lever[b], bodies.inertia_G[b]
         v_O, w = v[iv:iv + 3], v[iv + 3:iv + 6]
         f, tau_O = f_local[j, :3], f_local[j, 3:]
         # Newton about the centroid (world) and Euler about it (body axes)
-        a_G = f / m + mtv(R, g_W)
-        alpha = _solve3(I_G, tau_O - cross(c, f) - cross(w, mv(I_G, w)))
+        g = mtv3(R, g_W)
+        a_G = (f[0] / m + g[0], f[1] / m + g[1], f[2] / m + g[2])
+        alpha = _solve3(I_G, sub3(sub3(tau_O, cross3(c, f)), cross3(w, mv3(I_G, w))))
         # the centroid's acceleration is that of the origin plus alpha x c + w x (w x c); the
         # twist's linear part is the origin's velocity in the turning body frame (- w x v_O)
-        a[iv:iv + 3] = a_G - cross(alpha, c) - cross(w, cross(w, c)) - cross(w, v_O)
-        a[iv + 3:iv + 6] = alpha
+        put3(a, iv, sub3(sub3(sub3(a_G, cross3(alpha, c)), cross3(w, cross3(w, c))), cross3(w, v_O)))
+        put3(a, iv + 3, alpha)
     return a

@@ -118,8 +118,9 @@ def substeps(n, h, q, v, R_W, p_W, w_W, vo_W, near, opening, opening_rate, mem_k
             raise_peaks(peak_f, peak_t, peak_n, summary)
             s[PEAK_PAIRS] = max(s[PEAK_PAIRS], n_pairs)
         if fixed_contact:
-            J += h * loads[3]
-            JL += h * loads[4]
+            for i in range(3):
+                J[i] += h * loads[3][i]
+                JL[i] += h * loads[4][i]
         if gravity:
             for b in range(bodies.joint.shape[0]):
                 j = bodies.joint[b]

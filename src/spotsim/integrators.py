@@ -14,7 +14,8 @@ import math
 import numpy as np
 import pinocchio as pin
 
-from .bodies import body_pose, cross, free_bodies, mm, mtv, mv, quat_times_exp, quat_to_rotation
+from .bodies import (add3, axpy3, body_origin3, body_rotation, cross3, free_bodies, mm, mtv3, mv3, put3,
+                     quat_times_exp, quat_to_rotation, sub3)
 from .errors import SimulationError
 from .jit import direct, njit
 from .step import contact_stage
@@ -22,19 +23,20 @@ from .step import contact_stage
 
 @njit
 def _centroid_state(bodies, b, q, v):
-    """World centroid position and velocity, rotation, and body angular velocity of free body b."""
+    """World centroid position and velocity, rotation, and body angular velocity of free body
+    b: 3-tuple, 3-tuple, (3, 3), 3-tuple."""
     iv = bodies.idx_v[b]
-    R, p = body_pose(bodies, b, q)
+    R = body_rotation(bodies, b, q)
     c = bodies.lever[b]
     v_O, w = v[iv:iv + 3], v[iv + 3:iv + 6]
-    return p + mv(R, c), mv(R, v_O + cross(w, c)), R, w.copy()
+    return add3(body_origin3(bodies, b, q), mv3(R, c)), mv3(R, add3(v_O, cross3(w, c))), R, (w[0], w[1], w[2])
 
 
 @njit
 def _centroid_acceleration(R, c, v_O, w, a_O, alpha):
     """d/dt of R (v_O + w x c): the centroid's world acceleration from the body-frame twist
-    (v_O, w) and its derivative (a_O, alpha); c is the centroid in the body frame."""
-    return mv(R, a_O + cross(w, v_O) + cross(alpha, c) + cross(w, cross(w, c)))
+    (v_O, w) and its derivative (a_O, alpha); c is the centroid in the body frame. A 3-tuple."""
+    return mv3(R, add3(add3(add3(a_O, cross3(w, v_O)), cross3(alpha, c)), cross3(w, cross3(w, c))))
 
 
 @njit
@@ -46,10 +48,10 @@ def _set_centroid_state(bodies, b, q, v, p_G, v_G, quat, w):
     Rq = quat_to_rotation(quat[0], quat[1], quat[2], quat[3])
     R_P = bodies.R_P[b]
     # p_G = p_P + R_P (x + Rq c)
-    q[iq:iq + 3] = mtv(R_P, p_G - bodies.p_P[b]) - mv(Rq, c)
+    put3(q, iq, sub3(mtv3(R_P, sub3(p_G, bodies.p_P[b])), mv3(Rq, c)))
     q[iq + 3:iq + 7] = quat
-    v[iv:iv + 3] = mtv(mm(R_P, Rq), v_G) - cross(w, c)
-    v[iv + 3:iv + 6] = w
+    put3(v, iv, sub3(mtv3(mm(R_P, Rq), v_G), cross3(w, c)))
+    put3(v, iv + 3, w)
 
 
 @njit
@@ -59,11 +61,11 @@ def _symplectic_euler_bodies(bodies, q, v, a, h, q_new, v_new):
         iq, iv = bodies.idx_q[b], bodies.idx_v[b]
         p_G, v_G, R, w = _centroid_state(bodies, b, q, v)
         a_G = _centroid_acceleration(R, bodies.lever[b], v[iv:iv + 3], w, a[iv:iv + 3], a[iv + 3:iv + 6])
-        v_G = v_G + h * a_G
-        w = w + h * a[iv + 3:iv + 6]
+        v_G = axpy3(h, a_G, v_G)
+        w = axpy3(h, a[iv + 3:iv + 6], w)
         # a unit quaternion, or the round-off in R compounds from step to step
         quat = quat_times_exp(q[iq + 3:iq + 7], h * w[0], h * w[1], h * w[2])
-        _set_centroid_state(bodies, b, q_new, v_new, p_G + h * v_G, v_G, quat, w)
+        _set_centroid_state(bodies, b, q_new, v_new, axpy3(h, v_G, p_G), v_G, quat, w)
 
 
 @njit
@@ -77,14 +79,17 @@ def _symplectic_euler(bodies, q, v, a, h):
 def centroid_state(model: pin.Model, j: int, q, v):
     """World centroid position and velocity, rotation, and body angular velocity of free body j."""
     bodies = free_bodies(model)
-    return _centroid_state(bodies, list(bodies.joint).index(j), np.asarray(q, float), np.asarray(v, float))
+    p_G, v_G, R, w = _centroid_state(bodies, list(bodies.joint).index(j), np.asarray(q, float),
+                                     np.asarray(v, float))
+    return np.array(p_G), np.array(v_G), R, np.array(w)
 
 
 def centroid_acceleration(model: pin.Model, j: int, q, v, a):
     """Classical acceleration of free body j's centroid in world, from Pinocchio's spatial a."""
     iv = model.idx_vs[j]
     _, _, R, w = centroid_state(model, j, q, v)
-    return _centroid_acceleration(R, model.inertias[j].lever, v[iv:iv + 3], w, a[iv:iv + 3], a[iv + 3:iv + 6])
+    return np.array(_centroid_acceleration(R, model.inertias[j].lever, v[iv:iv + 3], w, a[iv:iv + 3],
+                                           a[iv + 3:iv + 6]))
 
 
 class SymplecticEuler:
@@ -144,10 +149,10 @@ def _pack(bodies, q, v):
     for b in range(bodies.joint.shape[0]):
         p_G, v_G, _, w = _centroid_state(bodies, b, q, v)
         iq, o = bodies.idx_q[b], STATE * b
-        y[o:o + 3] = p_G
+        put3(y, o, p_G)
         y[o + 3:o + 7] = q[iq + 3:iq + 7]
-        y[o + 7:o + 10] = v_G
-        y[o + 10:o + 13] = w
+        put3(y, o + 7, v_G)
+        put3(y, o + 10, w)
     return y
 
 
@@ -167,7 +172,7 @@ def _derivative(bodies, y, q, v, a):
     dy = np.empty_like(y)
     for b in range(bodies.joint.shape[0]):
         o, iv = STATE * b, bodies.idx_v[b]
-        R, _ = body_pose(bodies, b, q)
+        R = body_rotation(bodies, b, q)
         w = v[iv + 3:iv + 6]
         x, qy, z, qw = y[o + 3], y[o + 4], y[o + 5], y[o + 6]
         dy[o:o + 3] = y[o + 7:o + 10]
@@ -176,8 +181,8 @@ def _derivative(bodies, y, q, v, a):
         dy[o + 4] = 0.5 * (qw * w[1] + z * w[0] - x * w[2])
         dy[o + 5] = 0.5 * (qw * w[2] + x * w[1] - qy * w[0])
         dy[o + 6] = -0.5 * (x * w[0] + qy * w[1] + z * w[2])
-        dy[o + 7:o + 10] = _centroid_acceleration(R, bodies.lever[b], v[iv:iv + 3], w, a[iv:iv + 3],
-                                                  a[iv + 3:iv + 6])
+        put3(dy, o + 7, _centroid_acceleration(R, bodies.lever[b], v[iv:iv + 3], w, a[iv:iv + 3],
+                                               a[iv + 3:iv + 6]))
         dy[o + 10:o + 13] = a[iv + 3:iv + 6]
     return dy
 

@@ -340,10 +340,11 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
             free_steps += flight
             # the active drive held the fingers still through every step of this interval
             held = data.drives[model.grasps[data.active][0]].stalled
-            if not flight and compiled.applies(model, integrator):  # the substeps in one call
+            if compiled.applies(model, integrator):  # the interval's steps in one compiled call
+                n, h = (1, sim.dt_s) if flight else (sim.substeps, h_contact)
                 try:
                     n_steps, n_pairs, event, held = compiled.run_substeps(
-                        model, data, sim.substeps, h_contact, rec.peaks[data.active], J, JL, starts[-1],
+                        model, data, n, h, rec.peaks[data.active], J, JL, starts[-1],
                         scenario.completion.phase_timeout_s, max_phi, held)
                 except StateOverflow as e:
                     status, message = DIVERGED, f"{e} at t = {data.t:.4f} s"
@@ -353,36 +354,36 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
                 rec.substep(model, data, len(data.contacts.key))
                 if event == compiled.TOO_DEEP:
                     status, message = DIVERGED, _too_deep(data, max_phi)
-            for h in () if not flight and compiled.applies(model, integrator) else \
-                    _step_sizes(integrator, data, flight, sim.dt_s, h_contact, sim.substeps):
-                t_start = data.t
-                try:
-                    c = step(model, data, h, integrator)
-                except (StateOverflow, StepSizeUnderflow) as e:
-                    status, message = DIVERGED, f"{e} at t = {data.t:.4f} s"
-                    break
-                h = data.t - t_start  # an adaptive step may be shorter than asked
-                held = held and data.drives[model.grasps[data.active][0]].stalled
-                steps += 1
-                n = len(c.key)
-                pair_steps += n
-                rec.substep(model, data, n)
-                # impulse of the external forces on the free bodies: the contact forces from
-                # fixed bodies (a fixed base) and gravity
-                if fixed_contact:  # between free bodies every contact force is internal
-                    J += h * data.external_force_W
-                    JL += h * data.external_torque_O_W
-                if gravity:
-                    for j in model.free_joints:
-                        m_j = model.pin_model.inertias[j].mass
-                        r_G = data.p_W[j] + data.R_W[j] @ model.pin_model.inertias[j].lever
-                        J += h * m_j * g_W
-                        JL += h * np.cross(r_G, m_j * g_W)
-                if n and data.summary[7] > max_phi:
-                    status, message = DIVERGED, _too_deep(data, max_phi)
-                    break
-                if data.phase.phase == COMPLETE or data.t - starts[-1] > scenario.completion.phase_timeout_s:
-                    break
+            else:  # step by step
+                for h in _step_sizes(integrator, data, flight, sim.dt_s, h_contact, sim.substeps):
+                    t_start = data.t
+                    try:
+                        c = step(model, data, h, integrator)
+                    except (StateOverflow, StepSizeUnderflow) as e:
+                        status, message = DIVERGED, f"{e} at t = {data.t:.4f} s"
+                        break
+                    h = data.t - t_start  # an adaptive step may be shorter than asked
+                    held = held and data.drives[model.grasps[data.active][0]].stalled
+                    steps += 1
+                    n = len(c.key)
+                    pair_steps += n
+                    rec.substep(model, data, n)
+                    # impulse of the external forces on the free bodies: the contact forces from
+                    # fixed bodies (a fixed base) and gravity
+                    if fixed_contact:  # between free bodies every contact force is internal
+                        J += h * data.external_force_W
+                        JL += h * data.external_torque_O_W
+                    if gravity:
+                        for j in model.free_joints:
+                            m_j = model.pin_model.inertias[j].mass
+                            r_G = data.p_W[j] + data.R_W[j] @ model.pin_model.inertias[j].lever
+                            J += h * m_j * g_W
+                            JL += h * np.cross(r_G, m_j * g_W)
+                    if n and data.summary[7] > max_phi:
+                        status, message = DIVERGED, _too_deep(data, max_phi)
+                        break
+                    if data.phase.phase == COMPLETE or data.t - starts[-1] > scenario.completion.phase_timeout_s:
+                        break
             # a NaN or an infinity anywhere makes the sum non-finite; checked once a record
             if status != DIVERGED and not math.isfinite(data.q.sum() + data.v.sum()):
                 status = DIVERGED

@@ -343,10 +343,13 @@ def travel_rate(model: Model, data: Data) -> float:
 
 @njit
 def _travel_rate(idx_v, rows, reach, v, opening_rate):
-    rate = np.abs(opening_rate).max() if opening_rate.shape[0] else 0.0
+    rate = 0.0
+    for x in opening_rate:
+        rate = max(rate, abs(x))
     for b, r in zip(rows, reach):
         iv = idx_v[b]  # a free-flyer's v = (v_O, omega) in its frame; norms are frame-free
-        rate += np.linalg.norm(v[iv:iv + 3]) + np.linalg.norm(v[iv + 3:iv + 6]) * r
+        rate += math.sqrt(v[iv] ** 2 + v[iv + 1] ** 2 + v[iv + 2] ** 2) + \
+            math.sqrt(v[iv + 3] ** 2 + v[iv + 4] ** 2 + v[iv + 5] ** 2) * r
     return rate
 
 

@@ -404,8 +404,16 @@ def listed_search(near, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_sl
             out_m[n], out_s[n] = row, ls[idx]
             n += 1
     out_m, out_s = out_m[:n], out_s[:n]
-    searched = np.array([f for f in near if scan[f]], dtype=np.int64)
-    if searched.shape[0]:  # face pairs outside the ball regime: searched anew, merged by key
+    n_searched = 0
+    for f in near:
+        n_searched += scan[f]
+    if n_searched:  # face pairs outside the ball regime: searched anew, merged by key
+        searched = np.empty(n_searched, dtype=np.int64)
+        n_searched = 0
+        for f in near:
+            if scan[f]:
+                searched[n_searched] = f
+                n_searched += 1
         sm, ss, _ = grid_search(searched, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_slave, R_W, p_W,
                                 r1, radius, cutoff)
         out_m, out_s = np.concatenate((out_m, sm)), np.concatenate((out_s, ss))
