@@ -105,14 +105,16 @@ def test_interrupted_run_keeps_what_it_recorded(case_I, tmp_path, monkeypatch):
     """Ctrl-C ends the run as interrupted; its summary says so and is not a completed one."""
     import spotsim.run as run
 
-    real_step = run.step
+    def interrupting(real):
+        def then_interrupt(model, data, *args):
+            if data.t >= 0.05 - 1e-9:  # Ctrl-C once 50 ms are recorded
+                raise KeyboardInterrupt
+            return real(model, data, *args)
+        return then_interrupt
 
-    def step_then_interrupt(model, data, *args):
-        if data.t >= 0.05 - 1e-9:  # Ctrl-C once 50 ms are recorded
-            raise KeyboardInterrupt
-        return real_step(model, data, *args)
-
-    monkeypatch.setattr(run, "step", step_then_interrupt)
+    # the step-by-step path and the compiled loop alike
+    monkeypatch.setattr(run, "step", interrupting(run.step))
+    monkeypatch.setattr(run.compiled, "run_substeps", interrupting(run.compiled.run_substeps))
     r = spotsim.simulate(case_I)
     assert r.status == "interrupted" and len(r.timeseries["t"]) == 51
     spotsim.write_results(r, tmp_path, figures=False)

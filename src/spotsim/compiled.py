@@ -186,7 +186,7 @@ def run_substeps(model, data, n: int, h: float, peaks: dict, J: np.ndarray, JL: 
 
 def _leave(data, s, pairs, loads, summary) -> None:
     """Put the loop's last step into data as `step.step` leaves it."""
-    data.t, data.travel, data.list_travel = s[T], s[TRAVEL], s[LIST_TRAVEL]
+    data.t, data.travel, data.list_travel = float(s[T]), float(s[TRAVEL]), float(s[LIST_TRAVEL])
     data.contacts = Contacts(*pairs[:10])
     data.contacts.memory = (data.contacts.key, pairs[10], pairs[11])
     (local, data.joint_force_W, data.joint_torque_O_W, data.external_force_W, data.external_torque_O_W,

@@ -478,10 +478,11 @@ class AccuracyReport:
 
     def fastest_within(self, rel: float = WITHIN_REL, key: str = "max_err_rel") -> dict | None:
         """The row of the fastest setting whose error `key` (by default the largest of every
-        reported quantity) is within `rel` of the reference (not the reference, nor its
-        perturbed twin)."""
+        reported quantity) is within `rel` of the reference: a swept setting, not the reference,
+        its perturbed twin or its confirmation (a finer run, whose difference is the reference's
+        own uncertainty, reported as such)."""
         ref = self.reference_outcome.status
-        ok = [r for r in self.rows if r["role"] not in ("reference", "perturbed") and r["status"] == ref
+        ok = [r for r in self.rows if r["role"] not in ("reference", "perturbed", "confirmation") and r["status"] == ref
               and not math.isnan(r[key]) and r[key] <= rel]
         return min(ok, key=lambda r: r["wall_time_s"]) if ok else None
 
