@@ -22,7 +22,7 @@ from .contact.forces import raise_peaks
 from .grasp import PHASES
 from .integrators import SymplecticEuler, _symplectic_euler
 from .jit import direct, njit
-from .step import Contacts, _contact_kernels, _travel_rate, refresh_broad_phase
+from .step import Contacts, _contact_kernels, _travel_rate, near_face_pairs
 
 #: Why `substeps` returned: all its steps ran, the skin is used up (refresh coal and go on),
 #: the grasp phase completed or timed out, or a pair penetrated deeper than a sphere radius.
@@ -60,8 +60,9 @@ def substeps(n, h, q, v, R_W, p_W, w_W, vo_W, near, opening, opening_rate, mem_k
     mine: the active drive's fingers. watch: the active grasp's `Model.watch_args`. limits:
     (skin, deepest penetration, phase start, phase time-out, hold time, contact speed limit,
     net force limit, closing speed, grasp load, resume fraction), SI units. consts:
-    `loop_args`. Returns the new q, v, pair memory and pair list, the last step's pairs,
-    loads and summary (as `step._contact_kernels`), and why it returned (RAN ... TOO_DEEP).
+    `loop_args`. Returns the new q, v and pair list, the last step's pairs (whose memory is
+    the new pair memory), loads and summary (as `step._contact_kernels`), and why it returned
+    (RAN ... TOO_DEEP).
     """
     bodies, g_W, rows, reach, fixed_contact, contact_args = consts
     skin, max_phi, start, timeout, hold_s, max_speed, max_force, speed, grasp_load, resume = limits
@@ -136,7 +137,7 @@ def substeps(n, h, q, v, R_W, p_W, w_W, vo_W, near, opening, opening_rate, mem_k
         if s[TRAVEL] > skin and k + 1 < n:
             event = REFRESH
             break
-    return q, v, mem_key, mem_s, mem_vminus, pair_list, pairs, loads, summary, event
+    return q, v, pair_list, pairs, loads, summary, event
 
 
 _substeps = direct(substeps)
@@ -158,21 +159,19 @@ def run_substeps(model, data, n: int, h: float, peaks: dict, J: np.ndarray, JL: 
     drive, phase = data.drives[ee], data.phase
     limits = (model.params.skin, max_phi, start, timeout, phase.hold_s, phase.max_contact_speed,
               phase.max_net_force, drive.speed, drive.grasp_load, drive.resume_fraction)
-    s[T], s[TRAVEL], s[LIST_TRAVEL] = data.t, data.travel, data.list_travel
+    s[T] = data.t
     s[STALLED], s[PHASE], s[HELD] = drive.stalled, PHASES.index(phase.phase), held
     s[HELD_SINCE] = np.nan if phase._held_since is None else phase._held_since
     s[PEAK_PAIRS] = peaks["pairs"]
     event = REFRESH
     while event == REFRESH and s[STEPS] < n:
-        if data.travel > model.params.skin:
-            refresh_broad_phase(model, data)
-            s[TRAVEL], s[LIST_TRAVEL] = data.travel, data.list_travel
-        (data.q, data.v, data.mem_key, data.mem_s, data.mem_vminus, data.pair_list, pairs, loads, summary,
-         event) = _substeps(n - int(s[STEPS]), h, data.q, data.v, data.R_W, data.p_W, data.w_W, data.vo_W,
-                            data.near_pairs, data.opening, data.opening_rate, data.mem_key, data.mem_s,
-                            data.mem_vminus, data.pair_list, s, peaks["force"], peaks["torque"], peaks["norms"],
-                            J, JL, model.drive_fingers[ee], model.watch_args[data.active], limits,
-                            model.loop_args)
+        near = near_face_pairs(model, data)  # refreshed when the skin is used up
+        s[TRAVEL], s[LIST_TRAVEL] = data.travel, data.list_travel
+        data.q, data.v, data.pair_list, pairs, loads, summary, event = _substeps(
+            n - int(s[STEPS]), h, data.q, data.v, data.R_W, data.p_W, data.w_W, data.vo_W, near, data.opening,
+            data.opening_rate, data.mem_key, data.mem_s, data.mem_vminus, data.pair_list, s, peaks["force"],
+            peaks["torque"], peaks["norms"], J, JL, model.drive_fingers[ee], model.watch_args[data.active], limits,
+            model.loop_args)
         _leave(data, s, pairs, loads, summary)
     drive.stalled = bool(s[STALLED])
     phase.phase = PHASES[int(s[PHASE])]
@@ -189,6 +188,7 @@ def _leave(data, s, pairs, loads, summary) -> None:
     data.t, data.travel, data.list_travel = float(s[T]), float(s[TRAVEL]), float(s[LIST_TRAVEL])
     data.contacts = Contacts(*pairs[:10])
     data.contacts.memory = (data.contacts.key, pairs[10], pairs[11])
+    data.mem_key, data.mem_s, data.mem_vminus = data.contacts.memory
     (local, data.joint_force_W, data.joint_torque_O_W, data.external_force_W, data.external_torque_O_W,
      data.finger_load) = loads
     for view, w in zip(data.f_views, local):

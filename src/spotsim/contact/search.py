@@ -12,6 +12,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ..bodies import mv3
 from ..jit import njit
 from .detection import NORMAL_EPS
 
@@ -111,14 +112,6 @@ def face_table(face_pairs) -> FaceTable:
 
 
 @njit
-def _rotate(R, x):
-    """R x for a 3x3 R and a 3-vector x, as a 3-tuple."""
-    return (R[0, 0] * x[0] + R[0, 1] * x[1] + R[0, 2] * x[2],
-            R[1, 0] * x[0] + R[1, 1] * x[1] + R[1, 2] * x[2],
-            R[2, 0] * x[0] + R[2, 1] * x[1] + R[2, 2] * x[2])
-
-
-@njit
 def _dot(a, b):
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
@@ -130,9 +123,9 @@ def _face_frame(f, table, N1_J, finger1, axis1_J, opening, R_W, p_W):
     centre in its joint's frame to face coordinates (u, v, height above the face plane), and
     the common normal in world (3,)."""
     Rs, ps = R_W[table.slave_joint[f]], p_W[table.slave_joint[f]]
-    b0, b1, b2 = _rotate(Rs, table.t1_J[f]), _rotate(Rs, table.t2_J[f]), _rotate(Rs, table.n_J[f])
+    b0, b1, b2 = mv3(Rs, table.t1_J[f]), mv3(Rs, table.t2_J[f]), mv3(Rs, table.n_J[f])
     Rm, pm = R_W[table.master_joint[f]], p_W[table.master_joint[f]]
-    nm = _rotate(Rm, N1_J[table.master_start[f]])
+    nm = mv3(Rm, N1_J[table.master_start[f]])
     dn = (b2[0] - nm[0], b2[1] - nm[1], b2[2] - nm[2])
     norm = math.sqrt(_dot(dn, dn))
     A = np.empty((3, 3))
@@ -143,7 +136,7 @@ def _face_frame(f, table, N1_J, finger1, axis1_J, opening, R_W, p_W):
         n_W[a] = dn[a] / norm
     # the common normal in face coordinates
     nu, nv, nh = _dot(dn, b0) / norm, _dot(dn, b1) / norm, _dot(dn, b2) / norm
-    o = _rotate(Rs, table.origin_J[f])
+    o = mv3(Rs, table.origin_J[f])
     # a master centre c (its joint's frame) in face coordinates is A c + off: the rows of A are
     # the face axes in the master's frame, and off holds the master origin and the finger's
     # opening, which shifts all the face's spheres alike (a face is on one finger)
@@ -373,7 +366,7 @@ def listed_search(near, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_sl
     n_table = table.master_start.shape[0]
     slot = np.full(n_table, -1, dtype=np.int64)
     k = near.shape[0]
-    A_k, off_k, n_k = np.empty((k, 3, 3)), np.empty((k, 3)), np.empty((k, 5))
+    A_k, off_k, n_k = np.empty((k, 3, 3)), np.empty((k, 3)), np.empty((k, 3))
     valid = travel <= LIST_SKIN / LIST_SAFETY
     for m in range(k):
         f = near[m]
@@ -381,7 +374,7 @@ def listed_search(near, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_sl
         facing, nu, nv, nh, A, off, n_W = _face_frame(f, table, N1_J, finger1, axis1_J, opening, R_W, p_W)
         A_k[m] = A
         off_k[m, 0], off_k[m, 1], off_k[m, 2] = off
-        n_k[m, 0], n_k[m, 1], n_k[m, 2], n_k[m, 3] = nu, nv, nh, 1.0 if facing else 0.0
+        n_k[m, 0], n_k[m, 1], n_k[m, 2] = nu, nv, nh
         if not scan[f] and (not facing or math.sqrt((n_W[0] - normal_W[f, 0]) ** 2 + (n_W[1] - normal_W[f, 1]) ** 2
                                                     + (n_W[2] - normal_W[f, 2]) ** 2) > LIST_NORMAL_TOL):
             valid = False
