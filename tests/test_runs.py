@@ -114,7 +114,7 @@ def test_interrupted_run_keeps_what_it_recorded(case_I, tmp_path, monkeypatch):
 
     # the step-by-step path and the compiled loop alike
     monkeypatch.setattr(run, "step", interrupting(run.step))
-    monkeypatch.setattr(run.compiled, "run_substeps", interrupting(run.compiled.run_substeps))
+    monkeypatch.setattr(run.compiled, "run_records", interrupting(run.compiled.run_records))
     r = spotsim.simulate(case_I)
     assert r.status == "interrupted" and len(r.timeseries["t"]) == 51
     spotsim.write_results(r, tmp_path, figures=False)

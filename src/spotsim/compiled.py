@@ -1,14 +1,15 @@
-"""The default step, compiled whole: the substeps of a record interval in one call.
+"""The default step, compiled whole: the record intervals between two returns in one call.
 
 For the default setting (symplectic Euler, the culled search, a scene of free bodies only)
 the stages of `step.step` run in one compiled loop: contact (`step._contact_kernels`), the
 dynamics (`bodies.free_body_accelerations`, ABA for free bodies), the update
 (`integrators._symplectic_euler`), the finger drive, the travel bounds, the grasp phase, and
-the run loop's per-substep bookkeeping (peaks, external impulses, divergence by penetration).
-The loop returns to Python when the interval is done, when coal's face pairs must be
-refreshed (the Verlet skin is used up), when the grasp phase completes or times out, or when a
-pair penetrates too deep. It does what `step.step` and the run loop do, in the same order and
-with the same arithmetic; the tests hold the two to that.
+the run loop's per-substep bookkeeping (peaks, external impulses, divergence by penetration);
+and, at each interval's end, the run loop's record (`record.close_interval`). The loop
+returns to Python when coal's face pairs must be refreshed (the Verlet skin is used up), at
+the replay's next snapshot, when the grasp phase completes or times out, or when the run
+diverges. It does what `step.step` and the run loop do, in the same order and with the same
+arithmetic; the tests hold the two to that.
 """
 
 from __future__ import annotations
@@ -22,16 +23,18 @@ from .contact.forces import raise_peaks
 from .grasp import PHASES
 from .integrators import SymplecticEuler, _symplectic_euler
 from .jit import direct, njit
-from .step import Contacts, _contact_kernels, _travel_rate, near_face_pairs
+from .record import ENERGY as ENERGY_RECORD, NONFINITE as NONFINITE_RECORD, close_interval
+from .step import FREE_FLIGHT_SAFETY, Contacts, _contact_kernels, _travel_rate, near_face_pairs
 
-#: Why `substeps` returned: all its steps ran, the skin is used up (refresh coal and go on),
-#: the grasp phase completed or timed out, or a pair penetrated deeper than a sphere radius.
-RAN, REFRESH, STOPPED, TOO_DEEP = range(4)
+#: Why `substeps` or `intervals` returned: all their steps or records ran; the skin is used up
+#: (refresh coal and go on); the grasp phase completed or timed out; a pair penetrated deeper
+#: than a sphere radius; the state became non-finite; energy grew in a passive phase.
+RAN, REFRESH, STOPPED, TOO_DEEP, NONFINITE, ENERGY = range(6)
 
 # slots of the loop's scalar state, read and written in place
 (T, TRAVEL, LIST_TRAVEL, STALLED, PHASE, HELD_SINCE, T_CENTRING, T_COMPLETE, HELD, STEPS, PAIR_STEPS,
- PEAK_PAIRS) = range(12)
-N_SCALARS = 12
+ PEAK_PAIRS, LEFT, H, FLIGHTS) = range(15)
+N_SCALARS = 15
 
 
 def applies(model, integrator) -> bool:
@@ -49,12 +52,12 @@ def loop_args(model) -> tuple:
 
 
 @njit
-def substeps(n, h, q, v, R_W, p_W, w_W, vo_W, near, opening, opening_rate, mem_key, mem_s, mem_vminus,
+def substeps(h, q, v, R_W, p_W, w_W, vo_W, near, opening, opening_rate, mem_key, mem_s, mem_vminus,
              pair_list, s, peak_f, peak_t, peak_n, J, JL, mine, watch, limits, consts):
-    """Up to n steps of h (s) of `step.step` with symplectic Euler, and the run loop's
-    bookkeeping of each, compiled.
+    """The s[LEFT] steps of h (s) left in a record interval (fewer if it must return) of
+    `step.step` with symplectic Euler, and the run loop's bookkeeping of each, compiled.
 
-    s: (N_SCALARS,) the scalar state (slots T ... PEAK_PAIRS), in place. peak_f, peak_t,
+    s: (N_SCALARS,) the scalar state (slots T ... FLIGHTS), in place. peak_f, peak_t,
     peak_n: the active grasp's peaks (`contact.forces.raise_peaks`), in place. J, JL: (3,)
     external impulse on the free bodies and its moment about the world origin, in place.
     mine: the active drive's fingers. watch: the active grasp's `Model.watch_args`. limits:
@@ -62,14 +65,14 @@ def substeps(n, h, q, v, R_W, p_W, w_W, vo_W, near, opening, opening_rate, mem_k
     net force limit, closing speed, grasp load, resume fraction), SI units. consts:
     `loop_args`. Returns the new q, v and pair list, the last step's pairs (whose memory is
     the new pair memory), loads and summary (as `step._contact_kernels`), and why it returned
-    (RAN ... TOO_DEEP).
+    (RAN, REFRESH, STOPPED or TOO_DEEP).
     """
     bodies, g_W, rows, reach, fixed_contact, contact_args = consts
     skin, max_phi, start, timeout, hold_s, max_speed, max_force, speed, grasp_load, resume = limits
     ee_joint, R_ee, module_joint, lever = watch
     gravity = g_W[0] != 0.0 or g_W[1] != 0.0 or g_W[2] != 0.0
     event = RAN
-    for k in range(n):
+    while s[LEFT] > 0:
         # forces -> dynamics -> integrate (SymplecticEuler.advance)
         pairs, loads, summary, pair_list, s[LIST_TRAVEL] = _contact_kernels(
             q, v, R_W, p_W, w_W, vo_W, near, opening, opening_rate, mem_key, mem_s, mem_vminus, h, pair_list,
@@ -77,6 +80,7 @@ def substeps(n, h, q, v, R_W, p_W, w_W, vo_W, near, opening, opening_rate, mem_k
         mem_key, mem_s, mem_vminus = pairs[2], pairs[10], pairs[11]
         a = free_body_accelerations(bodies, q, v, loads[0], g_W)
         q, v = _symplectic_euler(bodies, q, v, a, h)
+        s[LEFT] -= 1
         # the active drive sets its fingers' rate from this step's loads (grasp.FingerDrive)
         if mine.shape[0]:
             force = 0.0
@@ -134,53 +138,115 @@ def substeps(n, h, q, v, R_W, p_W, w_W, vo_W, near, opening, opening_rate, mem_k
         if s[PHASE] == 2 or t - start > timeout:
             event = STOPPED
             break
-        if s[TRAVEL] > skin and k + 1 < n:
+        if s[TRAVEL] > skin and s[LEFT] > 0:
             event = REFRESH
             break
     return q, v, pair_list, pairs, loads, summary, event
 
 
-_substeps = direct(substeps)
+@njit
+def intervals(n_records, dt, n_sub, q, v, R_W, p_W, w_W, vo_W, near, opening, opening_rate, mem_key, mem_s,
+              mem_vminus, pair_list, s, peak_f, peak_t, peak_n, J, JL, mine, watch, limits, consts, rows, rs,
+              last_open, grasp, ee, k, record):
+    """Up to n_records record intervals of dt (s) of the run loop, compiled: each a free-flight
+    step of dt when nothing can touch within it (zero gravity, coal's face pairs beyond the
+    margin, the travel bound within the skin: `step.free_flight`), else n_sub `substeps`;
+    then `record.close_interval`, whose rows go into rows (n_records, width).
 
-
-def run_substeps(model, data, n: int, h: float, peaks: dict, J: np.ndarray, JL: np.ndarray, start: float,
-                 timeout: float, max_phi: float, held: bool) -> tuple[int, int, int, bool]:
-    """n steps of h of the active grasp (fewer if its phase ends or a pair goes too deep), with
-    coal refreshed as the skin requires; data is left as `step.step` leaves it.
-
-    peaks: the active grasp's peaks (the recorder's), raised in place; J, JL: the external
-    impulse and its moment, added to in place; start, timeout: the phase's start and time-out,
-    s; max_phi: the deepest penetration allowed, m; held: whether the drive has held so far in
-    this record interval. Returns (steps taken, pair steps, why it returned, whether the
-    drive held throughout). Raises StateOverflow when coal cannot bound the state.
+    Must be entered with the skin not used up (s[TRAVEL] <= skin) or within an interval
+    (s[LEFT] > 0): it then takes at least one step. Arguments as `substeps`, and: rs, J, JL,
+    last_open, grasp, ee, k, record: `record.close_interval`'s. Returns as `substeps` (the
+    event RAN when n_records rows are written, NONFINITE or ENERGY as `close_interval`
+    finds) and the rows written.
     """
+    bodies, g_W, reach_rows, reach, _, _ = consts
+    skin, start, timeout = limits[0], limits[2], limits[3]
+    gravity = g_W[0] != 0.0 or g_W[1] != 0.0 or g_W[2] != 0.0
+    n_rows = 0
+    while True:
+        if s[LEFT] == 0:  # a new interval
+            if s[TRAVEL] > skin:
+                event = REFRESH
+                break
+            flight = (not gravity and near.shape[0] == 0 and s[TRAVEL] + FREE_FLIGHT_SAFETY * dt * _travel_rate(
+                bodies.idx_v, reach_rows, reach, v, opening_rate) <= skin)
+            s[FLIGHTS] += flight
+            s[LEFT], s[H] = (1.0, dt) if flight else (float(n_sub), dt / n_sub)
+            s[HELD] = s[STALLED]  # the drive holds through the interval so far
+        q, v, pair_list, pairs, loads, summary, event = substeps(
+            s[H], q, v, R_W, p_W, w_W, vo_W, near, opening, opening_rate, mem_key, mem_s, mem_vminus, pair_list, s,
+            peak_f, peak_t, peak_n, J, JL, mine, watch, limits, consts)
+        mem_key, mem_s, mem_vminus = pairs[2], pairs[10], pairs[11]
+        if event == REFRESH or event == TOO_DEEP:
+            break
+        s[LEFT] = 0.0  # the interval ends here (early if its phase ended)
+        code = close_interval(rows[n_rows], rs, J, JL, s[HELD] != 0.0, s[T], q, v, pairs[3], pairs[10], summary,
+                              pairs[2].shape[0], pairs[9], opening, loads[5], last_open, int(s[PHASE]), grasp, ee, k,
+                              record)
+        if code == NONFINITE_RECORD:
+            event = NONFINITE
+            break
+        n_rows += 1
+        if code == ENERGY_RECORD:
+            event = ENERGY
+            break
+        if s[PHASE] == 2 or s[T] - start > timeout:
+            event = STOPPED
+            break
+        if n_rows == n_records:
+            event = RAN
+            break
+    return q, v, pair_list, pairs, loads, summary, event, n_rows
+
+
+_intervals = direct(intervals)
+
+
+def run_records(model, data, n_records: int, rec, J: np.ndarray, JL: np.ndarray, start: float, timeout: float,
+                max_phi: float) -> tuple[int, int, int, int, int]:
+    """Up to n_records record intervals of the active grasp (fewer if its phase ends or the run
+    diverges), with coal refreshed as the skin requires; data is left as `step.step` leaves
+    it, and the rows go to the recorder rec (`run.Recorder`).
+
+    J, JL: the external impulse and its moment, added to in place; start, timeout: the
+    phase's start and time-out, s; max_phi: the deepest penetration allowed, m. Returns (why
+    it returned: RAN, STOPPED, TOO_DEEP, NONFINITE or ENERGY; rows recorded; steps taken;
+    pair steps; free-flight steps). Raises StateOverflow when coal cannot bound the state.
+    """
+    sim = model.scenario.simulation
     s = np.zeros(N_SCALARS)
-    ee, _ = model.grasps[data.active]
+    ee, k = model.grasps[data.active]
     drive, phase = data.drives[ee], data.phase
+    peaks = rec.peaks[data.active]
     limits = (model.params.skin, max_phi, start, timeout, phase.hold_s, phase.max_contact_speed,
               phase.max_net_force, drive.speed, drive.grasp_load, drive.resume_fraction)
     s[T] = data.t
-    s[STALLED], s[PHASE], s[HELD] = drive.stalled, PHASES.index(phase.phase), held
+    s[STALLED], s[PHASE] = drive.stalled, PHASES.index(phase.phase)
     s[HELD_SINCE] = np.nan if phase._held_since is None else phase._held_since
     s[PEAK_PAIRS] = peaks["pairs"]
-    event = REFRESH
-    while event == REFRESH and s[STEPS] < n:
+    if len(rec.buffer) < n_records:
+        rec.buffer = np.empty((n_records, rec.layout.width))
+    n_rows, event = 0, REFRESH
+    while event == REFRESH:
         near = near_face_pairs(model, data)  # refreshed when the skin is used up
         s[TRAVEL], s[LIST_TRAVEL] = data.travel, data.list_travel
-        data.q, data.v, data.pair_list, pairs, loads, summary, event = _substeps(
-            n - int(s[STEPS]), h, data.q, data.v, data.R_W, data.p_W, data.w_W, data.vo_W, near, data.opening,
-            data.opening_rate, data.mem_key, data.mem_s, data.mem_vminus, data.pair_list, s, peaks["force"],
-            peaks["torque"], peaks["norms"], J, JL, model.drive_fingers[ee], model.watch_args[data.active], limits,
-            model.loop_args)
+        data.q, data.v, data.pair_list, pairs, loads, summary, event, rows = _intervals(
+            n_records - n_rows, sim.dt_s, sim.substeps, data.q, data.v, data.R_W, data.p_W, data.w_W, data.vo_W,
+            near, data.opening, data.opening_rate, data.mem_key, data.mem_s, data.mem_vminus, data.pair_list, s,
+            peaks["force"], peaks["torque"], peaks["norms"], J, JL, model.drive_fingers[ee],
+            model.watch_args[data.active], limits, model.loop_args, rec.buffer, rec.state, rec.last_open,
+            data.active, ee, k, rec.args(model))
         _leave(data, s, pairs, loads, summary)
-    drive.stalled = bool(s[STALLED])
-    phase.phase = PHASES[int(s[PHASE])]
-    phase._held_since = None if math.isnan(s[HELD_SINCE]) else float(s[HELD_SINCE])
-    for slot, name in ((T_CENTRING, PHASES[1]), (T_COMPLETE, PHASES[2])):
-        if s[slot] and name not in phase.times:
-            phase.times[name] = float(s[slot])
+        drive.stalled = bool(s[STALLED])
+        phase.phase = PHASES[int(s[PHASE])]
+        phase._held_since = None if math.isnan(s[HELD_SINCE]) else float(s[HELD_SINCE])
+        for slot, name in ((T_CENTRING, PHASES[1]), (T_COMPLETE, PHASES[2])):
+            if s[slot] and name not in phase.times:
+                phase.times[name] = float(s[slot])
+        rec.add_rows(model, data, rec.buffer[:rows])
+        n_rows += rows
     peaks["pairs"] = int(s[PEAK_PAIRS])
-    return int(s[STEPS]), int(s[PAIR_STEPS]), event, bool(s[HELD])
+    return event, n_rows, int(s[STEPS]), int(s[PAIR_STEPS]), int(s[FLIGHTS])
 
 
 def _leave(data, s, pairs, loads, summary) -> None:

@@ -207,19 +207,6 @@ class Model:
         return np.arange(len(self.bodies.joint), dtype=np.int64)
 
     @cached_property
-    def row_cache(self) -> dict:
-        """Rows in `bodies` of sets of free joints, as the recorder asks for them."""
-        return {}
-
-    @cached_property
-    def momentum_call(self):
-        """`bodies.bodies_momentum`, called directly once compiled (`jit.direct`)."""
-        from .bodies import bodies_momentum
-        from .jit import direct
-
-        return direct(bodies_momentum)
-
-    @cached_property
     def body_row(self) -> dict[int, int]:
         """Each free joint's row in `bodies`."""
         return {int(j): b for b, j in enumerate(self.bodies.joint)}

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass, field
 
@@ -11,18 +10,21 @@ import pinocchio as pin
 
 from . import compiled
 from .contact.forces import raise_peaks
-from .contact.friction import SLIPPING, STICKING
 from .grasp import COMPLETE, PHASES, SELF_CENTRING
 from .contact.search import FacePair
 from .integrators import StepSizeUnderflow, make_integrator
 from .model import Model, build_model, grasp_frame, groove_frame
 from .scenario import tolerance_warnings
-from .stability import ENERGY_FLOOR_J, ENERGY_GROWTH, mechanical_energy, stability_warnings
+from .jit import direct
+from .record import (DRIFT_ANG, DRIFT_LIN, E_NOW, E_PASSIVE, ENERGY, L_MAX, N_RECORD_STATE, NONFINITE, OK, P_MAX,
+                     Layout, close_interval, record_args, sample, start_record)
+from .stability import stability_warnings
 from .step import StateOverflow, completion_inputs, free_flight, make_data, step
 from .weld import twist_for_momentum, world_momentum
 
 COMPLETED, INCOMPLETE, DIVERGED, INTERRUPTED = "completed", "incomplete", "diverged", "interrupted"
-NO_WRENCH = np.zeros(3)
+NO_PHI = np.zeros(0)
+NO_STATES = np.zeros(0, dtype=np.int64)
 
 #: Contact snapshots per simulated second kept for `spotsim replay`: its highest display rate.
 #: 100 Hz is ten samples of a 10 ms bounce; a snapshot takes ~50 us, under 0.5 % of a Case I
@@ -63,48 +65,25 @@ def body_momentum_W(model: Model, data, j: int) -> pin.Force:
     return world_momentum(data.pin_data.oMi[j], model.pin_model.inertias[j], data.pin_data.v[j])
 
 
-def free_momentum_W(model: Model, data) -> tuple[np.ndarray, np.ndarray, float, float]:
-    """Total linear and angular momentum (about the world origin) of the free bodies, and the
-    largest single body's linear and angular momentum magnitudes. From (q, v) directly."""
-    return model.momentum_call(model.bodies, model.all_bodies, data.q, data.v)[:4]
-
-
-def centroid_W(model: Model, data, joints) -> np.ndarray:
-    """Centroid (world) of the free bodies of `joints`, from q."""
-    joints = tuple(joints)
-    rows = model.row_cache.get(joints)
-    if rows is None:
-        rows = model.row_cache[joints] = np.array([model.body_row[j] for j in joints], dtype=np.int64)
-    return model.momentum_call(model.bodies, rows, data.q, data.v)[4]
-
-
 class Recorder:
-    """Samples the state at every recorded step and keeps per-grasp peaks over every substep.
+    """Records a row at the end of every record interval (`record.close_interval`) and keeps
+    per-grasp peaks over every substep and the replay's contact snapshots.
 
     The model may change (a weld): quantities are recorded by name, per module and per
-    end-effector of the first model.
+    end-effector of the first model (`record.Layout`).
     """
 
     def __init__(self, model: Model):
         self.first = model
-        self.fingers = [f.name for f in model.fingers]
-        self.last_opening = {f.name: f.opening_start for f in model.fingers}
-        self.rows: dict[str, list] = {k: [] for k in (
-            "t", "module_pos_m", "module_quat_xyzw", "offset_mm", "rpy_deg", "module_vel_m_s",
-            "module_omega_rad_s", "force_N", "torque_Nm", "finger_opening_mm", "finger_load_N",
-            "pairs_slipping", "pairs_sticking", "phase", "grasp", "max_penetration_um")}
-        if model.robot_joint:
-            for k in ("robot_centroid_m", "base_pos_m", "base_quat_xyzw", "system_centroid_m"):
-                self.rows[k] = []
-            for mod in model.modules:
-                self.rows[f"{mod.name}_pos_m"] = []
-                self.rows[f"{mod.name}_quat_xyzw"] = []
-            for ee in model.end_effectors:
-                self.rows[f"{ee.name}_pos_m"] = []
+        self.layout = Layout(model)
+        self.fingers = self.layout.fingers
+        self.last_open = np.array([f.opening_start for f in model.fingers], dtype=float)
+        self.chunks: list[np.ndarray] = []  # rows, (n, layout.width) each
+        self.n_rows = 0
+        self.state = np.zeros(N_RECORD_STATE)  # record.close_interval's: energy, momentum balance
+        self.buffer = np.empty((1, self.layout.width))
         # norms: the peak |force| and |torque|
         self.peaks = [dict(force=np.zeros(3), torque=np.zeros(3), norms=np.zeros(2), pairs=0) for _ in model.grasps]
-        self.force_a = np.zeros(3)
-        self.torque_a = np.zeros(3)
         # the replay's contact snapshots, every `replay_every`-th sample: spheres by their index
         # in the first model, so that a weld (a new model) does not renumber them
         self.replay_every = max(1, int(round(1.0 / (REPLAY_RATE_HZ * model.scenario.simulation.dt_s))))
@@ -112,62 +91,63 @@ class Recorder:
         self.snapshots: dict[str, list] = {k: [] for k in (
             "row", "pairs", "master", "slave", "state", "faces_in_range", "force_W")}
         self._ids = (None, None)  # (model, its SphereIds in the first model)
+        self._args = (None, None)  # (model, its record.record_args)
+        self._sample, self._close = direct(sample), direct(close_interval)
+
+    def args(self, model: Model) -> tuple:
+        """`record.record_args` of `model` (the current one)."""
+        if self._args[0] is not model:
+            self._args = (model, record_args(model, self.layout))
+        return self._args[1]
 
     def substep(self, model: Model, data, n_pairs: int) -> None:
-        if n_pairs == 0:
-            self.force_a = self.torque_a = NO_WRENCH  # never written to
-            return
-        # the combined wrench on the active module, in O_a: force, and moment about its centroid
-        self.force_a, self.torque_a = data.summary[:3], data.summary[3:6]
-        p = self.peaks[data.active]
-        raise_peaks(p["force"], p["torque"], p["norms"], data.summary)
-        p["pairs"] = max(p["pairs"], n_pairs)
+        """Raise the active grasp's peaks by a step's contact wrench (step-by-step path)."""
+        if n_pairs:
+            p = self.peaks[data.active]
+            raise_peaks(p["force"], p["torque"], p["norms"], data.summary)
+            p["pairs"] = max(p["pairs"], n_pairs)
 
-    def sample(self, model: Model, data) -> None:
-        """Record the state; data.pin_data must hold the kinematics of (q, v)."""
-        r = self.rows
-        ee, k = model.grasps[data.active]
-        grooves = [groove_frame(model, data.pin_data, i) for i in range(len(model.modules))]
-        grasps = [grasp_frame(model, data.pin_data, i) for i in range(len(model.end_effectors))]
-        oMa, oMb = grasps[ee], grooves[k]
-        aMb = oMa.actInv(oMb)
-        j = model.modules[k].joint
-        nu = data.pin_data.v[j]
-        R_j = data.pin_data.oMi[j].rotation
+    def start(self, model: Model, data) -> None:
+        """The first row, and the momentum the balance starts from."""
+        start_record(self.state, data.q, data.v, self.args(model))
+        row = self.buffer[0]
+        self._sample(row, float(data.t), data.q, data.v, data.summary, 0, NO_STATES, data.opening,
+                     data.finger_load, self.last_open, PHASES.index(data.phase.phase), data.active,
+                     *model.grasps[data.active], self.args(model))
+        self.add_rows(model, data, self.buffer[:1])
+
+    def close(self, model: Model, data, held: bool, J: np.ndarray, JL: np.ndarray) -> int:
+        """`record.close_interval` on data's state: OK, NONFINITE (nothing recorded) or ENERGY."""
         c = data.contacts
-        states = np.bincount(c.state, minlength=3) if c is not None and len(c.key) else np.zeros(3, int)
-        names = [f.name for f in model.fingers]
-        for i, name in enumerate(names):
-            self.last_opening[name] = data.opening[i]
-        r["t"].append(data.t)
-        r["module_pos_m"].append(oMb.translation.copy())
-        r["module_quat_xyzw"].append(pin.SE3ToXYZQUAT(oMb)[3:])
-        r["offset_mm"].append(aMb.translation * 1e3)
-        r["rpy_deg"].append(np.degrees(pin.rpy.matrixToRpy(aMb.rotation)))
-        r["module_vel_m_s"].append(R_j @ nu.linear)
-        r["module_omega_rad_s"].append(R_j @ nu.angular)
-        r["force_N"].append(self.force_a)
-        r["torque_Nm"].append(self.torque_a)
-        r["finger_opening_mm"].append([self.last_opening[n] * 1e3 for n in self.fingers])
-        r["finger_load_N"].append([data.finger_load[names.index(n)] if n in names else 0.0 for n in self.fingers])
-        r["pairs_slipping"].append(states[SLIPPING])
-        r["pairs_sticking"].append(states[STICKING])
-        r["phase"].append(PHASES.index(data.phase.phase))
-        r["grasp"].append(data.active)
-        r["max_penetration_um"].append(data.summary[7] * 1e6 if c is not None and len(c.key) else 0.0)
-        if model.robot_joint:
-            base = data.pin_data.oMi[model.robot_joint]
-            r["robot_centroid_m"].append(centroid_W(model, data, [model.robot_joint]))
-            r["base_pos_m"].append(base.translation.copy())
-            r["base_quat_xyzw"].append(pin.SE3ToXYZQUAT(base)[3:])
-            r["system_centroid_m"].append(centroid_W(model, data, model.free_joints))
-            for mod, M in zip(model.modules, grooves, strict=True):
-                r[f"{mod.name}_pos_m"].append(M.translation.copy())
-                r[f"{mod.name}_quat_xyzw"].append(pin.SE3ToXYZQUAT(M)[3:])
-            for e, M in zip(model.end_effectors, grasps, strict=True):
-                r[f"{e.name}_pos_m"].append(M.translation.copy())
-        if (len(r["t"]) - 1) % self.replay_every == 0:
-            self.snapshot(model, data, len(r["t"]) - 1)
+        n = len(c.key)
+        code = self._close(self.buffer[0], self.state, J, JL, held, float(data.t), data.q, data.v,
+                           c.phi if n else NO_PHI, data.mem_s, data.summary, n, c.state if n else NO_STATES,
+                           data.opening, data.finger_load, self.last_open, PHASES.index(data.phase.phase),
+                           data.active, *model.grasps[data.active], self.args(model))
+        if code != NONFINITE:
+            self.add_rows(model, data, self.buffer[:1])
+        return code
+
+    def add_rows(self, model: Model, data, rows: np.ndarray) -> None:
+        """Keep rows (n, width), the last of them data's state; take the replay's snapshot if
+        that one is due."""
+        if not len(rows):
+            return
+        self.chunks.append(rows.copy())
+        self.n_rows += len(rows)
+        if (self.n_rows - 1) % self.replay_every == 0:
+            self.snapshot(model, data, self.n_rows - 1)
+
+    def to_snapshot(self) -> int:
+        """Rows to record before the next snapshot is due (at least 1)."""
+        return self.replay_every - (self.n_rows - 1) % self.replay_every
+
+    @property
+    def momentum_drift(self) -> tuple[float, float]:
+        """The largest drift of the free bodies' linear and angular momentum, relative to the
+        largest single body's (`record.close_interval`)."""
+        s = self.state
+        return s[DRIFT_LIN] / max(s[P_MAX], 1e-300), s[DRIFT_ANG] / max(s[L_MAX], 1e-300)
 
     def snapshot(self, model: Model, data, row: int) -> None:
         """Keep what the replay draws at sample `row`: the pairs in contact (their spheres and
@@ -197,7 +177,8 @@ class Recorder:
         s["force_W"].append(F)
 
     def arrays(self) -> dict[str, np.ndarray]:
-        return {k: np.asarray(v) for k, v in self.rows.items()}
+        rows = np.concatenate(self.chunks) if self.chunks else np.zeros((0, self.layout.width))
+        return self.layout.split(rows)
 
     def replay_arrays(self) -> dict[str, np.ndarray]:
         """The snapshots as the arrays of replay.npz (pairs of all snapshots concatenated)."""
@@ -312,49 +293,47 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
     integrator = make_integrator(sim.integrator, model.pin_model)
     data = make_data(model)
     rec = Recorder(model)
-    refresh_kinematics(model, data)
-    P0, L0, p_max, l_max = free_momentum_W(model, data)
     J, JL = np.zeros(3), np.zeros(3)
     fixed_contact = model.fixed_contact
     g_W = np.array(sim.gravity_m_s2)
     gravity = bool(np.any(g_W))
-    drift_lin = drift_ang = 0.0
     max_phi = min(model.params.r1, model.params.r2)
+    timeout = scenario.completion.phase_timeout_s
     status, message = INCOMPLETE, ""
     starts = [0.0]  # when each grasp's drive started
     welds, retired = [], []  # the integrators' counts of the models before each weld
-    e_passive = None  # mechanical energy when the current passive phase began, J
-    rec.sample(model, data)
+    rec.start(model, data)
     bar = progress_bar(n_records, progress)
     wall0 = time.perf_counter()
     steps = free_steps = pair_steps = 0
+    done = 0  # record intervals taken
     try:
-        for _ in range(n_records):
-            # nothing can touch before the next record (zero gravity): one step to it; else
-            # the dynamics substeps
-            try:
-                flight = not gravity and free_flight(model, data, sim.dt_s)
-            except StateOverflow as e:  # its broad phase met a state coal cannot bound
-                status, message = DIVERGED, f"{e} at t = {data.t:.4f} s"
-                break
-            free_steps += flight
-            # the active drive held the fingers still through every step of this interval
-            held = data.drives[model.grasps[data.active][0]].stalled
-            if compiled.applies(model, integrator):  # the interval's steps in one compiled call
-                n, h = (1, sim.dt_s) if flight else (sim.substeps, h_contact)
+        while done < n_records:
+            if compiled.applies(model, integrator):  # intervals up to the next snapshot in one call
                 try:
-                    n_steps, n_pairs, event, held = compiled.run_substeps(
-                        model, data, n, h, rec.peaks[data.active], J, JL, starts[-1],
-                        scenario.completion.phase_timeout_s, max_phi, held)
-                except StateOverflow as e:
+                    event, n_rows, n_steps, n_pairs, n_free = compiled.run_records(
+                        model, data, min(n_records - done, rec.to_snapshot()), rec, J, JL, starts[-1], timeout,
+                        max_phi)
+                except StateOverflow as e:  # its broad phase met a state coal cannot bound
                     status, message = DIVERGED, f"{e} at t = {data.t:.4f} s"
                     break
                 steps += n_steps
                 pair_steps += n_pairs
-                rec.substep(model, data, len(data.contacts.key))
+                free_steps += n_free
+                code = {compiled.NONFINITE: NONFINITE, compiled.ENERGY: ENERGY}.get(event, OK)
                 if event == compiled.TOO_DEEP:
                     status, message = DIVERGED, _too_deep(data, max_phi)
-            else:  # step by step
+            else:  # one interval step by step
+                # nothing can touch before the next record (zero gravity): one step to it; else
+                # the dynamics substeps
+                try:
+                    flight = not gravity and free_flight(model, data, sim.dt_s)
+                except StateOverflow as e:
+                    status, message = DIVERGED, f"{e} at t = {data.t:.4f} s"
+                    break
+                free_steps += flight
+                # the active drive held the fingers still through every step of this interval
+                held = data.drives[model.grasps[data.active][0]].stalled
                 for h in _step_sizes(integrator, data, flight, sim.dt_s, h_contact, sim.substeps):
                     t_start = data.t
                     try:
@@ -362,7 +341,8 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
                     except (StateOverflow, StepSizeUnderflow) as e:
                         status, message = DIVERGED, f"{e} at t = {data.t:.4f} s"
                         break
-                    h = data.t - t_start  # an adaptive step may be shorter than asked
+                    if integrator.adaptive:  # its step may be shorter than asked
+                        h = data.t - t_start
                     held = held and data.drives[model.grasps[data.active][0]].stalled
                     steps += 1
                     n = len(c.key)
@@ -382,34 +362,22 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
                     if n and data.summary[7] > max_phi:
                         status, message = DIVERGED, _too_deep(data, max_phi)
                         break
-                    if data.phase.phase == COMPLETE or data.t - starts[-1] > scenario.completion.phase_timeout_s:
+                    if data.phase.phase == COMPLETE or data.t - starts[-1] > timeout:
                         break
-            # a NaN or an infinity anywhere makes the sum non-finite; checked once a record
-            if status != DIVERGED and not math.isfinite(data.q.sum() + data.v.sum()):
+                n_rows, code = 0, OK
+                if status != DIVERGED:
+                    code = rec.close(model, data, held, J, JL)
+                    n_rows = code != NONFINITE
+            done += n_rows
+            bar.update(n_rows)
+            if code == NONFINITE:  # a NaN or an infinity anywhere; nothing recorded
                 status = DIVERGED
                 message = f"state became non-finite by t = {data.t:.4f} s"
+            elif code == ENERGY:  # a passive phase gained energy; its record is kept
+                status = DIVERGED
+                message = (f"energy grew from {rec.state[E_PASSIVE]:.3g} J to {rec.state[E_NOW]:.3g} J while the "
+                           f"drive held the fingers (a passive phase) at t = {data.t:.4f} s")
             if status == DIVERGED:
-                break
-            # a passive phase (the drive holding the fingers through the whole interval) may
-            # not gain energy
-            if held:
-                E = mechanical_energy(model, data)
-                if e_passive is None:
-                    e_passive = E
-                elif E > ENERGY_GROWTH * e_passive + ENERGY_FLOOR_J:
-                    status = DIVERGED
-                    message = (f"energy grew from {e_passive:.3g} J to {E:.3g} J while the drive held "
-                               f"the fingers (a passive phase) at t = {data.t:.4f} s")
-            else:
-                e_passive = None
-            refresh_kinematics(model, data)
-            rec.sample(model, data)
-            P, L, p_b, l_b = free_momentum_W(model, data)
-            p_max, l_max = max(p_max, p_b), max(l_max, l_b)
-            drift_lin = max(drift_lin, math.hypot(*(P - P0 - J)))
-            drift_ang = max(drift_ang, math.hypot(*(L - L0 - JL)))
-            bar.update(1)
-            if status == DIVERGED:  # the energy check; the record above is kept
                 break
             if data.phase.phase == COMPLETE:
                 if data.active + 1 == len(model.grasps):
@@ -422,9 +390,8 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
                 integrator = make_integrator(sim.integrator, model.pin_model)
                 fixed_contact = model.fixed_contact
                 starts.append(data.t)
-                e_passive = None
-                refresh_kinematics(model, data)
-            elif data.t - starts[-1] > scenario.completion.phase_timeout_s:
+                rec.state[E_PASSIVE] = np.nan  # a new passive phase starts with the new model
+            elif data.t - starts[-1] > timeout:
                 message = _why_incomplete(model, data, "the phase time-out")
                 break
         else:
@@ -441,8 +408,7 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
             if k != "method":
                 integrator_stats[k] += value
     summary = _summary(scenario, model, data, rec, series, status, message, wall, steps, free_steps,
-                       pair_steps, h_contact, starts, welds, drift_lin / max(p_max, 1e-300),
-                       drift_ang / max(l_max, 1e-300), integrator_stats)
+                       pair_steps, h_contact, starts, welds, *rec.momentum_drift, integrator_stats)
     return Result(scenario, model, summary, series, rec.replay_arrays())
 
 

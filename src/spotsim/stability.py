@@ -129,18 +129,11 @@ ENERGY_GROWTH = 10.0
 ENERGY_FLOOR_J = 1e-6
 
 
-def mechanical_energy(model, data) -> float:
+@njit
+def mechanical_energy(bodies, q, v, phi, s, K, k_b):
     """Kinetic energy of the free bodies plus the energy stored in the contacts, J: Hertz
     0.8 K (phi/2)^2.5 per pair (the integral of K (phi/2)^1.5 dphi) and 1/2 k_b |s|^2 per
-    bristle."""
-    c = data.contacts
-    phi = c.phi if c is not None and c.phi is not None else np.zeros(0)
-    return _mechanical_energy(model.bodies, data.q, data.v, phi, data.mem_s, model.params.K,
-                              model.params.bristle.k_b)
-
-
-@njit
-def _mechanical_energy(bodies, q, v, phi, s, K, k_b):
+    bristle (phi: the pairs' penetrations, m; s: their bristle deflections, m)."""
     E = kinetic_energy(bodies, q, v)
     for i in range(phi.shape[0]):
         E += 0.8 * K * (0.5 * phi[i]) ** 2.5
