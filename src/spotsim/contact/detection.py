@@ -14,51 +14,60 @@ NORMAL_EPS = 1e-9
 
 
 @njit
-def penetration(c1, n1, r1, c2, n2, r2):
-    """Eq. (6), (8)-(10): common normal and penetration of sphere pairs.
+def penetration1(c1, n1, r1, c2, n2, r2):
+    """Eq. (6), (8)-(10) for one sphere pair: common normal (3-tuple), penetration phi (m, how
+    far A must move along n_c to just touch B) and whether they are in contact (the root of
+    Eq. (8) is real and phi > 0). c1, n1, c2, n2: 3-vectors (world); r1, r2: radii, m."""
+    d0, d1, d2 = n2[0] - n1[0], n2[1] - n1[1], n2[2] - n1[2]
+    norm = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+    facing = norm > NORMAL_EPS
+    if facing:
+        d0, d1, d2 = d0 / norm, d1 / norm, d2 / norm
+    e0, e1, e2 = c1[0] - c2[0], c1[1] - c2[1], c1[2] - c2[2]
+    chi = d0 * e0 + d1 * e1 + d2 * e2  # Eq. (9)
+    w = e0 * e0 + e1 * e1 + e2 * e2 - (r1 + r2) ** 2  # Eq. (10)
+    disc = chi * chi - w
+    phi = -chi + math.sqrt(max(disc, 0.0))  # Eq. (8)
+    return (d0, d1, d2), phi, facing and disc >= 0.0 and phi > 0.0
 
-    c1, n1: (k, 3) master centres and face normals in world, m; r1 master radius, m.
-    c2, n2: (k, 3) slave centres and normals; r2 slave radius.
-    Returns n_c (k, 3), phi (k,) in m (how far A must move along n_c to just touch B), and
-    in_contact (k,) bool: the root of Eq. (8) is real and phi > 0.
+
+@njit
+def penetration(c1, n1, r1, c2, n2, r2):
+    """`penetration1` of k pairs: c1, n1: (k, 3) master centres and face normals in world, m;
+    r1 master radius, m. c2, n2: (k, 3) slave centres and normals; r2 slave radius.
+    Returns n_c (k, 3), phi (k,) in m, and in_contact (k,) bool.
     """
     k = c1.shape[0]
     n_c = np.zeros((k, 3))
     phi = np.empty(k)
     hit = np.empty(k, dtype=np.bool_)
-    R2 = (r1 + r2) ** 2
     for i in range(k):
-        d0, d1, d2 = n2[i, 0] - n1[i, 0], n2[i, 1] - n1[i, 1], n2[i, 2] - n1[i, 2]
-        norm = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-        facing = norm > NORMAL_EPS
-        if facing:
-            n_c[i, 0], n_c[i, 1], n_c[i, 2] = d0 / norm, d1 / norm, d2 / norm
-        else:
-            n_c[i, 0], n_c[i, 1], n_c[i, 2] = d0, d1, d2
-        e0, e1, e2 = c1[i, 0] - c2[i, 0], c1[i, 1] - c2[i, 1], c1[i, 2] - c2[i, 2]
-        chi = n_c[i, 0] * e0 + n_c[i, 1] * e1 + n_c[i, 2] * e2  # Eq. (9)
-        w = e0 * e0 + e1 * e1 + e2 * e2 - R2  # Eq. (10)
-        disc = chi * chi - w
-        phi[i] = -chi + math.sqrt(max(disc, 0.0))  # Eq. (8)
-        hit[i] = facing and disc >= 0.0 and phi[i] > 0.0
+        n, phi[i], hit[i] = penetration1(c1[i], n1[i], r1, c2[i], n2[i], r2)
+        n_c[i, 0], n_c[i, 1], n_c[i, 2] = n
     return n_c, phi, hit
 
 
 @njit
-def contact_point(c1, c2, r1, r2, n_c, phi):
-    """One contact point per pair, shared by both bodies, m (k, 3).
+def contact_point1(c1, c2, r1, r2, n_c, phi):
+    """One contact point of a pair, shared by both bodies, m (3-tuple).
 
     [reading] With d = c1 - c2 + phi n_c (Eq. 7), the spheres would just touch at
     c2 + r2/(r1 + r2) d; the point used is that tangency point moved back by phi/2 along n_c,
     the middle of the overlap. For coaxial spheres it lies halfway through the overlap.
     """
+    share = r2 / (r1 + r2)
+    return (c2[0] + share * (c1[0] - c2[0] + phi * n_c[0]) - 0.5 * phi * n_c[0],  # Eq. (7)
+            c2[1] + share * (c1[1] - c2[1] + phi * n_c[1]) - 0.5 * phi * n_c[1],
+            c2[2] + share * (c1[2] - c2[2] + phi * n_c[2]) - 0.5 * phi * n_c[2])
+
+
+@njit
+def contact_point(c1, c2, r1, r2, n_c, phi):
+    """`contact_point1` of k pairs, (k, 3)."""
     k = c1.shape[0]
     p = np.empty((k, 3))
-    share = r2 / (r1 + r2)
     for i in range(k):
-        for a in range(3):
-            d = c1[i, a] - c2[i, a] + phi[i] * n_c[i, a]  # Eq. (7)
-            p[i, a] = c2[i, a] + share * d - 0.5 * phi[i] * n_c[i, a]
+        p[i, 0], p[i, 1], p[i, 2] = contact_point1(c1[i], c2[i], r1, r2, n_c[i], phi[i])
     return p
 
 

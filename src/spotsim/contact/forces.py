@@ -13,37 +13,31 @@ import numpy as np
 
 from ..bodies import mm, mv
 from ..jit import njit
-from .detection import contact_point, penetration
-from .friction import bristle_step
-from .normal import indentation, normal_force
+from .detection import contact_point1, penetration1
+from .friction import bristle1
+from .normal import indentation, normal_force1
 
 
 @njit
-def _to_world(R_W, p_W, joint, x_J, rows, point, shift=None, shift_J=None):
-    """(k, 3): R_W[joint[r]] x_J[r] (+ p_W[joint[r]] if point) for each r in rows; with
-    `shift` (k,) and `shift_J` (|rows|, 3), x_J[r] + shift[i] shift_J[r] in place of x_J[r]."""
-    out = np.empty((rows.shape[0], 3))
-    x = np.empty(3)
-    for i in range(rows.shape[0]):
-        r = rows[i]
-        j = joint[r]
-        for a in range(3):
-            x[a] = x_J[r, a] if shift is None else x_J[r, a] + shift[i] * shift_J[r, a]
-        for a in range(3):
-            out[i, a] = R_W[j, a, 0] * x[0] + R_W[j, a, 1] * x[1] + R_W[j, a, 2] * x[2]
-            if point:
-                out[i, a] += p_W[j, a]
-    return out
+def _rotate(R, x):
+    return (R[0, 0] * x[0] + R[0, 1] * x[1] + R[0, 2] * x[2],
+            R[1, 0] * x[0] + R[1, 1] * x[1] + R[1, 2] * x[2],
+            R[2, 0] * x[0] + R[2, 1] * x[1] + R[2, 2] * x[2])
 
 
 @njit
-def _point_velocity(vo_W, w_W, p_W, j, point, out, i):
-    """out[i] += velocity of the point `point` (3,) riding on the body of joint j, world."""
-    r0, r1, r2 = point[0] - p_W[j, 0], point[1] - p_W[j, 1], point[2] - p_W[j, 2]
-    w = w_W[j]
-    out[i, 0] += vo_W[j, 0] + w[1] * r2 - w[2] * r1
-    out[i, 1] += vo_W[j, 1] + w[2] * r0 - w[0] * r2
-    out[i, 2] += vo_W[j, 2] + w[0] * r1 - w[1] * r0
+def _place(R, x, p):
+    """R x + p, as a 3-tuple."""
+    y = _rotate(R, x)
+    return (y[0] + p[0], y[1] + p[1], y[2] + p[2])
+
+
+@njit
+def _point_velocity(vo, w, o, point):
+    """Velocity of `point` riding on a body whose origin o moves at vo and which turns at w
+    (world), as a 3-tuple."""
+    r0, r1, r2 = point[0] - o[0], point[1] - o[1], point[2] - o[2]
+    return (vo[0] + w[1] * r2 - w[2] * r1, vo[1] + w[2] * r0 - w[0] * r2, vo[2] + w[0] * r1 - w[1] * r0)
 
 
 @njit
@@ -63,51 +57,58 @@ def pair_forces(master, slave, key, C1_J, N1_J, joint1, finger1, axis1_J, C2_J, 
     Returns, for the pairs in contact only (sorted by key): master, slave, key, phi (m),
     contact point (m), master and slave centres (m), force on the master (N, world), relative
     speed at the point (m/s), state, and the new memory (deflection, onset approach speed).
+    One pass over the pairs, each one's arithmetic in scalars.
     """
-    c1 = _to_world(R_W, p_W, joint1, C1_J, master, True, opening[finger1[master]], axis1_J)
-    n1 = _to_world(R_W, p_W, joint1, N1_J, master, False)
-    c2 = _to_world(R_W, p_W, joint2, C2_J, slave, True)
-    n2 = _to_world(R_W, p_W, joint2, N2_J, slave, False)
-    n_c, phi, hit = penetration(c1, n1, r1, c2, n2, r2)
-    keep = np.flatnonzero(hit)
-    master, slave, key = master[keep], slave[keep], key[keep]
-    c1, c2, n_c, phi = c1[keep], c2[keep], n_c[keep], phi[keep]
-    k = keep.shape[0]
-    point = contact_point(c1, c2, r1, r2, n_c, phi)
-    slide = _to_world(R_W, p_W, joint1, axis1_J, master, False)
-    v_rel = np.empty((k, 3))
-    v_B = np.zeros((k, 3))
-    delta_dot = np.empty(k)
-    v_minus = np.empty(k)
-    s_prev = np.zeros((k, 3))
+    k = master.shape[0]
+    out_m, out_s, out_key = np.empty(k, dtype=np.int64), np.empty(k, dtype=np.int64), np.empty(k, dtype=np.int64)
+    phi_out, speed_out, v_minus_out = np.empty(k), np.empty(k), np.empty(k)
+    point_out, c1_out, c2_out = np.empty((k, 3)), np.empty((k, 3)), np.empty((k, 3))
+    force_out, s_out = np.empty((k, 3)), np.empty((k, 3))
+    state_out = np.empty(k, dtype=np.int64)
     n_mem = mem_key.shape[0]
+    pos = 0  # both key lists are sorted: the memory is merged, not searched
+    n = 0
     for i in range(k):
-        rate = opening_rate[finger1[master[i]]]
-        for a in range(3):
-            v_rel[i, a] = slide[i, a] * rate
-        _point_velocity(vo_W, w_W, p_W, joint1[master[i]], point[i], v_rel, i)
-        _point_velocity(vo_W, w_W, p_W, joint2[slave[i]], point[i], v_B, i)
-        for a in range(3):
-            v_rel[i, a] -= v_B[i, a]
+        m, sl = master[i], slave[i]
+        j1, j2 = joint1[m], joint2[sl]
+        R1, R2 = R_W[j1], R_W[j2]
+        shift = opening[finger1[m]]  # the finger has slid along its axis
+        c1 = _place(R1, (C1_J[m, 0] + shift * axis1_J[m, 0], C1_J[m, 1] + shift * axis1_J[m, 1],
+                         C1_J[m, 2] + shift * axis1_J[m, 2]), p_W[j1])
+        c2 = _place(R2, C2_J[sl], p_W[j2])
+        n_c, phi, hit = penetration1(c1, _rotate(R1, N1_J[m]), r1, c2, _rotate(R2, N2_J[sl]), r2)
+        if not hit:
+            continue
+        point = contact_point1(c1, c2, r1, r2, n_c, phi)
+        slide = _rotate(R1, axis1_J[m])
+        rate = opening_rate[finger1[m]]
+        v_A = _point_velocity(vo_W[j1], w_W[j1], p_W[j1], point)
+        v_B = _point_velocity(vo_W[j2], w_W[j2], p_W[j2], point)
+        v_rel = ((slide[0] * rate + v_A[0]) - v_B[0], (slide[1] * rate + v_A[1]) - v_B[1],
+                 (slide[2] * rate + v_A[2]) - v_B[2])
         # rate of delta = phi / 2
-        delta_dot[i] = -0.5 * (v_rel[i, 0] * n_c[i, 0] + v_rel[i, 1] * n_c[i, 1] + v_rel[i, 2] * n_c[i, 2])
+        delta_dot = -0.5 * (v_rel[0] * n_c[0] + v_rel[1] * n_c[1] + v_rel[2] * n_c[2])
         # a pair in contact at the last step keeps its onset speed and bristle; a new one
         # starts from its approach speed (floored) and an unbent bristle
-        pos = np.searchsorted(mem_key, key[i])
+        while pos < n_mem and mem_key[pos] < key[i]:
+            pos += 1
         if pos < n_mem and mem_key[pos] == key[i]:
-            v_minus[i] = mem_vminus[pos]
-            s_prev[i] = mem_s[pos]
+            v_minus = mem_vminus[pos]
+            s_prev = (mem_s[pos, 0], mem_s[pos, 1], mem_s[pos, 2])
         else:
-            v_minus[i] = max(delta_dot[i], floor)
-    F_n = normal_force(indentation(phi), delta_dot, v_minus, K, damping)
-    s, F_f, state = bristle_step(s_prev, v_rel, n_c, F_n, h, bristle)
-    force = np.empty((k, 3))
-    speed = np.empty(k)
-    for i in range(k):
+            v_minus = max(delta_dot, floor)
+            s_prev = (0.0, 0.0, 0.0)
+        F_n = normal_force1(indentation(phi), delta_dot, v_minus, K, damping)
+        s, F_f, state = bristle1(s_prev, v_rel, n_c, F_n, h, bristle)
+        out_m[n], out_s[n], out_key[n] = m, sl, key[i]
+        phi_out[n], v_minus_out[n], state_out[n] = phi, v_minus, state
         for a in range(3):
-            force[i, a] = F_n[i] * n_c[i, a] + F_f[i, a]  # Eq. (18): f_i = F_n,i + F_f,i
-        speed[i] = math.sqrt(v_rel[i, 0] ** 2 + v_rel[i, 1] ** 2 + v_rel[i, 2] ** 2)
-    return master, slave, key, phi, point, c1, c2, force, speed, state, s, v_minus
+            point_out[n, a], c1_out[n, a], c2_out[n, a], s_out[n, a] = point[a], c1[a], c2[a], s[a]
+            force_out[n, a] = F_n * n_c[a] + F_f[a]  # Eq. (18): f_i = F_n,i + F_f,i
+        speed_out[n] = math.sqrt(v_rel[0] ** 2 + v_rel[1] ** 2 + v_rel[2] ** 2)
+        n += 1
+    return (out_m[:n], out_s[:n], out_key[:n], phi_out[:n], point_out[:n], c1_out[:n], c2_out[:n], force_out[:n],
+            speed_out[:n], state_out[:n], s_out[:n], v_minus_out[:n])
 
 
 @njit

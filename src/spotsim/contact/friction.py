@@ -28,68 +28,65 @@ class BristleParams(NamedTuple):
 
 
 @njit
-def tangential(v, n_c):
-    """Eq. (17): v_t = v - (v . n) n, rows of (k, 3)."""
-    out = np.empty_like(v)
-    for i in range(v.shape[0]):
-        vn = v[i, 0] * n_c[i, 0] + v[i, 1] * n_c[i, 1] + v[i, 2] * n_c[i, 2]
-        for a in range(3):
-            out[i, a] = v[i, a] - vn * n_c[i, a]
-    return out
+def _norm(x):
+    return math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2])
 
 
 @njit
-def _norm3(x, i):
-    return math.sqrt(x[i, 0] * x[i, 0] + x[i, 1] * x[i, 1] + x[i, 2] * x[i, 2])
+def _tangential(x, n):
+    """Eq. (17): x - (x . n) n, as a 3-tuple."""
+    xn = x[0] * n[0] + x[1] * n[1] + x[2] * n[2]
+    return (x[0] - xn * n[0], x[1] - xn * n[1], x[2] - xn * n[2])
 
 
 @njit
-def carry_deflection(s, n_c):
-    """Keep a carried deflection (k, 3) in the current tangent plane, with its length kept."""
-    s_t = tangential(s, n_c)
-    for i in range(s.shape[0]):
-        old, new = _norm3(s, i), _norm3(s_t, i)
-        scale = old / new if new > 0.0 else 0.0
-        for a in range(3):
-            s_t[i, a] *= scale
-    return s_t
+def bristle1(s_prev, v, n_c, F_n, dt, p):
+    """One step of the bristle law for one pair.
+
+    s_prev: deflection carried from the last step (zero at onset), m. v: velocity of A's
+    contact point relative to B's, m/s. n_c: common normal. (3-vectors.) F_n: normal force
+    magnitude, N. dt: step, s. p: BristleParams.
+    Returns the deflection s, the friction force on A (N), both 3-tuples, and the pair state.
+    """
+    # the carried deflection, kept in the current tangent plane with its length kept
+    s = _tangential(s_prev, n_c)
+    old, new = _norm(s_prev), _norm(s)
+    scale = old / new if new > 0.0 else 0.0
+    s0, s1, s2 = s[0] * scale, s[1] * scale, s[2] * scale
+    v_t = _tangential(v, n_c)
+    speed = _norm(v_t)
+    slipping = speed > p.v_d
+    s_max = (p.mu_k if slipping else p.mu_s) * F_n / p.k_b  # Eq. (16)
+    s0, s1, s2 = s0 + v_t[0] * dt, s1 + v_t[1] * dt, s2 + v_t[2] * dt  # Eq. (15), first branch
+    saturated = _norm((s0, s1, s2)) >= s_max
+    if saturated:
+        # Eq. (15), second branch: the bristle lies at s_max along the sliding direction
+        # (along its own deflection when there is no sliding)
+        src = v_t if speed > 0.0 else (s0, s1, s2)
+        dir_norm = _norm(src)
+        if dir_norm > 0.0:
+            s0, s1, s2 = s_max * src[0] / dir_norm, s_max * src[1] / dir_norm, s_max * src[2] / dir_norm
+        else:
+            s0 = s1 = s2 = 0.0
+    # [reading] s_dot is the bristle's deflection rate while it holds (v_t); a saturated
+    # bristle lies at s_max and slides, so its rate is zero. Differencing the clamped s
+    # instead would turn every reversal of the sliding direction into an impulse of
+    # c_b * 2 s_max / dt, which grows without bound as dt shrinks.
+    s_dot = (0.0, 0.0, 0.0) if saturated else v_t
+    F_f = (-p.k_b * s0 - p.c_b * s_dot[0], -p.k_b * s1 - p.c_b * s_dot[1], -p.k_b * s2 - p.c_b * s_dot[2])  # Eq. (14)
+    return (s0, s1, s2), F_f, SLIPPING if slipping else STICKING
 
 
 @njit
 def bristle_step(s_prev, v, n_c, F_n, dt, p):
-    """One step of the bristle law for k pairs.
-
-    s_prev: (k, 3) deflection carried from the last step (zero at onset), m.
-    v: (k, 3) velocity of A's contact point relative to B's, m/s.  n_c: (k, 3) common normal.
-    F_n: (k,) normal force magnitude, N.  dt: step, s.  p: BristleParams.
-    Returns s (k, 3), friction force on A (k, 3) in N, and the pair state (k,) int.
-    """
+    """`bristle1` for k pairs: s_prev, v, n_c (k, 3), F_n (k,). Returns s (k, 3), friction
+    force on A (k, 3) in N, and the pair state (k,) int."""
     k = s_prev.shape[0]
-    s = carry_deflection(s_prev, n_c)
-    v_t = tangential(v, n_c)
+    s = np.empty((k, 3))
     F_f = np.empty((k, 3))
     state = np.empty(k, dtype=np.int64)
     for i in range(k):
-        speed = _norm3(v_t, i)
-        slipping = speed > p.v_d
-        s_max = (p.mu_k if slipping else p.mu_s) * F_n[i] / p.k_b  # Eq. (16)
-        for a in range(3):
-            s[i, a] += v_t[i, a] * dt  # Eq. (15), first branch
-        length = _norm3(s, i)
-        saturated = length >= s_max
-        if saturated:
-            # Eq. (15), second branch: the bristle lies at s_max along the sliding direction
-            # (along its own deflection when there is no sliding)
-            src = v_t if speed > 0.0 else s
-            dir_norm = _norm3(src, i)
-            for a in range(3):
-                s[i, a] = s_max * src[i, a] / dir_norm if dir_norm > 0.0 else 0.0
-        for a in range(3):
-            # [reading] s_dot is the bristle's deflection rate while it holds (v_t); a
-            # saturated bristle lies at s_max and slides, so its rate is zero. Differencing
-            # the clamped s instead would turn every reversal of the sliding direction into
-            # an impulse of c_b * 2 s_max / dt, which grows without bound as dt shrinks.
-            s_dot = 0.0 if saturated else v_t[i, a]
-            F_f[i, a] = -p.k_b * s[i, a] - p.c_b * s_dot  # Eq. (14)
-        state[i] = SLIPPING if slipping else STICKING
+        s_i, f_i, state[i] = bristle1(s_prev[i], v[i], n_c[i], F_n[i], dt, p)
+        s[i, 0], s[i, 1], s[i, 2] = s_i
+        F_f[i, 0], F_f[i, 1], F_f[i, 2] = f_i
     return s, F_f, state

@@ -27,15 +27,21 @@ def indentation(phi):
 
 
 @njit
-def normal_force(delta, delta_dot, delta_dot_minus, K, factor):
+def normal_force1(delta, delta_dot, delta_dot_minus, K, factor):
     """Eq. (11)-(12): magnitude of F_n = K delta^a + lambda delta^a delta_dot, never pulling.
 
-    delta: (k,) indentation, m.  delta_dot: (k,) its rate, m/s (> 0 approaching).
-    delta_dot_minus: (k,) approach speed at each pair's contact onset, m/s, already floored.
-    lambda = factor K / delta_dot_minus. Returns (k,) N, clamped at 0.
+    delta: indentation, m.  delta_dot: its rate, m/s (> 0 approaching).
+    delta_dot_minus: approach speed at the pair's contact onset, m/s, already floored.
+    lambda = factor K / delta_dot_minus. Returns N, clamped at 0.
     """
+    elastic = K * delta ** HERTZ_EXPONENT
+    return max(elastic * (1.0 + factor * delta_dot / delta_dot_minus), 0.0)
+
+
+@njit
+def normal_force(delta, delta_dot, delta_dot_minus, K, factor):
+    """`normal_force1` of k pairs: (k,) arrays in, (k,) N out."""
     F = np.empty(delta.shape[0])
     for i in range(delta.shape[0]):
-        elastic = K * delta[i] ** HERTZ_EXPONENT
-        F[i] = max(elastic * (1.0 + factor * delta_dot[i] / delta_dot_minus[i]), 0.0)
+        F[i] = normal_force1(delta[i], delta_dot[i], delta_dot_minus[i], K, factor)
     return F
