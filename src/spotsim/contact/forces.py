@@ -112,6 +112,27 @@ def pair_forces(master, slave, key, C1_J, N1_J, joint1, finger1, axis1_J, C2_J, 
 
 
 @njit
+def _add_wrench(F, T, ext_f, ext_t, j, partner, p, sign, f, p_W):
+    """Add sign f (3-tuple), acting at p (3-tuple, world), to body j's force F[j] and moment
+    T[j] about its origin, and to the external wrench when the partner body is fixed."""
+    r0, r1, r2 = p[0] - p_W[j, 0], p[1] - p_W[j, 1], p[2] - p_W[j, 2]
+    F[j, 0] += sign * f[0]
+    F[j, 1] += sign * f[1]
+    F[j, 2] += sign * f[2]
+    T[j, 0] += sign * (r1 * f[2] - r2 * f[1])
+    T[j, 1] += sign * (r2 * f[0] - r0 * f[2])
+    T[j, 2] += sign * (r0 * f[1] - r1 * f[0])
+    # what a fixed body exerts on a free one is external; between free bodies internal
+    if partner == 0 and j != 0:
+        ext_f[0] += sign * f[0]
+        ext_f[1] += sign * f[1]
+        ext_f[2] += sign * f[2]
+        ext_t[0] += sign * (p[1] * f[2] - p[2] * f[1])
+        ext_t[1] += sign * (p[2] * f[0] - p[0] * f[2])
+        ext_t[2] += sign * (p[0] * f[1] - p[1] * f[0])
+
+
+@njit
 def body_wrenches(master, slave, force, point, c1, c2, common_point, joint1, joint2, finger1,
                   finger_parent, finger_axis_J, R_W, p_W, njoints):
     """One wrench per body (Eq. 18-21): +f_i on the finger's body, -f_i on the module's.
@@ -130,29 +151,16 @@ def body_wrenches(master, slave, force, point, c1, c2, common_point, joint1, joi
     load = np.zeros(finger_parent.shape[0])
     for i in range(master.shape[0]):
         j1, j2 = joint1[master[i]], joint2[slave[i]]
-        p1 = point[i] if common_point else c1[i]
-        p2 = point[i] if common_point else c2[i]
-        f = force[i]
-        for side in range(2):
-            j, p, sign, partner = (j1, p1, 1.0, j2) if side == 0 else (j2, p2, -1.0, j1)
-            r0, r1, r2 = p[0] - p_W[j, 0], p[1] - p_W[j, 1], p[2] - p_W[j, 2]
-            for a in range(3):
-                F[j, a] += sign * f[a]
-            T[j, 0] += sign * (r1 * f[2] - r2 * f[1])
-            T[j, 1] += sign * (r2 * f[0] - r0 * f[2])
-            T[j, 2] += sign * (r0 * f[1] - r1 * f[0])
-            # what a fixed body exerts on a free one is external; between free bodies internal
-            if partner == 0 and j != 0:
-                for a in range(3):
-                    ext_f[a] += sign * f[a]
-                ext_t[0] += sign * (p[1] * f[2] - p[2] * f[1])
-                ext_t[1] += sign * (p[2] * f[0] - p[0] * f[2])
-                ext_t[2] += sign * (p[0] * f[1] - p[1] * f[0])
+        f = (force[i, 0], force[i, 1], force[i, 2])
+        p1 = (point[i, 0], point[i, 1], point[i, 2]) if common_point else (c1[i, 0], c1[i, 1], c1[i, 2])
+        p2 = (point[i, 0], point[i, 1], point[i, 2]) if common_point else (c2[i, 0], c2[i, 1], c2[i, 2])
+        _add_wrench(F, T, ext_f, ext_t, j1, j2, p1, 1.0, f, p_W)
+        _add_wrench(F, T, ext_f, ext_t, j2, j1, p2, -1.0, f, p_W)
         fg = finger1[master[i]]
-        axis = finger_axis_J[fg]
-        R = R_W[finger_parent[fg]]
+        j = finger_parent[fg]
         for a in range(3):
-            load[fg] += f[a] * (R[a, 0] * axis[0] + R[a, 1] * axis[1] + R[a, 2] * axis[2])
+            load[fg] += f[a] * (R_W[j, a, 0] * finger_axis_J[fg, 0] + R_W[j, a, 1] * finger_axis_J[fg, 1]
+                                + R_W[j, a, 2] * finger_axis_J[fg, 2])
     local = np.empty((njoints, 6))
     T_O = np.empty((njoints, 3))
     for j in range(njoints):
