@@ -66,14 +66,16 @@ def test_compiled_loop_takes_exactly_the_steps_of_the_python_path(config, durati
         assert np.array_equal(fast.replay[key], array), key
 
 
-@pytest.mark.parametrize("config, cause", [("dual_arm_sequential.yaml", "energy grew"),
-                                           ("single_arm_case_I.yaml", "exceeds the sphere radius")])
-def test_compiled_loop_detects_divergence_as_the_python_path_does(config, cause, monkeypatch):
-    """The paper's setting (symplectic Euler at 1 ms) diverges: by energy growth in a passive
-    phase (dual arm; its last record kept) and by penetration (Case I). Both paths stop at the
-    same step with the same message and record."""
-    s = spotsim.load_scenario(ROOT / "config" / config)
-    s = spotsim.replace(s, simulation={"substeps": 1})
+@pytest.mark.parametrize("config, changes, cause", [
+    ("dual_arm_sequential.yaml", {"simulation": {"substeps": 1}}, "while the drive held"),
+    ("single_arm_case_I.yaml", {"simulation": {"substeps": 1}}, "the finger drives did"),
+    ("single_arm_case_I.yaml", {"end_effector": {"closing_speed_m_s": 2.0}}, "exceeds the sphere radius")])
+def test_compiled_loop_detects_divergence_as_the_python_path_does(config, changes, cause, monkeypatch):
+    """Runs that diverge: the paper's setting (symplectic Euler at 1 ms) by energy growth in a
+    passive phase (dual arm) and by more energy than the drives put in (Case I), and fingers
+    closing at 2 m/s by penetration. Both paths stop at the same step with the same message
+    and record (the last record kept after an energy check)."""
+    s = spotsim.replace(spotsim.load_scenario(ROOT / "config" / config), **changes)
     _same_dynamics_as_compiled(monkeypatch)
     fast = spotsim.simulate(s)
     monkeypatch.setattr(compiled, "applies", lambda model, integrator: False)

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 import spotsim
+from spotsim.stability import ENERGY_FLOOR_J
 from conftest import CONFIGS, ROOT
 from spotsim.cli import main
 
@@ -99,6 +100,40 @@ def test_a_run_that_blows_up_ends_diverged_and_keeps_its_record(case_I):
     r = spotsim.simulate(s)
     assert r.status == "diverged" and "exceeds the sphere radius" in r.summary["message"]
     assert len(r.timeseries["t"]) > 1 and r.grasp["completed_s"] is None
+
+
+def test_an_unstable_stiff_run_is_caught_by_the_energy_balance(case_I):
+    """With both Young's moduli x100 the 0.1 ms step is past symplectic Euler's stability
+    limit: the bodies gain far more energy than the finger drives put in, and the run stops
+    diverged on that, long before the state overflows, with its record kept."""
+    c = case_I.contact
+    s = spotsim.replace(case_I, contact={"youngs_modulus_finger_Pa": 100 * c.youngs_modulus_finger_Pa,
+                                         "youngs_modulus_groove_Pa": 100 * c.youngs_modulus_groove_Pa})
+    r = spotsim.simulate(s)
+    assert r.status == "diverged" and "the finger drives did" in r.summary["message"]
+    assert r.summary["sim_time_s"] < 1.0 and len(r.timeseries["t"]) > 100
+
+
+def test_converged_runs_keep_within_the_energy_the_drives_put_in(case_I, monkeypatch):
+    """At the default step the bodies' mechanical energy stays below the work the finger
+    drives did (with damping and friction it can only be less): checked at every record of
+    Case I."""
+    from spotsim import run
+
+    ratios = []
+    close = run.Recorder.close
+
+    def probe(self, model, data, held, J, JL):
+        code = close(self, model, data, held, J, JL)
+        s = self.state
+        ratios.append(s[run.E_NOW] / (s[run.E_START] + s[run.DRIVE_WORK] + ENERGY_FLOOR_J))
+        return code
+
+    monkeypatch.setattr(run.Recorder, "close", probe)
+    monkeypatch.setattr(run.compiled, "applies", lambda model, integrator: False)  # records one by one
+    r = spotsim.simulate(case_I)
+    assert r.status == "completed" and len(ratios) > 1000
+    assert max(ratios) < 1.0
 
 
 def test_interrupted_run_keeps_what_it_recorded(case_I, tmp_path, monkeypatch):

@@ -23,13 +23,15 @@ from .contact.forces import raise_peaks
 from .grasp import PHASES
 from .integrators import SymplecticEuler, _symplectic_euler
 from .jit import direct, njit
-from .record import ENERGY as ENERGY_RECORD, NONFINITE as NONFINITE_RECORD, close_interval
+from .record import DRIVE_WORK, ENERGY as ENERGY_RECORD, ENERGY_WORK as ENERGY_WORK_RECORD, NONFINITE as NONFINITE_RECORD
+from .record import close_interval, drive_power
 from .step import FREE_FLIGHT_SAFETY, Contacts, _contact_kernels, _travel_rate, near_face_pairs
 
 #: Why `substeps` or `intervals` returned: all their steps or records ran; the skin is used up
 #: (refresh coal and go on); the grasp phase completed or timed out; a pair penetrated deeper
-#: than a sphere radius; the state became non-finite; energy grew in a passive phase.
-RAN, REFRESH, STOPPED, TOO_DEEP, NONFINITE, ENERGY = range(6)
+#: than a sphere radius; the state became non-finite; energy grew in a passive phase, or past
+#: what the drives could have put in (`record.close_interval`).
+RAN, REFRESH, STOPPED, TOO_DEEP, NONFINITE, ENERGY, ENERGY_WORK = range(7)
 
 # slots of the loop's scalar state, read and written in place
 (T, TRAVEL, LIST_TRAVEL, STALLED, PHASE, HELD_SINCE, T_CENTRING, T_COMPLETE, HELD, STEPS, PAIR_STEPS,
@@ -53,13 +55,14 @@ def loop_args(model) -> tuple:
 
 @njit
 def substeps(h, q, v, R_W, p_W, w_W, vo_W, near, opening, opening_rate, mem_key, mem_s, mem_vminus,
-             pair_list, s, peak_f, peak_t, peak_n, J, JL, mine, watch, limits, consts):
+             pair_list, s, peak_f, peak_t, peak_n, J, JL, rs, mine, watch, limits, consts):
     """The s[LEFT] steps of h (s) left in a record interval (fewer if it must return) of
     `step.step` with symplectic Euler, and the run loop's bookkeeping of each, compiled.
 
     s: (N_SCALARS,) the scalar state (slots T ... FLIGHTS), in place. peak_f, peak_t,
     peak_n: the active grasp's peaks (`contact.forces.raise_peaks`), in place. J, JL: (3,)
-    external impulse on the free bodies and its moment about the world origin, in place.
+    external impulse on the free bodies and its moment about the world origin, in place. rs:
+    the record state (`record.close_interval`), whose drive work is added to in place.
     mine: the active drive's fingers. watch: the active grasp's `Model.watch_args`. limits:
     (skin, deepest penetration, phase start, phase time-out, hold time, contact speed limit,
     net force limit, closing speed, grasp load, resume fraction), SI units. consts:
@@ -81,6 +84,7 @@ def substeps(h, q, v, R_W, p_W, w_W, vo_W, near, opening, opening_rate, mem_key,
         a = free_body_accelerations(bodies, q, v, loads[0], g_W)
         q, v = _symplectic_euler(bodies, q, v, a, h)
         s[LEFT] -= 1
+        power = drive_power(loads[5], opening_rate)  # at this step's rate, before the drive sets the next
         # the active drive sets its fingers' rate from this step's loads (grasp.FingerDrive)
         if mine.shape[0]:
             force = 0.0
@@ -97,6 +101,7 @@ def substeps(h, q, v, R_W, p_W, w_W, vo_W, near, opening, opening_rate, mem_key,
         for i in range(opening.shape[0]):
             opening[i] += h * opening_rate[i]
         s[T] += h
+        rs[DRIVE_WORK] += h * power
         moved = h * _travel_rate(bodies.idx_v, rows, reach, v, opening_rate)
         s[TRAVEL] += moved
         s[LIST_TRAVEL] += moved
@@ -175,7 +180,7 @@ def intervals(n_records, dt, n_sub, q, v, R_W, p_W, w_W, vo_W, near, opening, op
             s[HELD] = s[STALLED]  # the drive holds through the interval so far
         q, v, pair_list, pairs, loads, summary, event = substeps(
             s[H], q, v, R_W, p_W, w_W, vo_W, near, opening, opening_rate, mem_key, mem_s, mem_vminus, pair_list, s,
-            peak_f, peak_t, peak_n, J, JL, mine, watch, limits, consts)
+            peak_f, peak_t, peak_n, J, JL, rs, mine, watch, limits, consts)
         mem_key, mem_s, mem_vminus = pairs[2], pairs[10], pairs[11]
         if event == REFRESH or event == TOO_DEEP:
             break
@@ -187,8 +192,8 @@ def intervals(n_records, dt, n_sub, q, v, R_W, p_W, w_W, vo_W, near, opening, op
             event = NONFINITE
             break
         n_rows += 1
-        if code == ENERGY_RECORD:
-            event = ENERGY
+        if code == ENERGY_RECORD or code == ENERGY_WORK_RECORD:
+            event = ENERGY if code == ENERGY_RECORD else ENERGY_WORK
             break
         if s[PHASE] == 2 or s[T] - start > timeout:
             event = STOPPED
@@ -210,7 +215,7 @@ def run_records(model, data, n_records: int, rec, J: np.ndarray, JL: np.ndarray,
 
     J, JL: the external impulse and its moment, added to in place; start, timeout: the
     phase's start and time-out, s; max_phi: the deepest penetration allowed, m. Returns (why
-    it returned: RAN, STOPPED, TOO_DEEP, NONFINITE or ENERGY; rows recorded; steps taken;
+    it returned: RAN, STOPPED, TOO_DEEP, NONFINITE, ENERGY or ENERGY_WORK; rows recorded; steps taken;
     pair steps; free-flight steps). Raises StateOverflow when coal cannot bound the state.
     """
     sim = model.scenario.simulation

@@ -18,18 +18,22 @@ import math
 
 import numpy as np
 
-from .bodies import bodies_momentum, body_pose, mm, mv3
+from .bodies import bodies_momentum, body_pose, kinetic_energy, mm, mv3
 from .contact.friction import SLIPPING, STICKING
 from .jit import njit
 from .stability import ENERGY_FLOOR_J, ENERGY_GROWTH, mechanical_energy
 
-#: What `close_interval` found: nothing wrong, a non-finite state (no row written) or energy
-#: growth in a passive phase (the row written).
-OK, NONFINITE, ENERGY = range(3)
+#: What `close_interval` found: nothing wrong, a non-finite state (no row written), energy
+#: growth in a passive phase, or more energy than the drives could have put in (the row
+#: written for both).
+OK, NONFINITE, ENERGY, ENERGY_WORK = range(4)
 
-# slots of the record state `rs` (float array), kept between intervals and across welds
-E_PASSIVE, E_NOW, P_MAX, L_MAX, DRIFT_LIN, DRIFT_ANG, P0, L0 = 0, 1, 2, 3, 4, 5, 6, 9
-N_RECORD_STATE = 12
+# slots of the record state `rs` (float array), kept between intervals and across welds:
+# the energy when the passive phase began and at the last record, the largest single-body
+# momenta, the momentum drifts, the momentum at the start, the energy at the start and the
+# work the finger drives have done since, J
+E_PASSIVE, E_NOW, P_MAX, L_MAX, DRIFT_LIN, DRIFT_ANG, P0, L0, E_START, DRIVE_WORK = 0, 1, 2, 3, 4, 5, 6, 9, 12, 13
+N_RECORD_STATE = 14
 
 #: Time series recorded as integers (the others are floats).
 INTEGER_SERIES = ("pairs_slipping", "pairs_sticking", "phase", "grasp")
@@ -90,8 +94,10 @@ def record_args(model, layout: Layout) -> tuple:
     rows = lambda joints: np.array([model.body_row[j] for j in joints], dtype=np.int64)
     robot_rows = rows([model.robot_joint] if model.robot_joint else [])
     p = model.params
+    # the drives' work bounds the energy only without gravity (which does work of its own)
+    no_gravity = not np.any(model.pin_model.gravity.linear)
     return (model.bodies, frame_row, frame_R, frame_p, module_row, finger_map, model.all_bodies, robot_rows,
-            rows(model.free_joints), layout.free_robot, p.K, p.bristle.k_b)
+            rows(model.free_joints), layout.free_robot, p.K, p.bristle.k_b, no_gravity)
 
 
 @njit
@@ -161,8 +167,7 @@ def sample(row, t, q, v, summary, n_pairs, state, opening, finger_load, last_ope
     summary, n_pairs, state: the last step's `contact_summary`, pair count and pair states;
     last_open: each first-model finger's last opening, m, updated in place.
     """
-    bodies, frame_row, frame_R, frame_p, module_row, finger_map, _, robot_rows, system_rows, free_robot, _, _ \
-        = args
+    bodies, frame_row, frame_R, frame_p, module_row, finger_map, _, robot_rows, system_rows, free_robot = args[:10]
     n_mod = module_row.shape[0]
     n_ee = frame_row.shape[0] - n_mod - 1
     R_b, p_b = _frame(bodies, q, frame_row, frame_R, frame_p, k)
@@ -231,17 +236,32 @@ def start_record(rs, q, v, args):
     rs[P_MAX], rs[L_MAX] = p_max, l_max
     rs[P0:P0 + 3] = P
     rs[L0:L0 + 3] = L
+    rs[E_START] = kinetic_energy(bodies, q, v)  # no pair in contact at the start
+
+
+@njit
+def drive_power(finger_load, opening_rate):
+    """A bound on the power the finger drives put into the bodies during a step, W: each
+    finger's load along its axis (N, never negative) times its sliding speed (m/s)."""
+    power = 0.0
+    for i in range(finger_load.shape[0]):
+        power += finger_load[i] * abs(opening_rate[i])
+    return power
 
 
 @njit
 def close_interval(row, rs, J, JL, held, t, q, v, phi, mem_s, summary, n_pairs, state, opening, finger_load,
                    last_open, phase, grasp, ee, k, args):
-    """The run loop's work at the end of a record interval: returns OK, NONFINITE or ENERGY.
+    """The run loop's work at the end of a record interval: returns OK, NONFINITE, ENERGY or
+    ENERGY_WORK.
 
     A NaN or an infinity anywhere in (q, v) is NONFINITE, and nothing is recorded. When the
     drive held the fingers through the whole interval (held: a passive phase), the mechanical
     energy may not grow past ENERGY_GROWTH times its value when the phase began plus
-    ENERGY_FLOOR_J (rs[E_PASSIVE], rs[E_NOW]); ENERGY keeps the row. Then the row
+    ENERGY_FLOOR_J (rs[E_PASSIVE], rs[E_NOW]): else ENERGY. In any phase it may not grow past
+    ENERGY_GROWTH times its value at the start plus the work the finger drives have done
+    (rs[E_START] + rs[DRIVE_WORK]), plus ENERGY_FLOOR_J: the drives are the only source of
+    energy in zero gravity, so more is the integrator's (ENERGY_WORK). Both keep the row. Then the row
     (`sample`) and the momentum balance: the largest drift of the free bodies' momentum from
     its start less the external impulse J, JL (rs[DRIFT_LIN], rs[DRIFT_ANG]), and the largest
     single-body momenta (rs[P_MAX], rs[L_MAX]).
@@ -249,15 +269,17 @@ def close_interval(row, rs, J, JL, held, t, q, v, phi, mem_s, summary, n_pairs, 
     if not math.isfinite(np.sum(q) + np.sum(v)):
         return NONFINITE
     code = OK
+    E = mechanical_energy(args[0], q, v, phi, mem_s, args[10], args[11])
+    rs[E_NOW] = E
     if held:
-        E = mechanical_energy(args[0], q, v, phi, mem_s, args[10], args[11])
-        rs[E_NOW] = E
         if math.isnan(rs[E_PASSIVE]):
             rs[E_PASSIVE] = E
         elif E > ENERGY_GROWTH * rs[E_PASSIVE] + ENERGY_FLOOR_J:
             code = ENERGY
     else:
         rs[E_PASSIVE] = np.nan
+    if code == OK and args[12] and E > ENERGY_GROWTH * (rs[E_START] + rs[DRIVE_WORK]) + ENERGY_FLOOR_J:
+        code = ENERGY_WORK
     sample(row, t, q, v, summary, n_pairs, state, opening, finger_load, last_open, phase, grasp, ee, k, args)
     P, L, p_b, l_b, _ = bodies_momentum(args[0], args[6], q, v)
     rs[P_MAX], rs[L_MAX] = max(rs[P_MAX], p_b), max(rs[L_MAX], l_b)

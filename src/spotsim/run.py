@@ -16,8 +16,9 @@ from .integrators import StepSizeUnderflow, make_integrator
 from .model import Model, build_model, grasp_frame, groove_frame
 from .scenario import tolerance_warnings
 from .jit import direct
-from .record import (DRIFT_ANG, DRIFT_LIN, E_NOW, E_PASSIVE, ENERGY, L_MAX, N_RECORD_STATE, NONFINITE, OK, P_MAX,
-                     Layout, close_interval, record_args, sample, start_record)
+from .record import (DRIFT_ANG, DRIFT_LIN, DRIVE_WORK, E_NOW, E_PASSIVE, E_START, ENERGY, ENERGY_WORK, L_MAX,
+                     N_RECORD_STATE, NONFINITE, OK, P_MAX, Layout, close_interval, record_args, sample, start_record)
+from .stability import ENERGY_GROWTH
 from .stability import stability_warnings
 from .step import StateOverflow, completion_inputs, free_flight, make_data, step
 from .weld import twist_for_momentum, world_momentum
@@ -320,7 +321,8 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
                 steps += n_steps
                 pair_steps += n_pairs
                 free_steps += n_free
-                code = {compiled.NONFINITE: NONFINITE, compiled.ENERGY: ENERGY}.get(event, OK)
+                code = {compiled.NONFINITE: NONFINITE, compiled.ENERGY: ENERGY,
+                        compiled.ENERGY_WORK: ENERGY_WORK}.get(event, OK)
                 if event == compiled.TOO_DEEP:
                     status, message = DIVERGED, _too_deep(data, max_phi)
             else:  # one interval step by step
@@ -345,6 +347,7 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
                         h = data.t - t_start
                     held = held and data.drives[model.grasps[data.active][0]].stalled
                     steps += 1
+                    rec.state[DRIVE_WORK] += h * data.drive_power
                     n = len(c.key)
                     pair_steps += n
                     rec.substep(model, data, n)
@@ -373,6 +376,11 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
             if code == NONFINITE:  # a NaN or an infinity anywhere; nothing recorded
                 status = DIVERGED
                 message = f"state became non-finite by t = {data.t:.4f} s"
+            elif code == ENERGY_WORK:  # energy from nowhere; its record is kept
+                status = DIVERGED
+                message = (f"energy grew to {rec.state[E_NOW]:.3g} J, more than {ENERGY_GROWTH:g} times the "
+                           f"{rec.state[E_START]:.3g} J at the start plus the {rec.state[DRIVE_WORK]:.3g} J the finger "
+                           f"drives did, at t = {data.t:.4f} s")
             elif code == ENERGY:  # a passive phase gained energy; its record is kept
                 status = DIVERGED
                 message = (f"energy grew from {rec.state[E_PASSIVE]:.3g} J to {rec.state[E_NOW]:.3g} J while the "

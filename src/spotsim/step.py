@@ -20,6 +20,7 @@ from .jit import njit
 from .grasp import FingerDrive, GraspPhase
 from .errors import SimulationError
 from .model import Model
+from .record import drive_power
 
 
 class StateOverflow(SimulationError):
@@ -77,6 +78,7 @@ class Data:
     travel: float = np.inf  # bound on any two spheres' relative motion since then, m
     pair_list: tuple = None  # the search's candidate pairs (contact.search.build_pair_list)
     list_travel: float = np.inf  # bound on any two spheres' relative motion since its build, m
+    drive_power: float = 0.0  # the finger drives' power during the last step, W (bound)
     external_force_W: np.ndarray = field(default_factory=lambda: np.zeros(3))
     external_torque_O_W: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
@@ -298,6 +300,7 @@ def step(model: Model, data: Data, h: float, integrator) -> Contacts:
     """Advance the scene by h seconds (an adaptive integrator may take less: data.t tells);
     returns the contacts that acted during the step."""
     contacts, h = integrator.advance(model, data, h)  # forces -> dynamics -> integrate
+    data.drive_power = drive_power(data.finger_load, data.opening_rate)  # at this step's rate
     # the active grasp's drive sets its fingers' rate for the coming step from this step's
     # loads; the other end-effectors hold (their rates stay zero)
     active_ee = model.grasps[data.active][0]
