@@ -114,6 +114,27 @@ def test_an_unstable_stiff_run_is_caught_by_the_energy_balance(case_I):
     assert r.summary["sim_time_s"] < 1.0 and len(r.timeseries["t"]) > 100
 
 
+@pytest.mark.parametrize("compiled_loop", [True, False])
+def test_a_state_coal_cannot_bound_ends_the_run_diverged(case_I, monkeypatch, compiled_loop):
+    """When coal rejects the state (bounds that overflowed), the run ends diverged with coal's
+    reason, its record and its step count kept: the compiled loop and the step-by-step path."""
+    from spotsim import run, step
+
+    real = step.broad_phase
+
+    def overflowing(model, data):
+        if data.t > 0.3:
+            raise step.StateOverflow("state left the representable range (coal: test)")
+        return real(model, data)
+
+    monkeypatch.setattr(step, "broad_phase", overflowing)
+    if not compiled_loop:
+        monkeypatch.setattr(run.compiled, "applies", lambda model, integrator: False)
+    r = spotsim.simulate(case_I)
+    assert r.status == "diverged" and "coal: test" in r.summary["message"]
+    assert 0.3 < r.timeseries["t"][-1] < 0.45 and r.summary["steps"] > 300
+
+
 def test_converged_runs_keep_within_the_energy_the_drives_put_in(case_I, monkeypatch):
     """At the default step the bodies' mechanical energy stays below the work the finger
     drives did (with damping and friction it can only be less): checked at every record of

@@ -25,13 +25,15 @@ from .integrators import SymplecticEuler, _symplectic_euler
 from .jit import direct, njit
 from .record import DRIVE_WORK, ENERGY as ENERGY_RECORD, ENERGY_WORK as ENERGY_WORK_RECORD, NONFINITE as NONFINITE_RECORD
 from .record import close_interval, drive_power
-from .step import FREE_FLIGHT_SAFETY, Contacts, _contact_kernels, _travel_rate, near_face_pairs
+from .step import FREE_FLIGHT_SAFETY, Contacts, StateOverflow, _contact_kernels, _travel_rate, near_face_pairs
 
 #: Why `substeps` or `intervals` returned: all their steps or records ran; the skin is used up
 #: (refresh coal and go on); the grasp phase completed or timed out; a pair penetrated deeper
 #: than a sphere radius; the state became non-finite; energy grew in a passive phase, or past
 #: what the drives could have put in (`record.close_interval`).
 RAN, REFRESH, STOPPED, TOO_DEEP, NONFINITE, ENERGY, ENERGY_WORK = range(7)
+#: ... and, from `run_records` only: coal could not bound the state (the run has diverged).
+OVERFLOW = 7
 
 # slots of the loop's scalar state, read and written in place
 (T, TRAVEL, LIST_TRAVEL, STALLED, PHASE, HELD_SINCE, T_CENTRING, T_COMPLETE, HELD, STEPS, PAIR_STEPS,
@@ -215,8 +217,9 @@ def run_records(model, data, n_records: int, rec, J: np.ndarray, JL: np.ndarray,
 
     J, JL: the external impulse and its moment, added to in place; start, timeout: the
     phase's start and time-out, s; max_phi: the deepest penetration allowed, m. Returns (why
-    it returned: RAN, STOPPED, TOO_DEEP, NONFINITE, ENERGY or ENERGY_WORK; rows recorded; steps taken;
-    pair steps; free-flight steps). Raises StateOverflow when coal cannot bound the state.
+    it returned: RAN, STOPPED, TOO_DEEP, NONFINITE, ENERGY, ENERGY_WORK or OVERFLOW; rows
+    recorded; steps taken; pair steps; free-flight steps; with OVERFLOW, why coal could not
+    bound the state).
     """
     sim = model.scenario.simulation
     s = np.zeros(N_SCALARS)
@@ -231,9 +234,13 @@ def run_records(model, data, n_records: int, rec, J: np.ndarray, JL: np.ndarray,
     s[PEAK_PAIRS] = peaks["pairs"]
     if len(rec.buffer) < n_records:
         rec.buffer = np.empty((n_records, rec.layout.width))
-    n_rows, event = 0, REFRESH
+    n_rows, event, overflow = 0, REFRESH, ""
     while event == REFRESH:
-        near = near_face_pairs(model, data)  # refreshed when the skin is used up
+        try:
+            near = near_face_pairs(model, data)  # refreshed when the skin is used up
+        except StateOverflow as e:
+            event, overflow = OVERFLOW, str(e)
+            break
         s[TRAVEL], s[LIST_TRAVEL] = data.travel, data.list_travel
         data.q, data.v, data.pair_list, pairs, loads, summary, event, rows = _intervals(
             n_records - n_rows, sim.dt_s, sim.substeps, data.q, data.v, data.R_W, data.p_W, data.w_W, data.vo_W,
@@ -251,7 +258,7 @@ def run_records(model, data, n_records: int, rec, J: np.ndarray, JL: np.ndarray,
         rec.add_rows(model, data, rec.buffer[:rows])
         n_rows += rows
     peaks["pairs"] = int(s[PEAK_PAIRS])
-    return event, n_rows, int(s[STEPS]), int(s[PAIR_STEPS]), int(s[FLIGHTS])
+    return event, n_rows, int(s[STEPS]), int(s[PAIR_STEPS]), int(s[FLIGHTS]), overflow
 
 
 def _leave(data, s, pairs, loads, summary) -> None:

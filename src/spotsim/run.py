@@ -311,13 +311,8 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
     try:
         while done < n_records:
             if compiled.applies(model, integrator):  # intervals up to the next snapshot in one call
-                try:
-                    event, n_rows, n_steps, n_pairs, n_free = compiled.run_records(
-                        model, data, min(n_records - done, rec.to_snapshot()), rec, J, JL, starts[-1], timeout,
-                        max_phi)
-                except StateOverflow as e:  # its broad phase met a state coal cannot bound
-                    status, message = DIVERGED, f"{e} at t = {data.t:.4f} s"
-                    break
+                event, n_rows, n_steps, n_pairs, n_free, overflow = compiled.run_records(
+                    model, data, min(n_records - done, rec.to_snapshot()), rec, J, JL, starts[-1], timeout, max_phi)
                 steps += n_steps
                 pair_steps += n_pairs
                 free_steps += n_free
@@ -325,6 +320,8 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
                         compiled.ENERGY_WORK: ENERGY_WORK}.get(event, OK)
                 if event == compiled.TOO_DEEP:
                     status, message = DIVERGED, _too_deep(data, max_phi)
+                elif event == compiled.OVERFLOW:  # its broad phase met a state coal cannot bound
+                    status, message = DIVERGED, f"{overflow} at t = {data.t:.4f} s"
             else:  # one interval step by step
                 # nothing can touch before the next record (zero gravity): one step to it; else
                 # the dynamics substeps
