@@ -18,7 +18,7 @@ import math
 
 import numpy as np
 
-from .bodies import bodies_momentum, body_pose, kinetic_energy, mm, mv3
+from .bodies import bodies_momentum, body_pose, kinetic_energy, mm, mtv3, mv3
 from .contact.friction import SLIPPING, STICKING
 from .jit import njit
 from .stability import ENERGY_FLOOR_J, ENERGY_GROWTH, mechanical_energy
@@ -175,11 +175,7 @@ def sample(row, t, q, v, summary, n_pairs, state, opening, finger_load, last_ope
     at = _put(row, 0, np.array([t]))
     at = _put(row, at, p_b)
     at = _put(row, at, quat_xyzw(R_b))
-    d = p_b - p_a
-    offset = np.array([R_a[0, 0] * d[0] + R_a[1, 0] * d[1] + R_a[2, 0] * d[2],
-                       R_a[0, 1] * d[0] + R_a[1, 1] * d[1] + R_a[2, 1] * d[2],
-                       R_a[0, 2] * d[0] + R_a[1, 2] * d[1] + R_a[2, 2] * d[2]])
-    at = _put(row, at, offset, 1e3)
+    at = _put(row, at, np.array(mtv3(R_a, p_b - p_a)), 1e3)  # O_b in O_a
     R_ab = np.empty((3, 3))  # R_a^T R_b
     for i in range(3):
         for j in range(3):

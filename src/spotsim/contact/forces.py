@@ -11,25 +11,11 @@ import math
 
 import numpy as np
 
-from ..bodies import mm, mv
+from ..bodies import add3, mm, mv, mv3
 from ..jit import njit
 from .detection import contact_point1, penetration1
 from .friction import bristle1
 from .normal import indentation, normal_force1
-
-
-@njit
-def _rotate(R, x):
-    return (R[0, 0] * x[0] + R[0, 1] * x[1] + R[0, 2] * x[2],
-            R[1, 0] * x[0] + R[1, 1] * x[1] + R[1, 2] * x[2],
-            R[2, 0] * x[0] + R[2, 1] * x[1] + R[2, 2] * x[2])
-
-
-@njit
-def _place(R, x, p):
-    """R x + p, as a 3-tuple."""
-    y = _rotate(R, x)
-    return (y[0] + p[0], y[1] + p[1], y[2] + p[2])
 
 
 @njit
@@ -73,14 +59,14 @@ def pair_forces(master, slave, key, C1_J, N1_J, joint1, finger1, axis1_J, C2_J, 
         j1, j2 = joint1[m], joint2[sl]
         R1, R2 = R_W[j1], R_W[j2]
         shift = opening[finger1[m]]  # the finger has slid along its axis
-        c1 = _place(R1, (C1_J[m, 0] + shift * axis1_J[m, 0], C1_J[m, 1] + shift * axis1_J[m, 1],
-                         C1_J[m, 2] + shift * axis1_J[m, 2]), p_W[j1])
-        c2 = _place(R2, C2_J[sl], p_W[j2])
-        n_c, phi, hit = penetration1(c1, _rotate(R1, N1_J[m]), r1, c2, _rotate(R2, N2_J[sl]), r2)
+        c1 = add3(mv3(R1, (C1_J[m, 0] + shift * axis1_J[m, 0], C1_J[m, 1] + shift * axis1_J[m, 1],
+                           C1_J[m, 2] + shift * axis1_J[m, 2])), p_W[j1])
+        c2 = add3(mv3(R2, C2_J[sl]), p_W[j2])
+        n_c, phi, hit = penetration1(c1, mv3(R1, N1_J[m]), r1, c2, mv3(R2, N2_J[sl]), r2)
         if not hit:
             continue
         point = contact_point1(c1, c2, r1, r2, n_c, phi)
-        slide = _rotate(R1, axis1_J[m])
+        slide = mv3(R1, axis1_J[m])
         rate = opening_rate[finger1[m]]
         v_A = _point_velocity(vo_W[j1], w_W[j1], p_W[j1], point)
         v_B = _point_velocity(vo_W[j2], w_W[j2], p_W[j2], point)
