@@ -44,3 +44,38 @@ def test_welded_robot_against_table_5_body_4():
     print("body 4 inertia about its centroid:", inertia, "paper:", TABLE5[4].inertia,
           "difference:", (inertia / TABLE5[4].inertia - 1).round(3))
     assert np.all(inertia > 0)
+
+
+def test_weld_by_editing_the_compiled_urdf_builds_the_model_the_xacro_builds():
+    """A run welds TM-1 by editing one joint of the compiled URDF (`model.weld_urdf`) instead
+    of compiling the XACRO again with TM-1's joint fixed: both give the same model, to the bit."""
+    import spotsim
+    from spotsim.model import build_model
+
+    s = spotsim.load_scenario(spotsim.assets.ROOT / "config" / "dual_arm_sequential.yaml")
+    first = build_model(s)
+    welded = {0: ((0.0012345678901234, -0.0023, 1e-5), (0.001, -0.002, 0.3))}
+    by_xacro, by_edit = build_model(s, welded=welded), build_model(s, welded=welded, urdf=first.urdf)
+    a, b = by_xacro.pin_model, by_edit.pin_model
+    assert list(a.names) == list(b.names) and a.nq == b.nq == first.pin_model.nq - 7
+    for x, y in zip(a.jointPlacements, b.jointPlacements, strict=True):
+        assert np.array_equal(x.homogeneous, y.homogeneous)
+    for x, y in zip(a.inertias, b.inertias, strict=True):
+        assert np.array_equal(x.toDynamicParameters(), y.toDynamicParameters())
+    for f, g in zip(a.frames, b.frames, strict=True):
+        assert f.name == g.name and f.parentJoint == g.parentJoint
+        assert np.array_equal(f.placement.homogeneous, g.placement.homogeneous)
+    for x, y in ((by_xacro.master, by_edit.master), (by_xacro.slave, by_edit.slave)):
+        assert np.array_equal(x.centres_J, y.centres_J) and np.array_equal(x.joint, y.joint)
+    assert np.array_equal(by_xacro.q0, by_edit.q0)
+
+
+def test_weld_of_a_scene_without_the_modules_joint_is_a_clear_error():
+    import spotsim
+    from spotsim.errors import ModelError
+    from spotsim.model import scene_spec, weld_urdf
+
+    s = spotsim.load_scenario(spotsim.assets.ROOT / "config" / "dual_arm_sequential.yaml")
+    spec = scene_spec(s, {0: ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))})
+    with pytest.raises(ModelError, match="tm1_free_flyer"):
+        weld_urdf('<robot name="empty"><link name="world"/></robot>', spec)
