@@ -36,9 +36,9 @@ RAN, REFRESH, STOPPED, TOO_DEEP, NONFINITE, ENERGY, ENERGY_WORK = range(7)
 OVERFLOW = 7
 
 # slots of the loop's scalar state, read and written in place
-(T, TRAVEL, LIST_TRAVEL, STALLED, PHASE, HELD_SINCE, T_CENTRING, T_COMPLETE, HELD, STEPS, PAIR_STEPS,
- PEAK_PAIRS, LEFT, H, FLIGHTS) = range(15)
-N_SCALARS = 15
+(T, TRAVEL, STALLED, PHASE, HELD_SINCE, T_CENTRING, T_COMPLETE, HELD, STEPS, PAIR_STEPS, PEAK_PAIRS, LEFT, H,
+ FLIGHTS) = range(14)
+N_SCALARS = 14
 
 
 def applies(model, integrator) -> bool:
@@ -79,9 +79,9 @@ def substeps(h, q, v, R_W, p_W, w_W, vo_W, near, opening, opening_rate, mem_key,
     event = RAN
     while s[LEFT] > 0:
         # forces -> dynamics -> integrate (SymplecticEuler.advance)
-        pairs, loads, summary, pair_list, s[LIST_TRAVEL] = _contact_kernels(
+        pairs, loads, summary, pair_list = _contact_kernels(
             q, v, R_W, p_W, w_W, vo_W, near, opening, opening_rate, mem_key, mem_s, mem_vminus, h, pair_list,
-            s[LIST_TRAVEL], ee_joint, R_ee, module_joint, lever, *contact_args)
+            ee_joint, R_ee, module_joint, lever, *contact_args)
         mem_key, mem_s, mem_vminus = pairs[2], pairs[10], pairs[11]
         a = free_body_accelerations(bodies, q, v, loads[0], g_W)
         q, v = _symplectic_euler(bodies, q, v, a, h)
@@ -104,9 +104,7 @@ def substeps(h, q, v, R_W, p_W, w_W, vo_W, near, opening, opening_rate, mem_key,
             opening[i] += h * opening_rate[i]
         s[T] += h
         rs[DRIVE_WORK] += h * power
-        moved = h * _travel_rate(bodies.idx_v, rows, reach, v, opening_rate)
-        s[TRAVEL] += moved
-        s[LIST_TRAVEL] += moved
+        s[TRAVEL] += h * _travel_rate(bodies.idx_v, rows, reach, v, opening_rate)
         # the grasp phase (grasp.GraspPhase.update)
         n_pairs = pairs[2].shape[0]
         t = s[T]
@@ -241,7 +239,7 @@ def run_records(model, data, n_records: int, rec, J: np.ndarray, JL: np.ndarray,
         except StateOverflow as e:
             event, overflow = OVERFLOW, str(e)
             break
-        s[TRAVEL], s[LIST_TRAVEL] = data.travel, data.list_travel
+        s[TRAVEL] = data.travel
         data.q, data.v, data.pair_list, pairs, loads, summary, event, rows = _intervals(
             n_records - n_rows, sim.dt_s, sim.substeps, data.q, data.v, data.R_W, data.p_W, data.w_W, data.vo_W,
             near, data.opening, data.opening_rate, data.mem_key, data.mem_s, data.mem_vminus, data.pair_list, s,
@@ -263,7 +261,7 @@ def run_records(model, data, n_records: int, rec, J: np.ndarray, JL: np.ndarray,
 
 def _leave(data, s, pairs, loads, summary) -> None:
     """Put the loop's last step into data as `step.step` leaves it."""
-    data.t, data.travel, data.list_travel = float(s[T]), float(s[TRAVEL]), float(s[LIST_TRAVEL])
+    data.t, data.travel = float(s[T]), float(s[TRAVEL])
     data.contacts = Contacts(*pairs[:10])
     data.contacts.memory = (data.contacts.key, pairs[10], pairs[11])
     data.mem_key, data.mem_s, data.mem_vminus = data.contacts.memory

@@ -77,7 +77,6 @@ class Data:
     near_pairs: np.ndarray = None  # indices of the face pairs coal kept at its last run
     travel: float = np.inf  # bound on any two spheres' relative motion since then, m
     pair_list: tuple = None  # the search's candidate pairs (contact.search.build_pair_list)
-    list_travel: float = np.inf  # bound on any two spheres' relative motion since its build, m
     drive_power: float = 0.0  # the finger drives' power during the last step, W (bound)
     external_force_W: np.ndarray = field(default_factory=lambda: np.zeros(3))
     external_torque_O_W: np.ndarray = field(default_factory=lambda: np.zeros(3))
@@ -156,7 +155,7 @@ def broad_phase(model: Model, data: Data) -> np.ndarray:
 def refresh_broad_phase(model: Model, data: Data) -> None:
     """Run the broad phase anew: its face pairs start a fresh skin, and the search a fresh
     pair list."""
-    data.near_pairs, data.travel, data.list_travel = broad_phase(model, data), 0.0, np.inf
+    data.near_pairs, data.travel = broad_phase(model, data), 0.0
 
 
 def near_face_pairs(model: Model, data: Data) -> np.ndarray:
@@ -245,19 +244,17 @@ def contact_stage(model: Model, data: Data, h: float, commit: bool = True) -> Co
                                        *model.watch_args[data.active], c.speed, c.phi)
         return c
     near = near_face_pairs(model, data)
-    # a Runge-Kutta stage lies ahead of the state the list's travel bound covers: it builds
-    # a list of its own
-    travel = data.list_travel if commit else np.inf
+    # the pair list checks itself against the state it is used at, so a Runge-Kutta stage
+    # may use and rebuild it too
     pairs, (local, data.joint_force_W, data.joint_torque_O_W, data.external_force_W, data.external_torque_O_W,
-            data.finger_load), data.summary, pair_list, travel = model.contact_call(
+            data.finger_load), data.summary, data.pair_list = model.contact_call(
         data.q, data.v, data.R_W, data.p_W, data.w_W, data.vo_W, near, data.opening,
-        data.opening_rate, data.mem_key, data.mem_s, data.mem_vminus, h, data.pair_list, travel,
+        data.opening_rate, data.mem_key, data.mem_s, data.mem_vminus, h, data.pair_list,
         *model.watch_args[data.active], *model.contact_kernel_args)
     c = Contacts(*pairs[:10])
     c.memory = (c.key, pairs[10], pairs[11])
     if commit:
         data.mem_key, data.mem_s, data.mem_vminus = c.memory
-        data.pair_list, data.list_travel = pair_list, travel
     for view, w in zip(data.f_views, local):  # written into the Force objects ABA reads
         view[:] = w
     return c
@@ -274,15 +271,15 @@ def contact_kernel_args(model: Model) -> tuple:
 
 @njit
 def _contact_kernels(q, v, R_W, p_W, w_W, vo_W, near, opening, opening_rate, mem_key, mem_s, mem_vminus, h,
-                     pair_list, list_travel, ee_joint, R_ee, module_joint, lever, bodies, table, maps, C1_J, N1_J, joint1, finger1, axis1_J, C2_J, N2_J, joint2,
+                     pair_list, ee_joint, R_ee, module_joint, lever, bodies, table, maps, C1_J, N1_J, joint1, finger1, axis1_J, C2_J, N2_J, joint2,
                      r1, r2, K, damping, floor, cutoff, bristle, common_point, finger_parent, finger_axis_J):
     """The kernels of `kinematics`, `candidate_pairs` (from the pair list), `contact_forces` and
     `wrenches`, chained, and the `contact_summary` of the step; then the pair list and its
     travel."""
     body_kinematics(bodies, q, v, R_W, p_W, w_W, vo_W)
-    (master, slave, key), pair_list, list_travel = listed_search(
+    (master, slave, key), pair_list = listed_search(
         near, table, C1_J, N1_J, finger1, axis1_J, opening, maps, C2_J.shape[0], R_W, p_W, r1, r2, cutoff,
-        pair_list, list_travel)
+        pair_list)
     pairs = pair_forces(master, slave, key, C1_J, N1_J, joint1, finger1, axis1_J, C2_J, N2_J, joint2,
                         R_W, p_W, w_W, vo_W, opening, opening_rate, mem_key, mem_s, mem_vminus,
                         r1, r2, K, damping, floor, h, bristle)
@@ -290,7 +287,7 @@ def _contact_kernels(q, v, R_W, p_W, w_W, vo_W, near, opening, opening_rate, mem
                           joint1, joint2, finger1, finger_parent, finger_axis_J, R_W, p_W, R_W.shape[0])
     summary = contact_summary(loads[1], loads[2], R_W, p_W, ee_joint, R_ee, module_joint, lever, pairs[8],
                               pairs[3])
-    return pairs, loads, summary, pair_list, list_travel
+    return pairs, loads, summary, pair_list
 
 
 # -------------------------------------------------------------------------------- step
@@ -310,9 +307,7 @@ def step(model: Model, data: Data, h: float, integrator) -> Contacts:
     if not integrator.moves_fingers:
         data.opening += h * data.opening_rate
     data.t += h
-    moved = h * travel_rate(model, data)
-    data.travel += moved
-    data.list_travel += moved
+    data.travel += h * travel_rate(model, data)
     data.contacts = contacts
     grasp_phase(model, data, contacts)
     return contacts

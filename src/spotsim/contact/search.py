@@ -259,58 +259,85 @@ def grid_search(near, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_slav
 
 
 #: The pair list's reach beyond contact, m: it keeps the candidate pairs whose centres lie
-#: within r1 + r2 + LIST_SKIN. Larger lists cost more per step, smaller ones are rebuilt more
-#: often; 30 um keeps ~2-10 candidates per pair in contact on the paper's 0.7/0.8 mm layers.
+#: within r1 + r2 + LIST_SKIN. A candidate is tested only once the spheres may have closed its
+#: gap, so a wider skin costs little per step; a rebuild costs ~50 us.
 LIST_SKIN = 30e-6
-#: The list is kept while the spheres may have moved at most LIST_SKIN / LIST_SAFETY relative
-#: to each other: the step's travel bound is taken at the step's end (see step.travel_rate).
-LIST_SAFETY = 2.0
 #: ... and while each listed face pair's common normal stays within this of the normal it was
 #: built with (|n - n_built|, unit vectors): the listed pairs are then those of the ball regime.
 LIST_NORMAL_TOL = 0.01
+#: A candidate is tested while its gap at the build is at most the bound on how far its master
+#: sphere has moved since then plus this, m: far above the round-off of the gaps and the bound
+#: (~1e-16 m) and the SEARCH_SLACK band of the test (< 1e-12 m), far below a sphere's motion.
+GAP_SLACK = 1e-9
 
 
-def empty_pair_list(n_face_pairs: int) -> tuple:
+class PairList(NamedTuple):
+    """The candidate pairs of the face pairs a search has built (`build_pair_list`), grouped
+    by face pair, each group ordered by gap."""
+
+    master: np.ndarray  # (n,) master sphere of each candidate
+    slave: np.ndarray  # (n,) slave sphere
+    node_i: np.ndarray  # (n,) the slave sphere's grid row and column on its face
+    node_j: np.ndarray
+    gap: np.ndarray  # (n,) |c1 - c2| - (r1 + r2) at the build, m
+    start: np.ndarray  # (n_table,) each face pair's first candidate
+    stop: np.ndarray  # (n_table,) one past its last
+    built: np.ndarray  # (n_table,) whether the face pair was among those the list was built for
+    scan: np.ndarray  # (n_table,) whether it is searched anew at every step instead (not a ball)
+    normal_W: np.ndarray  # (n_table, 3) its common normal (world) at the build
+    A: np.ndarray  # (n_table, 3, 3) its map of master centres to face coordinates at the build
+    off: np.ndarray  # (n_table, 3) and the map's offset (`_face_frame`)
+    centre_J: np.ndarray  # (n_table, 3) the mean of its master face's centres, master joint frame
+    radius: np.ndarray  # (n_table,) the farthest of those centres from that mean, m
+
+
+def empty_pair_list(n_face_pairs: int) -> PairList:
     """A pair list that holds nothing and must be built at its first use."""
     none = np.zeros(0, dtype=np.int64)
-    return none, none, none, none, none, np.ones(n_face_pairs, dtype=np.bool_), np.zeros((n_face_pairs, 3))
+    ints, flags = np.zeros(n_face_pairs, dtype=np.int64), np.zeros(n_face_pairs, dtype=np.bool_)
+    return PairList(none, none, none, none, np.zeros(0), ints, ints.copy(), flags, flags.copy(),
+                    np.zeros((n_face_pairs, 3)), np.zeros((n_face_pairs, 3, 3)), np.zeros((n_face_pairs, 3)),
+                    np.zeros((n_face_pairs, 3)), np.zeros(n_face_pairs))
 
 
 @njit
 def build_pair_list(near, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_slave, R_W, p_W, r1, radius,
                     cutoff):
     """The candidate pairs of the face pairs `near` that can come into contact while the
-    spheres move less than LIST_SKIN / LIST_SAFETY relative to each other (a Verlet list).
+    spheres move less than LIST_SKIN relative to each other (a Verlet list).
 
     A face pair whose common normal makes chi = n . (c1 - c2) clearly positive for every pair
     within reach is in the ball regime: a pair there touches only if its centres are closer
-    than r1 + r2 (+ round-off), so the list keeps the pairs closer than r1 + r2 + LIST_SKIN.
-    Chi moves by at most the travel plus the normal's turn times the cutoff, which the margin
-    covers. Any other face pair (faces tilted far from each other) is marked to be searched
-    anew at every step.
-    Arguments as `grid_search`. Returns (master, slave, face pair, grid row, grid column) of
-    the listed pairs, sorted by key; (n_table,) whether each face pair is searched anew; and
-    (n_table, 3) each face pair's common normal (world) at the build.
+    than r1 + r2 (+ round-off), so the list keeps the pairs closer than r1 + r2 + LIST_SKIN,
+    with their gap, each face pair's candidates ordered by gap. Chi moves by at most the
+    spheres' motion plus the normal's turn times the cutoff, which the margin covers. Any
+    other face pair (faces tilted far from each other) is marked to be searched anew at every
+    step. Arguments as `grid_search`; returns a `PairList`.
     """
     n_table = table.master_start.shape[0]
-    scan = np.ones(n_table, dtype=np.bool_)
-    normal_W = np.zeros((n_table, 3))
+    built = np.zeros(n_table, dtype=np.bool_)
+    scan = np.zeros(n_table, dtype=np.bool_)
+    start, stop = np.zeros(n_table, dtype=np.int64), np.zeros(n_table, dtype=np.int64)
+    normal_W, A_b, off_b = np.zeros((n_table, 3)), np.zeros((n_table, 3, 3)), np.zeros((n_table, 3))
+    centre, spread = np.zeros((n_table, 3)), np.zeros(n_table)
     cap = 256
-    lm, ls, lf = np.empty(cap, dtype=np.int64), np.empty(cap, dtype=np.int64), np.empty(cap, dtype=np.int64)
+    lm, ls, gap = np.empty(cap, dtype=np.int64), np.empty(cap, dtype=np.int64), np.empty(cap)
     li, lj = np.empty(cap, dtype=np.int64), np.empty(cap, dtype=np.int64)
     n = 0
     R = r1 + radius
     reach_3d = R + LIST_SKIN
     chi_margin = LIST_SKIN + LIST_NORMAL_TOL * cutoff + SEARCH_SLACK
-    inv = 1.0 / radius  # the list needs no exact grid coordinates: its skin absorbs round-off
+    inv = 1.0 / radius  # the list needs no exact grid coordinates: GAP_SLACK absorbs round-off
     for f in near:
+        built[f] = True
         facing, nu, nv, nh, A, off, n_W = _face_frame(f, table, N1_J, finger1, axis1_J, opening, R_W, p_W)
         if not facing:
+            scan[f] = True
             continue
         n_uv = math.hypot(nu, nv)
         ni, nj = table.shape[f, 0], table.shape[f, 1]
         face = table.slave_face[f]
-        start, ball = n, True
+        first, ball = n, True
         for row in range(table.master_start[f], table.master_stop[f]):
             c = C1_J[row]
             lift = _lift(A, off, c, radius)
@@ -334,17 +361,32 @@ def build_pair_list(near, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_
                     if s < 0 or du * du + dv * dv >= r_sq:
                         continue
                     if n == lm.shape[0]:
-                        lm, ls, lf = _grow(lm), _grow(ls), _grow(lf)
+                        lm, ls, gap = _grow(lm), _grow(ls), _grow(gap)
                         li, lj = _grow(li), _grow(lj)
-                    lm[n], ls[n], lf[n], li[n], lj[n] = row, s, f, i, j
+                    lm[n], ls[n], li[n], lj[n] = row, s, i, j
+                    gap[n] = math.sqrt(du * du + dv * dv + lift * lift) - R
                     n += 1
-        if ball:
-            scan[f] = False
-            normal_W[f] = n_W
-        else:
-            n = start
-    order = np.argsort(lm[:n] * n_slave + ls[:n])
-    return lm[:n][order], ls[:n][order], lf[:n][order], li[:n][order], lj[:n][order], scan, normal_W
+        if not ball:
+            scan[f] = True
+            n = first
+            continue
+        order = np.argsort(gap[first:n]) + first
+        lm[first:n], ls[first:n], li[first:n], lj[first:n], gap[first:n] = (
+            lm[order], ls[order], li[order], lj[order], gap[order])
+        start[f], stop[f] = first, n
+        normal_W[f] = n_W
+        A_b[f] = A
+        off_b[f, 0], off_b[f, 1], off_b[f, 2] = off
+        # the master face's centres as their mean and a radius about it: `_moved` bounds
+        # every centre's motion from these
+        rows = C1_J[table.master_start[f]:table.master_stop[f]]
+        for a in range(3):
+            centre[f, a] = rows[:, a].mean()
+        for c in rows:
+            spread[f] = max(spread[f], math.sqrt((c[0] - centre[f, 0]) ** 2 + (c[1] - centre[f, 1]) ** 2
+                                                 + (c[2] - centre[f, 2]) ** 2))
+    return PairList(lm[:n].copy(), ls[:n].copy(), li[:n].copy(), lj[:n].copy(), gap[:n].copy(), start, stop, built,
+                    scan, normal_W, A_b, off_b, centre, spread)
 
 
 @njit
@@ -353,67 +395,96 @@ def _grow(a):
 
 
 @njit
-def listed_search(near, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_slave, R_W, p_W, r1, radius,
-                  cutoff, pair_list, travel):
-    """`grid_search`'s pairs, tested only among the candidates of a pair list kept between
-    steps (`build_pair_list`), which is rebuilt when the spheres may have moved too far
-    (`travel`, m, since the build: infinite forces a build) or a face pair's normal turned.
+def _moved(A, off, A_b, off_b, centre, spread):
+    """A bound on how far any master centre of a face pair has moved in face coordinates
+    (relative to the slave spheres) since the pair list's build, m: the map x = A c + off
+    moved every centre c = centre + d (|d| <= spread) by (A - A_b) centre + (off - off_b) +
+    (A - A_b) d, the last at most |A - A_b|_F spread."""
+    shift = 0.0
+    norm_sq = 0.0
+    for r in range(3):
+        x = off[r] - off_b[r]
+        for k in range(3):
+            d = A[r, k] - A_b[r, k]
+            x += d * centre[k]
+            norm_sq += d * d
+        shift += x * x
+    return math.sqrt(shift) + math.sqrt(norm_sq) * spread
 
-    Returns (master, slave, key) as `grid_search` does, the pair list and the travel since
-    its build (0 after a rebuild).
+
+@njit
+def listed_search(near, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_slave, R_W, p_W, r1, radius,
+                  cutoff, pair_list):
+    """`grid_search`'s pairs, tested only among the candidates of a pair list kept between
+    steps (`build_pair_list`).
+
+    The list is rebuilt when a face pair in `near` was not among those it was built for, a
+    face pair's normal has turned, or its master spheres may have moved LIST_SKIN relative
+    to its slave spheres since the build (`_moved`, computed from the two poses: exact, not
+    integrated over the steps). Within a face pair, only the candidates whose gap at the build
+    that motion could have closed are tested. Returns (master, slave, key) as `grid_search`
+    does, and the pair list.
     """
-    lm, ls, lf, li, lj, scan, normal_W = pair_list
-    n_table = table.master_start.shape[0]
-    slot = np.full(n_table, -1, dtype=np.int64)
     k = near.shape[0]
-    A_k, off_k, n_k = np.empty((k, 3, 3)), np.empty((k, 3)), np.empty((k, 3))
-    valid = travel <= LIST_SKIN / LIST_SAFETY
+    A_k, off_k, n_k, moved = np.empty((k, 3, 3)), np.empty((k, 3)), np.empty((k, 3)), np.empty(k)
+    valid = True
     for m in range(k):
         f = near[m]
-        slot[f] = m
         facing, nu, nv, nh, A, off, n_W = _face_frame(f, table, N1_J, finger1, axis1_J, opening, R_W, p_W)
         A_k[m] = A
         off_k[m, 0], off_k[m, 1], off_k[m, 2] = off
         n_k[m, 0], n_k[m, 1], n_k[m, 2] = nu, nv, nh
-        if not scan[f] and (not facing or math.sqrt((n_W[0] - normal_W[f, 0]) ** 2 + (n_W[1] - normal_W[f, 1]) ** 2
-                                                    + (n_W[2] - normal_W[f, 2]) ** 2) > LIST_NORMAL_TOL):
+        if not pair_list.built[f]:
             valid = False
+        elif not pair_list.scan[f]:
+            turn = math.sqrt((n_W[0] - pair_list.normal_W[f, 0]) ** 2 + (n_W[1] - pair_list.normal_W[f, 1]) ** 2
+                             + (n_W[2] - pair_list.normal_W[f, 2]) ** 2)
+            moved[m] = _moved(A, off, pair_list.A[f], pair_list.off[f], pair_list.centre_J[f],
+                              pair_list.radius[f])
+            if not facing or turn > LIST_NORMAL_TOL or moved[m] >= LIST_SKIN - GAP_SLACK:
+                valid = False
     if not valid:
         pair_list = build_pair_list(near, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_slave, R_W, p_W,
                                     r1, radius, cutoff)
-        lm, ls, lf, li, lj, scan, normal_W = pair_list
-        travel = 0.0
+        moved[:] = 0.0
+    lm, ls, li, lj, gap = pair_list.master, pair_list.slave, pair_list.node_i, pair_list.node_j, pair_list.gap
     R = r1 + radius
-    out_m, out_s = np.empty(lm.shape[0], dtype=np.int64), np.empty(lm.shape[0], dtype=np.int64)
-    n = 0
-    for idx in range(lm.shape[0]):
-        m = slot[lf[idx]]
-        row = lm[idx]
-        c = C1_J[row]
-        lift = _lift(A_k[m], off_k[m], c, radius)
-        u, v = _grid_uv(A_k[m], off_k[m], c, radius)
-        if _node_hit(u, v, li[idx], lj[idx], lift, lift * lift - R * R, n_k[m, 0], n_k[m, 1], n_k[m, 2], radius,
-                     cutoff):
-            out_m[n], out_s[n] = row, ls[idx]
-            n += 1
+    n_out = 0
+    for m in range(k):
+        n_out += pair_list.stop[near[m]] - pair_list.start[near[m]]
+    out_m, out_s = np.empty(n_out, dtype=np.int64), np.empty(n_out, dtype=np.int64)
+    n = n_searched = 0
+    for m in range(k):
+        f = near[m]
+        if pair_list.scan[f]:
+            n_searched += 1
+            continue
+        A, off, nu, nv, nh = A_k[m], off_k[m], n_k[m, 0], n_k[m, 1], n_k[m, 2]
+        reach = moved[m] + GAP_SLACK
+        for idx in range(pair_list.start[f], pair_list.stop[f]):
+            if gap[idx] > reach:
+                break  # ordered by gap: no later candidate can touch either
+            row = lm[idx]
+            c = C1_J[row]
+            lift = _lift(A, off, c, radius)
+            u, v = _grid_uv(A, off, c, radius)
+            if _node_hit(u, v, li[idx], lj[idx], lift, lift * lift - R * R, nu, nv, nh, radius, cutoff):
+                out_m[n], out_s[n] = row, ls[idx]
+                n += 1
     out_m, out_s = out_m[:n], out_s[:n]
-    n_searched = 0
-    for f in near:
-        n_searched += scan[f]
-    if n_searched:  # face pairs outside the ball regime: searched anew, merged by key
+    if n_searched:  # face pairs outside the ball regime: searched anew
         searched = np.empty(n_searched, dtype=np.int64)
         n_searched = 0
         for f in near:
-            if scan[f]:
+            if pair_list.scan[f]:
                 searched[n_searched] = f
                 n_searched += 1
         sm, ss, _ = grid_search(searched, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_slave, R_W, p_W,
                                 r1, radius, cutoff)
         out_m, out_s = np.concatenate((out_m, sm)), np.concatenate((out_s, ss))
-        key = out_m * n_slave + out_s
-        order = np.argsort(key)
-        return (out_m[order], out_s[order], key[order]), pair_list, travel
-    return (out_m, out_s, out_m * n_slave + out_s), pair_list, travel
+    key = out_m * n_slave + out_s
+    order = np.argsort(key)  # by key, as grid_search returns them
+    return (out_m[order], out_s[order], key[order]), pair_list
 
 
 def face_slices(layers: LayerSet) -> list[slice]:
