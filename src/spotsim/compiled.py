@@ -1,7 +1,7 @@
 """The default step, compiled whole: the record intervals between two returns in one call.
 
 For the default setting (symplectic Euler, the culled search, a scene of free bodies only)
-the stages of `step.step` run in one compiled loop: contact (`step._contact_kernels`), the
+the stages of `step.step` run in one compiled loop: contact (`step._contact_kernels`' chain), the
 dynamics (`bodies.free_body_accelerations`, ABA for free bodies), the update
 (`integrators._symplectic_euler`), the finger drive, the travel bounds, the grasp phase, and
 the run loop's per-substep bookkeeping (peaks, external impulses, divergence by penetration);
@@ -18,14 +18,15 @@ import math
 
 import numpy as np
 
-from .bodies import cross, free_body_accelerations, mv
-from .contact.forces import raise_peaks
+from .bodies import body_kinematics, cross, free_body_accelerations, mv
+from .contact.forces import body_wrenches, contact_summary, pair_forces, raise_peaks
+from .contact.search import listed_search
 from .grasp import PHASES
 from .integrators import SymplecticEuler, _symplectic_euler
 from .jit import direct, njit
 from .record import DRIVE_WORK, ENERGY as ENERGY_RECORD, ENERGY_WORK as ENERGY_WORK_RECORD, NONFINITE as NONFINITE_RECORD
 from .record import close_interval, drive_power
-from .step import FREE_FLIGHT_SAFETY, Contacts, StateOverflow, _contact_kernels, _travel_rate, near_face_pairs
+from .step import FREE_FLIGHT_SAFETY, Contacts, StateOverflow, _travel_rate, near_face_pairs
 
 #: Why `substeps` or `intervals` returned: all their steps or records ran; the skin is used up
 #: (refresh coal and go on); the grasp phase completed or timed out; a pair penetrated deeper
@@ -79,9 +80,21 @@ def substeps(h, q, v, R_W, p_W, w_W, vo_W, near, opening, opening_rate, mem_key,
     event = RAN
     while s[LEFT] > 0:
         # forces -> dynamics -> integrate (SymplecticEuler.advance)
-        pairs, loads, summary, pair_list = _contact_kernels(
-            q, v, R_W, p_W, w_W, vo_W, near, opening, opening_rate, mem_key, mem_s, mem_vminus, h, pair_list,
-            ee_joint, R_ee, module_joint, lever, *contact_args)
+        # step._contact_kernels' chain, written out here: called as one kernel it cost ~4 us more
+        # a step (its ~40 arguments in and ~30 arrays out), a fifth of a step in contact
+        (_, table, maps, C1_J, N1_J, joint1, finger1, axis1_J, C2_J, N2_J, joint2, r1, r2, K, damping, floor,
+         cutoff, bristle, common_point, finger_parent, finger_axis_J) = contact_args
+        body_kinematics(bodies, q, v, R_W, p_W, w_W, vo_W)
+        (master, slave, key), pair_list = listed_search(
+            near, table, C1_J, N1_J, finger1, axis1_J, opening, maps, C2_J.shape[0], R_W, p_W, r1, r2, cutoff,
+            pair_list)
+        pairs = pair_forces(master, slave, key, C1_J, N1_J, joint1, finger1, axis1_J, C2_J, N2_J, joint2,
+                            R_W, p_W, w_W, vo_W, opening, opening_rate, mem_key, mem_s, mem_vminus,
+                            r1, r2, K, damping, floor, h, bristle)
+        loads = body_wrenches(pairs[0], pairs[1], pairs[7], pairs[4], pairs[5], pairs[6], common_point,
+                              joint1, joint2, finger1, finger_parent, finger_axis_J, R_W, p_W, R_W.shape[0])
+        summary = contact_summary(loads[1], loads[2], R_W, p_W, ee_joint, R_ee, module_joint, lever, pairs[8],
+                                  pairs[3])
         mem_key, mem_s, mem_vminus = pairs[2], pairs[10], pairs[11]
         a = free_body_accelerations(bodies, q, v, loads[0], g_W)
         q, v = _symplectic_euler(bodies, q, v, a, h)
