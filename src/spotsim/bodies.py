@@ -151,22 +151,21 @@ def quat_to_rotation(x, y, z, w):
 
 
 @njit
-def quat_times_exp(q, t0, t1, t2):
+def quat_times_exp4(q, t0, t1, t2):
     """q exp(t) for the quaternion q (x, y, z, w) and a rotation vector t in q's own frame
-    (R <- R exp(t)), normalised, as a new (4,) array."""
+    (R <- R exp(t)), normalised, as a 4-tuple."""
     angle = math.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
     half = 0.5 * angle
     # sin(half) / angle, with its series where the division loses digits
     k = 0.5 - angle * angle / 48.0 if angle < 1e-4 else math.sin(half) / angle
     dx, dy, dz, dw = k * t0, k * t1, k * t2, math.cos(half)
     x, y, z, w = q[0], q[1], q[2], q[3]
-    out = np.empty(4)
-    out[0] = w * dx + x * dw + y * dz - z * dy
-    out[1] = w * dy - x * dz + y * dw + z * dx
-    out[2] = w * dz + x * dy - y * dx + z * dw
-    out[3] = w * dw - x * dx - y * dy - z * dz
-    norm = math.sqrt(out[0] ** 2 + out[1] ** 2 + out[2] ** 2 + out[3] ** 2)
-    return out / norm
+    o0 = w * dx + x * dw + y * dz - z * dy
+    o1 = w * dy - x * dz + y * dw + z * dx
+    o2 = w * dz + x * dy - y * dx + z * dw
+    o3 = w * dw - x * dx - y * dy - z * dz
+    norm = math.sqrt(o0 ** 2 + o1 ** 2 + o2 ** 2 + o3 ** 2)
+    return o0 / norm, o1 / norm, o2 / norm, o3 / norm
 
 
 @njit
@@ -272,17 +271,24 @@ def free_body_accelerations(bodies, q, v, f_local, g_W):
     """
     a = np.zeros(v.shape[0])
     for b in range(bodies.joint.shape[0]):
-        j, iv = bodies.joint[b], bodies.idx_v[b]
-        R = body_rotation(bodies, b, q)
-        m, c, I_G = bodies.mass[b], bodies.lever[b], bodies.inertia_G[b]
-        v_O, w = v[iv:iv + 3], v[iv + 3:iv + 6]
-        f, tau_O = f_local[j, :3], f_local[j, 3:]
-        # Newton about the centroid (world) and Euler about it (body axes)
-        g = mtv3(R, g_W)
-        a_G = (f[0] / m + g[0], f[1] / m + g[1], f[2] / m + g[2])
-        alpha = _solve3(I_G, sub3(sub3(tau_O, cross3(c, f)), cross3(w, mv3(I_G, w))))
-        # the centroid's acceleration is that of the origin plus alpha x c + w x (w x c); the
-        # twist's linear part is the origin's velocity in the turning body frame (- w x v_O)
-        put3(a, iv, sub3(sub3(sub3(a_G, cross3(alpha, c)), cross3(w, cross3(w, c))), cross3(w, v_O)))
-        put3(a, iv + 3, alpha)
+        a_O, alpha = free_body_acceleration(bodies, b, body_rotation(bodies, b, q), v, f_local, g_W)
+        put3(a, bodies.idx_v[b], a_O)
+        put3(a, bodies.idx_v[b] + 3, alpha)
     return a
+
+
+@njit
+def free_body_acceleration(bodies, b, R, v, f_local, g_W):
+    """Free body b's part of `free_body_accelerations` given its rotation R (3, 3): the time
+    derivative of its body-frame twist, (a_O, alpha) as two 3-tuples."""
+    j, iv = bodies.joint[b], bodies.idx_v[b]
+    m, c, I_G = bodies.mass[b], bodies.lever[b], bodies.inertia_G[b]
+    v_O, w = v[iv:iv + 3], v[iv + 3:iv + 6]
+    f, tau_O = f_local[j, :3], f_local[j, 3:]
+    # Newton about the centroid (world) and Euler about it (body axes)
+    g = mtv3(R, g_W)
+    a_G = (f[0] / m + g[0], f[1] / m + g[1], f[2] / m + g[2])
+    alpha = _solve3(I_G, sub3(sub3(tau_O, cross3(c, f)), cross3(w, mv3(I_G, w))))
+    # the centroid's acceleration is that of the origin plus alpha x c + w x (w x c); the
+    # twist's linear part is the origin's velocity in the turning body frame (- w x v_O)
+    return sub3(sub3(sub3(a_G, cross3(alpha, c)), cross3(w, cross3(w, c))), cross3(w, v_O)), alpha

@@ -1,11 +1,11 @@
 """The default step, compiled whole: the record intervals between two returns in one call.
 
 For the default setting (symplectic Euler, the culled search, a scene of free bodies only)
-the stages of `step.step` run in one compiled loop: contact (`step._contact_kernels`' chain), the
-dynamics (`bodies.free_body_accelerations`, ABA for free bodies), the update
-(`integrators._symplectic_euler`), the finger drive, the travel bounds, the grasp phase, and
-the run loop's per-substep bookkeeping (peaks, external impulses, divergence by penetration);
-and, at each interval's end, the run loop's record (`record.close_interval`). The loop
+the stages of `step.step` run in one compiled loop: contact (`step._contact_kernels`' chain),
+the dynamics (`bodies.free_body_accelerations`, ABA for free bodies) and the update
+(`integrators._symplectic_euler`) in one pass (`integrators.free_bodies_step`), the finger
+drive, the travel bounds, the grasp phase, and the run loop's per-substep bookkeeping (peaks,
+external impulses, divergence by penetration); and, at each interval's end, the run loop's record (`record.close_interval`). The loop
 returns to Python when coal's face pairs must be refreshed (the Verlet skin is used up), at
 the replay's next snapshot, when the grasp phase completes or times out, or when the run
 diverges. It does what `step.step` and the run loop do, in the same order and with the same
@@ -18,11 +18,11 @@ import math
 
 import numpy as np
 
-from .bodies import body_kinematics, cross, free_body_accelerations, mv
+from .bodies import body_kinematics, cross, mv
 from .contact.forces import body_wrenches, contact_summary, pair_forces, raise_peaks
 from .contact.search import listed_search
 from .grasp import PHASES
-from .integrators import SymplecticEuler, _symplectic_euler
+from .integrators import SymplecticEuler, free_bodies_step
 from .jit import direct, njit
 from .record import DRIVE_WORK, ENERGY as ENERGY_RECORD, ENERGY_WORK as ENERGY_WORK_RECORD, NONFINITE as NONFINITE_RECORD
 from .record import close_interval, drive_power
@@ -96,8 +96,7 @@ def substeps(h, q, v, R_W, p_W, w_W, vo_W, near, opening, opening_rate, mem_key,
         summary = contact_summary(loads[1], loads[2], R_W, p_W, ee_joint, R_ee, module_joint, lever, pairs[8],
                                   pairs[3])
         mem_key, mem_s, mem_vminus = pairs[2], pairs[10], pairs[11]
-        a = free_body_accelerations(bodies, q, v, loads[0], g_W)
-        q, v = _symplectic_euler(bodies, q, v, a, h)
+        q, v = free_bodies_step(bodies, R_W, q, v, loads[0], g_W, h)
         s[LEFT] -= 1
         power = drive_power(loads[5], opening_rate)  # at this step's rate, before the drive sets the next
         # the active drive sets its fingers' rate from this step's loads (grasp.FingerDrive)

@@ -14,8 +14,8 @@ import math
 import numpy as np
 import pinocchio as pin
 
-from .bodies import (add3, axpy3, body_origin3, body_rotation, cross3, free_bodies, mm, mtv3, mv3, put3,
-                     quat_times_exp, quat_to_rotation, sub3)
+from .bodies import (add3, axpy3, body_origin3, body_rotation, cross3, free_bodies, free_body_acceleration, mm,
+                     mtv3, mv3, put3, quat_times_exp4, quat_to_rotation, sub3)
 from .errors import SimulationError
 from .jit import direct, njit
 from .step import contact_stage
@@ -25,8 +25,13 @@ from .step import contact_stage
 def _centroid_state(bodies, b, q, v):
     """World centroid position and velocity, rotation, and body angular velocity of free body
     b: 3-tuple, 3-tuple, (3, 3), 3-tuple."""
+    return _centroid_state_at(bodies, b, body_rotation(bodies, b, q), q, v)
+
+
+@njit
+def _centroid_state_at(bodies, b, R, q, v):
+    """`_centroid_state` given the body's rotation R (from q)."""
     iv = bodies.idx_v[b]
-    R = body_rotation(bodies, b, q)
     c = bodies.lever[b]
     v_O, w = v[iv:iv + 3], v[iv + 3:iv + 6]
     return add3(body_origin3(bodies, b, q), mv3(R, c)), mv3(R, add3(v_O, cross3(w, c))), R, (w[0], w[1], w[2])
@@ -49,7 +54,7 @@ def _set_centroid_state(bodies, b, q, v, p_G, v_G, quat, w):
     R_P = bodies.R_P[b]
     # p_G = p_P + R_P (x + Rq c)
     put3(q, iq, sub3(mtv3(R_P, sub3(p_G, bodies.p_P[b])), mv3(Rq, c)))
-    q[iq + 3:iq + 7] = quat
+    q[iq + 3], q[iq + 4], q[iq + 5], q[iq + 6] = quat[0], quat[1], quat[2], quat[3]
     put3(v, iv, sub3(mtv3(mm(R_P, Rq), v_G), cross3(w, c)))
     put3(v, iv + 3, w)
 
@@ -58,14 +63,37 @@ def _set_centroid_state(bodies, b, q, v, p_G, v_G, quat, w):
 def _symplectic_euler_bodies(bodies, q, v, a, h, q_new, v_new):
     """The free bodies' part of a symplectic Euler step, into q_new, v_new."""
     for b in range(bodies.joint.shape[0]):
-        iq, iv = bodies.idx_q[b], bodies.idx_v[b]
-        p_G, v_G, R, w = _centroid_state(bodies, b, q, v)
-        a_G = _centroid_acceleration(R, bodies.lever[b], v[iv:iv + 3], w, a[iv:iv + 3], a[iv + 3:iv + 6])
-        v_G = axpy3(h, a_G, v_G)
-        w = axpy3(h, a[iv + 3:iv + 6], w)
-        # a unit quaternion, or the round-off in R compounds from step to step
-        quat = quat_times_exp(q[iq + 3:iq + 7], h * w[0], h * w[1], h * w[2])
-        _set_centroid_state(bodies, b, q_new, v_new, axpy3(h, v_G, p_G), v_G, quat, w)
+        iv = bodies.idx_v[b]
+        _symplectic_euler_body(bodies, b, body_rotation(bodies, b, q), q, v, a[iv:iv + 3], a[iv + 3:iv + 6], h,
+                               q_new, v_new)
+
+
+@njit
+def _symplectic_euler_body(bodies, b, R, q, v, a_O, alpha, h, q_new, v_new):
+    """Free body b's symplectic Euler step, into q_new, v_new, given its rotation R (from q) and
+    its twist's derivative (a_O, alpha)."""
+    iq = bodies.idx_q[b]
+    iv = bodies.idx_v[b]
+    p_G, v_G, R, w = _centroid_state_at(bodies, b, R, q, v)
+    a_G = _centroid_acceleration(R, bodies.lever[b], v[iv:iv + 3], w, a_O, alpha)
+    v_G = axpy3(h, a_G, v_G)
+    w = axpy3(h, alpha, w)
+    # a unit quaternion, or the round-off in R compounds from step to step
+    quat = quat_times_exp4(q[iq + 3:iq + 7], h * w[0], h * w[1], h * w[2])
+    _set_centroid_state(bodies, b, q_new, v_new, axpy3(h, v_G, p_G), v_G, quat, w)
+
+
+@njit
+def free_bodies_step(bodies, R_W, q, v, f_local, g_W, h):
+    """`bodies.free_body_accelerations` and `_symplectic_euler` in one pass, for a model of
+    free bodies only, with each body's rotation R_W[joint] at q (`bodies.body_kinematics`):
+    the new (q, v), to the bit as the two give them."""
+    q_new, v_new = q.copy(), v.copy()  # every entry is a free body's, and is written below
+    for b in range(bodies.joint.shape[0]):
+        R = R_W[bodies.joint[b]]
+        a_O, alpha = free_body_acceleration(bodies, b, R, v, f_local, g_W)
+        _symplectic_euler_body(bodies, b, R, q, v, a_O, alpha, h, q_new, v_new)
+    return q_new, v_new
 
 
 @njit
