@@ -204,6 +204,21 @@ def body_kinematics(bodies, q, v, R_W, p_W, w_W, vo_W):
 
 
 @njit
+def body_momentum3(bodies, b, q, v):
+    """Free body b's linear momentum, its angular momentum about the world origin and its
+    centroid (world), as 3-tuples."""
+    iv = bodies.idx_v[b]
+    R = body_rotation(bodies, b, q)
+    m, lever = bodies.mass[b], bodies.lever[b]
+    w = v[iv + 3:iv + 6]
+    v_G = mv3(R, add3(v[iv:iv + 3], cross3(w, lever)))
+    p_G = add3(body_origin3(bodies, b, q), mv3(R, lever))
+    p_b = (m * v_G[0], m * v_G[1], m * v_G[2])
+    l_b = add3(cross3(p_G, p_b), mv3(R, mv3(bodies.inertia_G[b], w)))
+    return p_b, l_b, p_G
+
+
+@njit
 def bodies_momentum(bodies, rows, q, v):
     """Linear and angular momentum (about the world origin) of the free bodies `rows`, summed,
     and the largest single body's linear and angular momentum magnitudes: (3,), (3,), float,
@@ -211,21 +226,31 @@ def bodies_momentum(bodies, rows, q, v):
     P, L, c = np.zeros(3), np.zeros(3), np.zeros(3)
     p_max = l_max = m_sum = 0.0
     for b in rows:
-        iv = bodies.idx_v[b]
-        R, p = body_pose(bodies, b, q)
-        m, lever = bodies.mass[b], bodies.lever[b]
-        w = v[iv + 3:iv + 6]
-        v_G = mv(R, v[iv:iv + 3] + cross(w, lever))
-        p_G = p + mv(R, lever)
-        p_b = m * v_G
-        l_b = cross(p_G, p_b) + mv(R, mv(bodies.inertia_G[b], w))
-        P += p_b
-        L += l_b
-        c += m * p_G
+        p_b, l_b, p_G = body_momentum3(bodies, b, q, v)
+        m = bodies.mass[b]
+        for i in range(3):
+            P[i] += p_b[i]
+            L[i] += l_b[i]
+            c[i] += m * p_G[i]
         m_sum += m
-        p_max = max(p_max, np.linalg.norm(p_b))
-        l_max = max(l_max, np.linalg.norm(l_b))
+        p_max = max(p_max, math.sqrt(p_b[0] ** 2 + p_b[1] ** 2 + p_b[2] ** 2))
+        l_max = max(l_max, math.sqrt(l_b[0] ** 2 + l_b[1] ** 2 + l_b[2] ** 2))
     return P, L, p_max, l_max, c / m_sum
+
+
+@njit
+def bodies_centroid3(bodies, rows, q):
+    """The centroid of the free bodies `rows` (world, m) as a 3-tuple: `bodies_momentum`'s,
+    without the momenta."""
+    c0 = c1 = c2 = m_sum = 0.0
+    for b in rows:
+        m = bodies.mass[b]
+        p_G = add3(body_origin3(bodies, b, q), mv3(body_rotation(bodies, b, q), bodies.lever[b]))
+        c0 += m * p_G[0]
+        c1 += m * p_G[1]
+        c2 += m * p_G[2]
+        m_sum += m
+    return c0 / m_sum, c1 / m_sum, c2 / m_sum
 
 
 @njit
@@ -235,8 +260,10 @@ def kinetic_energy(bodies, q, v):
     for b in range(bodies.joint.shape[0]):
         iv = bodies.idx_v[b]
         w = v[iv + 3:iv + 6]
-        v_G = v[iv:iv + 3] + cross(w, bodies.lever[b])  # body axes; the norm is frame-free
-        total += 0.5 * bodies.mass[b] * np.sum(v_G * v_G) + 0.5 * np.sum(w * mv(bodies.inertia_G[b], w))
+        v_G = add3(v[iv:iv + 3], cross3(w, bodies.lever[b]))  # body axes; the norm is frame-free
+        Iw = mv3(bodies.inertia_G[b], w)
+        total += 0.5 * bodies.mass[b] * (v_G[0] * v_G[0] + v_G[1] * v_G[1] + v_G[2] * v_G[2]) + \
+            0.5 * (w[0] * Iw[0] + w[1] * Iw[1] + w[2] * Iw[2])
     return total
 
 

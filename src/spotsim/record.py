@@ -18,7 +18,7 @@ import math
 
 import numpy as np
 
-from .bodies import bodies_momentum, body_pose, kinetic_energy, mm, mtv3, mv3
+from .bodies import bodies_centroid3, bodies_momentum, body_pose, kinetic_energy, mm, mtv3, mv3, sub3
 from .contact.friction import SLIPPING, STICKING
 from .jit import njit
 from .stability import ENERGY_FLOOR_J, ENERGY_GROWTH, mechanical_energy
@@ -153,9 +153,9 @@ def _frame(bodies, q, frame_row, frame_R, frame_p, i):
 
 @njit
 def _put(row, at, x, scale=1.0):
-    for i in range(x.shape[0]):
+    for i in range(len(x)):
         row[at + i] = scale * x[i]
-    return at + x.shape[0]
+    return at + len(x)
 
 
 @njit
@@ -172,22 +172,23 @@ def sample(row, t, q, v, summary, n_pairs, state, opening, finger_load, last_ope
     n_ee = frame_row.shape[0] - n_mod - 1
     R_b, p_b = _frame(bodies, q, frame_row, frame_R, frame_p, k)
     R_a, p_a = _frame(bodies, q, frame_row, frame_R, frame_p, n_mod + ee)
-    at = _put(row, 0, np.array([t]))
+    row[0] = t
+    at = 1
     at = _put(row, at, p_b)
     at = _put(row, at, quat_xyzw(R_b))
-    at = _put(row, at, np.array(mtv3(R_a, p_b - p_a)), 1e3)  # O_b in O_a
+    at = _put(row, at, mtv3(R_a, sub3(p_b, p_a)), 1e3)  # O_b in O_a
     R_ab = np.empty((3, 3))  # R_a^T R_b
     for i in range(3):
         for j in range(3):
             R_ab[i, j] = R_a[0, i] * R_b[0, j] + R_a[1, i] * R_b[1, j] + R_a[2, i] * R_b[2, j]
-    at = _put(row, at, np.array(rpy(R_ab)), 180.0 / math.pi)
+    at = _put(row, at, rpy(R_ab), 180.0 / math.pi)
     # the module's velocity and angular velocity, world
     b = module_row[k]
     if b >= 0:
         iv = bodies.idx_v[b]
         R_j, _ = body_pose(bodies, b, q)
-        at = _put(row, at, np.array(mv3(R_j, v[iv:iv + 3])))
-        at = _put(row, at, np.array(mv3(R_j, v[iv + 3:iv + 6])))
+        at = _put(row, at, mv3(R_j, v[iv:iv + 3]))
+        at = _put(row, at, mv3(R_j, v[iv + 3:iv + 6]))
     else:
         at = _put(row, at, np.zeros(6))
     wrench = np.zeros(6)  # on the module, in O_a: force, and moment about its centroid
@@ -208,11 +209,11 @@ def sample(row, t, q, v, summary, n_pairs, state, opening, finger_load, last_ope
     at = _put(row, at, np.array([float(n_slip), float(n_stick), float(phase), float(grasp),
                                  summary[7] * 1e6 if n_pairs else 0.0]))
     if free_robot:
-        at = _put(row, at, bodies_momentum(bodies, robot_rows, q, v)[4])
+        at = _put(row, at, bodies_centroid3(bodies, robot_rows, q))
         R, p = _frame(bodies, q, frame_row, frame_R, frame_p, frame_row.shape[0] - 1)
         at = _put(row, at, p)
         at = _put(row, at, quat_xyzw(R))
-        at = _put(row, at, bodies_momentum(bodies, system_rows, q, v)[4])
+        at = _put(row, at, bodies_centroid3(bodies, system_rows, q))
         for i in range(n_mod):
             R, p = _frame(bodies, q, frame_row, frame_R, frame_p, i)
             at = _put(row, at, p)
