@@ -47,15 +47,17 @@ def test_welded_robot_against_table_5_body_4():
 
 
 def test_weld_by_editing_the_compiled_urdf_builds_the_model_the_xacro_builds():
-    """A run welds TM-1 by editing one joint of the compiled URDF (`model.weld_urdf`) instead
-    of compiling the XACRO again with TM-1's joint fixed: both give the same model, to the bit."""
+    """A run welds TM-1 by editing one joint of the compiled URDF (`model.weld_urdf`), keeping
+    the contact faces it parsed, instead of compiling the XACRO again with TM-1's joint fixed:
+    both give the same model, to the bit."""
     import spotsim
     from spotsim.model import build_model
 
     s = spotsim.load_scenario(spotsim.assets.ROOT / "config" / "dual_arm_sequential.yaml")
     first = build_model(s)
     welded = {0: ((0.0012345678901234, -0.0023, 1e-5), (0.001, -0.002, 0.3))}
-    by_xacro, by_edit = build_model(s, welded=welded), build_model(s, welded=welded, urdf=first.urdf)
+    by_xacro = build_model(s, welded=welded)
+    by_edit = build_model(s, welded=welded, urdf=first.urdf, faces=first.faces)
     a, b = by_xacro.pin_model, by_edit.pin_model
     assert list(a.names) == list(b.names) and a.nq == b.nq == first.pin_model.nq - 7
     for x, y in zip(a.jointPlacements, b.jointPlacements, strict=True):

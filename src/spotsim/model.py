@@ -49,6 +49,8 @@ class SceneSpec:
     robot_joint: str | None = None
     # modules fixed to their end-effector (grasp done): (module, xyz, rpy of O_b in O_a)
     welded: tuple[tuple[int, tuple, tuple], ...] = ()
+    # the arm fragments the XACRO includes (`assets.prefixed_arm`): (arm model, prefix)
+    arms: tuple[tuple[str, str], ...] = ()
 
     @property
     def welded_modules(self) -> set[int]:
@@ -137,6 +139,8 @@ class Model:
     sphere_reach: tuple[tuple[int, float], ...] = field(default=())
     # the fingers of each end-effector's drive, as index arrays into `fingers`
     drive_fingers: tuple[np.ndarray, ...] = field(default=())
+    # every contact face of the URDF, active or not (`spheres.contact_faces`); a weld keeps them
+    faces: tuple = field(default=())
 
     @cached_property
     def face_table(self) -> FaceTable:
@@ -280,14 +284,13 @@ def scene_spec(s, welded: dict | None = None) -> SceneSpec:
                 checked[arm + name] = f"robot.{arm}joint_angles_rad[{i}]"
             for finger in FINGER_NAMES:
                 locked[f"ee{arm[3]}_{finger}"] = 0.0
-        for prefix in ("arm1_", "arm2_"):
-            assets.prefixed_arm(s.robot.arm_model, prefix)
         return SceneSpec(assets.URDF_DIR / "dual_arm_scene.urdf.xacro", args, locked, checked,
                          (("EE-1", "ee1_"), ("EE-2", "ee2_")),
                          (("TM-1", "tm1_", s.tm1, 0), ("TM-2", "tm2_", s.tm2, 1)),
                          ((0, 0), (1, 1)), robot_joint="fdr_free_flyer",
                          welded=tuple((k, tuple(map(float, xyz)), tuple(map(float, rpy)))
-                                      for k, (xyz, rpy) in sorted(welded.items())))
+                                      for k, (xyz, rpy) in sorted(welded.items())),
+                         arms=((s.robot.arm_model, "arm1_"), (s.robot.arm_model, "arm2_")))
     raise TypeError(f"not a scenario: {type(s).__name__}")
 
 
@@ -358,32 +361,41 @@ def weld_urdf(urdf: str, spec: SceneSpec) -> str:
     end-effector's `<prefix>grasp` link at the welded pose, as the scene's XACRO compiles it
     with `<prefix>joint_type:=fixed` (`scene_spec`). Editing that one joint costs milliseconds;
     compiling the XACRO again costs ~0.1 s of a run."""
+    import re
     import xml.etree.ElementTree as ET
 
-    root = ET.fromstring(urdf)
-    joints = {el.get("name"): el for el in root.iter("joint")}
     for k, xyz, rpy in spec.welded:
         prefix = spec.modules[k][1]
         ee = next(e for e, m in spec.grasps if m == k)
-        joint = joints.get(f"{prefix}free_flyer")
-        if joint is None:
+        # that one element is parsed and rewritten; the rest of the text is kept as it is
+        found = re.search(rf'<joint\s[^>]*name="{prefix}free_flyer".*?</joint>', urdf, re.DOTALL)
+        if found is None:
             raise ModelError(f"the scene has no joint {prefix}free_flyer to weld module {spec.modules[k][0]} by")
+        joint = ET.fromstring(found.group(0))
         joint.set("type", "fixed")
         joint.find("parent").set("link", f"{spec.end_effectors[ee][1]}grasp")
         joint.find("origin").set("xyz", " ".join(repr(float(x)) for x in xyz))
         joint.find("origin").set("rpy", " ".join(repr(float(x)) for x in rpy))
-    return ET.tostring(root, encoding="unicode")
+        urdf = urdf[:found.start()] + ET.tostring(joint, encoding="unicode") + urdf[found.end():]
+    return urdf
 
 
-def build_model(s, source: str = "<scenario>", welded: dict | None = None, urdf: str | None = None) -> Model:
+def build_model(s, source: str = "<scenario>", welded: dict | None = None, urdf: str | None = None,
+                faces: tuple | None = None) -> Model:
     """Build the immutable Model of a validated scenario (raises ModelError, ScenarioError).
 
     welded: modules already grasped and welded (see `scene_spec`). urdf: the scene's compiled
     URDF (`Model.urdf`, any earlier welds in it), to weld into (`weld_urdf`) instead of
-    compiling the XACRO again.
+    compiling the XACRO again; faces: its contact faces (`Model.faces`), which a weld does not
+    change (they are given in their links' frames), instead of parsing them again.
     """
     spec = scene_spec(s, welded)
-    urdf = assets.compile_xacro(spec.xacro, spec.args) if urdf is None else weld_urdf(urdf, spec)
+    if urdf is None:
+        for arm, prefix in spec.arms:
+            assets.prefixed_arm(arm, prefix)
+        urdf = assets.compile_xacro(spec.xacro, spec.args)
+    else:
+        urdf = weld_urdf(urdf, spec)
     try:
         full = pin.buildModelFromXML(urdf)
     except Exception as e:
@@ -413,7 +425,8 @@ def build_model(s, source: str = "<scenario>", welded: dict | None = None, urdf:
                     if not any(g == (e, m) for m in spec.welded_modules for g in spec.grasps)
                     for finger in FINGER_NAMES]
     module_prefixes = [modules[k].prefix for k in active]
-    layers = _contact_layers(model, urdf, finger_links, module_prefixes, params)
+    faces = tuple(contact_faces(urdf)) if faces is None else faces
+    layers = _contact_layers(model, faces, finger_links, module_prefixes, params)
     master, master_finger, finger_geoms, slave, pairs, maps, geom, contact_joints = layers
     movable = [j for j in contact_joints if j and model.joints[j].shortname() != "JointModelFreeFlyer"]
     if movable:  # the compiled kinematics reads contact bodies' poses from free-flyers only
@@ -449,7 +462,7 @@ def build_model(s, source: str = "<scenario>", welded: dict | None = None, urdf:
                  else np.zeros((0, 3)), finger_geoms, contact_joints, master, slave, tuple(pairs), maps,
                  params, q0, np.zeros(model.nv), free, _sphere_reach(master, slave, fingers),
                  tuple(np.array([i for i, f in enumerate(fingers) if f.drive == e], dtype=int)
-                       for e in range(len(end_effectors))))
+                       for e in range(len(end_effectors))), faces)
 
 
 def _sphere_reach(master, slave, fingers) -> tuple[tuple[int, float], ...]:
@@ -464,7 +477,7 @@ def _sphere_reach(master, slave, fingers) -> tuple[tuple[int, float], ...]:
     return tuple(sorted(reach.items()))
 
 
-def _contact_layers(model, urdf, finger_links, module_prefixes, params):
+def _contact_layers(model, faces, finger_links, module_prefixes, params):
     """Sphere layers of the active contact faces, stacked by role, and the coal face patches.
 
     Master faces: those on `finger_links`, placed at opening 0 on the joint the finger is
@@ -473,7 +486,7 @@ def _contact_layers(model, urdf, finger_links, module_prefixes, params):
     geom = pin.GeometryModel()
     roles = {"master": [], "slave": []}
     finger_of_face, finger_geoms = [], []
-    for face in contact_faces(urdf):
+    for face in faces:
         if face.link in finger_links:
             role = "master"
         elif any(face.link.startswith(p) for p in module_prefixes):

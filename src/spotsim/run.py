@@ -255,7 +255,8 @@ def weld(model: Model, data, source: str):
     aMb = grasp_frame(model, data.pin_data, ee).actInv(groove_frame(model, data.pin_data, k))
     welded = {i: (xyz, rpy) for i, xyz, rpy in model.spec.welded}
     welded[k] = (aMb.translation, pin.rpy.matrixToRpy(aMb.rotation))
-    new = build_model(model.scenario, source, welded=welded, urdf=model.urdf)  # the XACRO is not recompiled
+    # the XACRO is not compiled again, nor the contact faces parsed again
+    new = build_model(model.scenario, source, welded=welded, urdf=model.urdf, faces=model.faces)
     new_data = make_data(new)
     pm, nm = model.pin_model, new.pin_model
     # configurations by joint name; the robot's twist from the momentum of robot + module

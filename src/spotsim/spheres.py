@@ -7,6 +7,7 @@ that every sphere is tangent to the face.
 
 from __future__ import annotations
 
+import functools
 import io
 from dataclasses import dataclass
 
@@ -69,8 +70,17 @@ def face_basis(vertices: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray
 
 
 def sphere_layer(vertices: np.ndarray, radius: float) -> SphereLayer:
-    """Eq. (2)-(5): the sphere layer of radius `radius` (m) on a convex planar face."""
+    """Eq. (2)-(5): the sphere layer of radius `radius` (m) on a convex planar face.
+
+    Layers are kept by their vertices and radius (a weld, a study's runs build the same faces
+    again); the returned layer's arrays must not be written to."""
     vertices = np.asarray(vertices, dtype=float)
+    return _sphere_layer(vertices.tobytes(), vertices.shape, float(radius))
+
+
+@functools.lru_cache(maxsize=1024)
+def _sphere_layer(vertices_bytes: bytes, shape: tuple, radius: float) -> SphereLayer:
+    vertices = np.frombuffer(vertices_bytes).reshape(shape)
     n, t1, t2 = face_basis(vertices)
     N0 = vertices[0]
     uv = np.stack([(vertices - N0) @ t1, (vertices - N0) @ t2], axis=1) / radius
@@ -91,7 +101,10 @@ def sphere_layer(vertices: np.ndarray, radius: float) -> SphereLayer:
     index_map = -np.ones((len(i), len(j)), dtype=np.int64)
     index_map[grid_ij[:, 0], grid_ij[:, 1]] = np.arange(len(grid_ij))
     origin = N0 + radius * (i0 * t1 + j0 * t2)
-    return SphereLayer(radius, centres, n, origin, t1, t2, grid_ij, index_map)
+    layer = SphereLayer(radius, centres, n, origin, t1, t2, grid_ij, index_map)
+    for x in (centres, n, origin, t1, t2, grid_ij, index_map):  # shared by every caller
+        x.flags.writeable = False
+    return layer
 
 
 def box_top_face(size: np.ndarray, T_LC: np.ndarray) -> np.ndarray:
