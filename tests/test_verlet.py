@@ -75,7 +75,7 @@ def test_kept_pair_list_finds_the_grid_search_pairs_after_any_small_motion(model
     to 40 um and 1 mrad, in any direction) and the fingers slide: wherever the list is kept,
     its pairs, tested only among the candidates whose gap the motion could have closed, are
     exactly the grid search's. The motion is checked against the two poses, not integrated."""
-    from spotsim.contact.search import _face_frame, _moved
+    from spotsim.contact.search import GAP_SLACK, _face_frame, _moved
 
     rng = np.random.default_rng(3)
     j = model_I.module_joint
@@ -105,8 +105,10 @@ def test_kept_pair_list_finds_the_grid_search_pairs_after_any_small_motion(model
                     continue
                 frame = _face_frame(f, model_I.face_table, M.normals_J, model_I.master_finger, model_I.master_axis_J,
                                     data.opening, data.R_W, data.p_W)
-                moved = _moved(frame[4], frame[5], built.A[f], built.off[f], built.centre_J[f], built.radius[f])
-                skipped += int(np.sum(built.gap[built.start[f]:built.stop[f]] > moved + 1e-9))
+                table = model_I.face_table
+                moved = _moved(frame[4], frame[5], built.A[f], built.off[f], table.master_centre_J[f],
+                               table.master_radius[f])
+                skipped += int(np.sum(built.gap[built.start[f]:built.stop[f]] > moved + GAP_SLACK))
     assert found > 100 and kept > 20 and skipped > 0
 
 

@@ -109,14 +109,6 @@ def mv(R, x):
 
 
 @njit
-def mtv(R, x):
-    """R^T x for a 3x3 R and a 3-vector x."""
-    out = np.empty(3)
-    put3(out, 0, mtv3(R, x))
-    return out
-
-
-@njit
 def mm(A, B):
     """A B for two 3x3 matrices."""
     out = np.empty((3, 3))

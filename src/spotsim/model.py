@@ -145,7 +145,7 @@ class Model:
     @cached_property
     def face_table(self) -> FaceTable:
         """`face_pairs` stacked as arrays, for the compiled search."""
-        return face_table(self.face_pairs)
+        return face_table(self.face_pairs, self.master.centres_J)
 
     @cached_property
     def contact_call(self):

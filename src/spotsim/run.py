@@ -18,8 +18,7 @@ from .scenario import tolerance_warnings
 from .jit import direct
 from .record import (DRIFT_ANG, DRIFT_LIN, DRIVE_WORK, E_NOW, E_PASSIVE, E_START, ENERGY, ENERGY_WORK, L_MAX,
                      N_RECORD_STATE, NONFINITE, OK, P_MAX, Layout, close_interval, record_args, sample, start_record)
-from .stability import ENERGY_GROWTH
-from .stability import stability_warnings
+from .stability import ENERGY_GROWTH, stability_warnings
 from .step import StateOverflow, completion_inputs, free_flight, make_data, step
 from .weld import twist_for_momentum, world_momentum
 

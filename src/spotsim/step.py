@@ -76,7 +76,7 @@ class Data:
     joint_torque_O_W: np.ndarray = None  # (njoints, 3) its moment about the world origin
     near_pairs: np.ndarray = None  # indices of the face pairs coal kept at its last run
     travel: float = np.inf  # bound on any two spheres' relative motion since then, m
-    pair_list: tuple = None  # the search's candidate pairs (contact.search.build_pair_list)
+    pair_list: tuple = None  # the search's candidate pairs (contact.search.PairList)
     drive_power: float = 0.0  # the finger drives' power during the last step, W (bound)
     external_force_W: np.ndarray = field(default_factory=lambda: np.zeros(3))
     external_torque_O_W: np.ndarray = field(default_factory=lambda: np.zeros(3))
@@ -153,8 +153,8 @@ def broad_phase(model: Model, data: Data) -> np.ndarray:
 
 
 def refresh_broad_phase(model: Model, data: Data) -> None:
-    """Run the broad phase anew: its face pairs start a fresh skin, and the search a fresh
-    pair list."""
+    """Run the broad phase anew: its face pairs start a fresh skin (the search's pair list
+    checks itself against the face pairs it was built for)."""
     data.near_pairs, data.travel = broad_phase(model, data), 0.0
 
 
@@ -274,8 +274,7 @@ def _contact_kernels(q, v, R_W, p_W, w_W, vo_W, near, opening, opening_rate, mem
                      pair_list, ee_joint, R_ee, module_joint, lever, bodies, table, maps, C1_J, N1_J, joint1, finger1, axis1_J, C2_J, N2_J, joint2,
                      r1, r2, K, damping, floor, cutoff, bristle, common_point, finger_parent, finger_axis_J):
     """The kernels of `kinematics`, `candidate_pairs` (from the pair list), `contact_forces` and
-    `wrenches`, chained, and the `contact_summary` of the step; then the pair list and its
-    travel."""
+    `wrenches`, chained, and the `contact_summary` of the step; then the pair list."""
     body_kinematics(bodies, q, v, R_W, p_W, w_W, vo_W)
     (master, slave, key), pair_list = listed_search(
         near, table, C1_J, N1_J, finger1, axis1_J, opening, maps, C2_J.shape[0], R_W, p_W, r1, r2, cutoff,

@@ -95,11 +95,18 @@ class FaceTable(NamedTuple):
     t2_J: np.ndarray
     n_J: np.ndarray
     shape: np.ndarray  # (n, 2) grid size
+    # the mean of the master face's centres (its joint's frame, fingers at opening 0) and the
+    # farthest of them from it, m: `_moved` bounds every centre's motion from these
+    master_centre_J: np.ndarray  # (n, 3)
+    master_radius: np.ndarray  # (n,)
 
 
-def face_table(face_pairs) -> FaceTable:
-    """The face pairs as one `FaceTable`."""
+def face_table(face_pairs, master_centres_J: np.ndarray) -> FaceTable:
+    """The face pairs as one `FaceTable`; master_centres_J: (|S1|, 3) every master centre."""
     n = len(face_pairs)
+    faces = [master_centres_J[fp.master_slice] for fp in face_pairs]
+    centre = np.array([c.mean(axis=0) for c in faces], dtype=float).reshape(n, 3)
+    radius = np.array([np.linalg.norm(c - m, axis=1).max() for c, m in zip(faces, centre)], dtype=float)
     vec = lambda name: np.array([getattr(fp.slave, name) for fp in face_pairs], dtype=float).reshape(n, 3)
     ints = lambda values: np.array(values, dtype=np.int64)
     return FaceTable(ints([fp.master_slice.start for fp in face_pairs]),
@@ -108,7 +115,7 @@ def face_table(face_pairs) -> FaceTable:
                      ints([fp.slave.joint for fp in face_pairs]),
                      ints([fp.slave.face for fp in face_pairs]),
                      vec("origin_J"), vec("t1_J"), vec("t2_J"), vec("n_J"),
-                     ints([fp.slave.shape for fp in face_pairs]).reshape(n, 2))
+                     ints([fp.slave.shape for fp in face_pairs]).reshape(n, 2), centre, radius)
 
 
 @njit
@@ -185,8 +192,7 @@ def _node_hit(u, v, i, j, lift, w0, nu, nv, nh, radius, cutoff):
 def _push(found_m, found_s, n_found, row, s):
     """Append (row, s) to the growing buffers; returns them (reallocated when full)."""
     if n_found == found_m.shape[0]:
-        found_m = np.concatenate((found_m, np.empty(n_found, dtype=np.int64)))
-        found_s = np.concatenate((found_s, np.empty(n_found, dtype=np.int64)))
+        found_m, found_s = _grow(found_m), _grow(found_s)
     found_m[n_found], found_s[n_found] = row, s
     return found_m, found_s
 
@@ -287,8 +293,6 @@ class PairList(NamedTuple):
     normal_W: np.ndarray  # (n_table, 3) its common normal (world) at the build
     A: np.ndarray  # (n_table, 3, 3) its map of master centres to face coordinates at the build
     off: np.ndarray  # (n_table, 3) and the map's offset (`_face_frame`)
-    centre_J: np.ndarray  # (n_table, 3) the mean of its master face's centres, master joint frame
-    radius: np.ndarray  # (n_table,) the farthest of those centres from that mean, m
 
 
 def empty_pair_list(n_face_pairs: int) -> PairList:
@@ -296,8 +300,7 @@ def empty_pair_list(n_face_pairs: int) -> PairList:
     none = np.zeros(0, dtype=np.int64)
     ints, flags = np.zeros(n_face_pairs, dtype=np.int64), np.zeros(n_face_pairs, dtype=np.bool_)
     return PairList(none, none, none, none, np.zeros(0), ints, ints.copy(), flags, flags.copy(),
-                    np.zeros((n_face_pairs, 3)), np.zeros((n_face_pairs, 3, 3)), np.zeros((n_face_pairs, 3)),
-                    np.zeros((n_face_pairs, 3)), np.zeros(n_face_pairs))
+                    np.zeros((n_face_pairs, 3)), np.zeros((n_face_pairs, 3, 3)), np.zeros((n_face_pairs, 3)))
 
 
 @njit
@@ -319,7 +322,6 @@ def build_pair_list(near, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_
     scan = np.zeros(n_table, dtype=np.bool_)
     start, stop = np.zeros(n_table, dtype=np.int64), np.zeros(n_table, dtype=np.int64)
     normal_W, A_b, off_b = np.zeros((n_table, 3)), np.zeros((n_table, 3, 3)), np.zeros((n_table, 3))
-    centre, spread = np.zeros((n_table, 3)), np.zeros(n_table)
     cap = 256
     lm, ls, gap = np.empty(cap, dtype=np.int64), np.empty(cap, dtype=np.int64), np.empty(cap)
     li, lj = np.empty(cap, dtype=np.int64), np.empty(cap, dtype=np.int64)
@@ -377,16 +379,8 @@ def build_pair_list(near, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_
         normal_W[f] = n_W
         A_b[f] = A
         off_b[f, 0], off_b[f, 1], off_b[f, 2] = off
-        # the master face's centres as their mean and a radius about it: `_moved` bounds
-        # every centre's motion from these
-        rows = C1_J[table.master_start[f]:table.master_stop[f]]
-        for a in range(3):
-            centre[f, a] = rows[:, a].mean()
-        for c in rows:
-            spread[f] = max(spread[f], math.sqrt((c[0] - centre[f, 0]) ** 2 + (c[1] - centre[f, 1]) ** 2
-                                                 + (c[2] - centre[f, 2]) ** 2))
     return PairList(lm[:n].copy(), ls[:n].copy(), li[:n].copy(), lj[:n].copy(), gap[:n].copy(), start, stop, built,
-                    scan, normal_W, A_b, off_b, centre, spread)
+                    scan, normal_W, A_b, off_b)
 
 
 @njit
@@ -439,8 +433,8 @@ def listed_search(near, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_sl
         elif not pair_list.scan[f]:
             turn = math.sqrt((n_W[0] - pair_list.normal_W[f, 0]) ** 2 + (n_W[1] - pair_list.normal_W[f, 1]) ** 2
                              + (n_W[2] - pair_list.normal_W[f, 2]) ** 2)
-            moved[m] = _moved(A, off, pair_list.A[f], pair_list.off[f], pair_list.centre_J[f],
-                              pair_list.radius[f])
+            moved[m] = _moved(A, off, pair_list.A[f], pair_list.off[f], table.master_centre_J[f],
+                              table.master_radius[f])
             if not facing or turn > LIST_NORMAL_TOL or moved[m] >= LIST_SKIN - GAP_SLACK:
                 valid = False
     if not valid:
