@@ -168,9 +168,10 @@ def test_interrupted_run_keeps_what_it_recorded(case_I, tmp_path, monkeypatch):
             return real(model, data, *args)
         return then_interrupt
 
-    # the step-by-step path and the compiled loop alike
+    # the step-by-step path and the compiled loop alike, this one returning every 10 records
     monkeypatch.setattr(run, "step", interrupting(run.step))
     monkeypatch.setattr(run.compiled, "run_records", interrupting(run.compiled.run_records))
+    monkeypatch.setattr(run.compiled, "RECORDS_PER_CALL", 10)
     r = spotsim.simulate(case_I)
     assert r.status == "interrupted" and len(r.timeseries["t"]) == 51
     spotsim.write_results(r, tmp_path, figures=False)

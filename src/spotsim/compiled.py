@@ -20,7 +20,7 @@ import numpy as np
 
 from .bodies import body_kinematics, cross, mv
 from .contact.forces import body_wrenches, contact_summary, pair_forces, raise_peaks
-from .contact.search import listed_search
+from .contact.search import grow, listed_search
 from .grasp import PHASES
 from .integrators import SymplecticEuler, free_bodies_step
 from .jit import direct, njit
@@ -164,22 +164,29 @@ def substeps(h, q, v, R_W, p_W, w_W, vo_W, near, opening, opening_rate, mem_key,
 @njit
 def intervals(n_records, dt, n_sub, q, v, R_W, p_W, w_W, vo_W, near, opening, opening_rate, mem_key, mem_s,
               mem_vminus, pair_list, s, peak_f, peak_t, peak_n, J, JL, mine, watch, limits, consts, rows, rs,
-              last_open, grasp, ee, k, record):
+              last_open, grasp, ee, k, record, first_row, every, module_joints):
     """Up to n_records record intervals of dt (s) of the run loop, compiled: each a free-flight
     step of dt when nothing can touch within it (zero gravity, coal's face pairs beyond the
     margin, the travel bound within the skin: `step.free_flight`), else n_sub `substeps`;
-    then `record.close_interval`, whose rows go into rows (n_records, width).
+    then `record.close_interval`, whose rows go into rows (n_records, width), and the
+    replay's snapshot of each row recorded whose index is a multiple of `every`.
 
     Must be entered with the skin not used up (s[TRAVEL] <= skin) or within an interval
     (s[LEFT] > 0): it then takes at least one step. Arguments as `substeps`, and: rs, J, JL,
-    last_open, grasp, ee, k, record: `record.close_interval`'s. Returns as `substeps` (the
-    event RAN when n_records rows are written, NONFINITE or ENERGY as `close_interval`
-    finds) and the rows written.
+    last_open, grasp, ee, k, record: `record.close_interval`'s; first_row: the run's index of
+    the first row written here; module_joints: (n_modules,) each module's joint, 0 once
+    welded. Returns as `substeps` (the event RAN when n_records rows are written, NONFINITE
+    or ENERGY as `close_interval` finds), the rows written and the snapshots (`_snapshot`).
     """
     bodies, g_W, reach_rows, reach, _, _ = consts
     skin, start, timeout = limits[0], limits[2], limits[3]
     gravity = g_W[0] != 0.0 or g_W[1] != 0.0 or g_W[2] != 0.0
     n_rows = 0
+    cap = n_records // every + 1
+    snaps = (np.empty(cap, dtype=np.int64), np.empty(cap, dtype=np.int64),
+             np.empty((cap, module_joints.shape[0], 3)), np.empty(16 * cap, dtype=np.int64),
+             np.empty(16 * cap, dtype=np.int64), np.empty(16 * cap, dtype=np.int64))
+    n_snap = n_snapped = 0
     while True:
         if s[LEFT] == 0:  # a new interval
             if s[TRAVEL] > skin:
@@ -204,6 +211,10 @@ def intervals(n_records, dt, n_sub, q, v, R_W, p_W, w_W, vo_W, near, opening, op
             event = NONFINITE
             break
         n_rows += 1
+        if (first_row + n_rows - 1) % every == 0:
+            snaps = _snapshot(snaps, n_snap, n_snapped, first_row + n_rows - 1, pairs, loads[1], module_joints)
+            n_snap += 1
+            n_snapped += pairs[0].shape[0]
         if code == ENERGY_RECORD or code == ENERGY_WORK_RECORD:
             event = ENERGY if code == ENERGY_RECORD else ENERGY_WORK
             break
@@ -213,17 +224,43 @@ def intervals(n_records, dt, n_sub, q, v, R_W, p_W, w_W, vo_W, near, opening, op
         if n_rows == n_records:
             event = RAN
             break
-    return q, v, pair_list, pairs, loads, summary, event, n_rows
+    return (q, v, pair_list, pairs, loads, summary, event, n_rows,
+            (snaps[0][:n_snap], snaps[1][:n_snap], snaps[2][:n_snap], snaps[3][:n_snapped], snaps[4][:n_snapped],
+             snaps[5][:n_snapped]))
+
+
+@njit
+def _snapshot(snaps, n_snap, n_snapped, row, pairs, joint_force_W, module_joints):
+    """Add the replay's snapshot of row to snaps, which hold n_snap snapshots of n_snapped
+    pairs in all: (row, pairs in contact, each module's contact force (n_modules, 3), world)
+    per snapshot, and (master, slave, state) per pair. Returns snaps (grown when full)."""
+    row_of, count, force, master, slave, state = snaps
+    n = pairs[0].shape[0]
+    while n_snapped + n > master.shape[0]:
+        master, slave, state = grow(master), grow(slave), grow(state)
+    row_of[n_snap], count[n_snap] = row, n
+    master[n_snapped:n_snapped + n] = pairs[0]
+    slave[n_snapped:n_snapped + n] = pairs[1]
+    state[n_snapped:n_snapped + n] = pairs[9]
+    for m in range(module_joints.shape[0]):
+        j = module_joints[m]
+        for a in range(3):
+            force[n_snap, m, a] = joint_force_W[j, a] if j else 0.0  # a welded module takes no contact
+    return row_of, count, force, master, slave, state
 
 
 _intervals = direct(intervals)
+
+#: Record intervals per call of `intervals` at most: each return to Python updates the
+#: progress bar and lets Ctrl-C in; 250 intervals are 0.25 s simulated at the default dt.
+RECORDS_PER_CALL = 250
 
 
 def run_records(model, data, n_records: int, rec, J: np.ndarray, JL: np.ndarray, start: float, timeout: float,
                 max_phi: float) -> tuple[int, int, int, int, int]:
     """Up to n_records record intervals of the active grasp (fewer if its phase ends or the run
     diverges), with coal refreshed as the skin requires; data is left as `step.step` leaves
-    it, and the rows go to the recorder rec (`run.Recorder`).
+    it, and the rows and the replay's snapshots go to the recorder rec (`run.Recorder`).
 
     J, JL: the external impulse and its moment, added to in place; start, timeout: the
     phase's start and time-out, s; max_phi: the deepest penetration allowed, m. Returns (why
@@ -244,6 +281,7 @@ def run_records(model, data, n_records: int, rec, J: np.ndarray, JL: np.ndarray,
     s[PEAK_PAIRS] = peaks["pairs"]
     if len(rec.buffer) < n_records:
         rec.buffer = np.empty((n_records, rec.layout.width))
+    module_joints = np.array([mod.joint for mod in model.modules], dtype=np.int64)
     n_rows, event, overflow = 0, REFRESH, ""
     while event == REFRESH:
         try:
@@ -252,12 +290,12 @@ def run_records(model, data, n_records: int, rec, J: np.ndarray, JL: np.ndarray,
             event, overflow = OVERFLOW, str(e)
             break
         s[TRAVEL] = data.travel
-        data.q, data.v, data.pair_list, pairs, loads, summary, event, rows = _intervals(
+        data.q, data.v, data.pair_list, pairs, loads, summary, event, rows, snaps = _intervals(
             n_records - n_rows, sim.dt_s, sim.substeps, data.q, data.v, data.R_W, data.p_W, data.w_W, data.vo_W,
             near, data.opening, data.opening_rate, data.mem_key, data.mem_s, data.mem_vminus, data.pair_list, s,
             peaks["force"], peaks["torque"], peaks["norms"], J, JL, model.drive_fingers[ee],
             model.watch_args[data.active], limits, model.loop_args, rec.buffer, rec.state, rec.last_open,
-            data.active, ee, k, rec.args(model))
+            data.active, ee, k, rec.args(model), rec.n_rows, rec.replay_every, module_joints)
         _leave(data, s, pairs, loads, summary)
         drive.stalled = bool(s[STALLED])
         phase.phase = PHASES[int(s[PHASE])]
@@ -265,7 +303,7 @@ def run_records(model, data, n_records: int, rec, J: np.ndarray, JL: np.ndarray,
         for slot, name in ((T_CENTRING, PHASES[1]), (T_COMPLETE, PHASES[2])):
             if s[slot] and name not in phase.times:
                 phase.times[name] = float(s[slot])
-        rec.add_rows(model, data, rec.buffer[:rows])
+        rec.add_rows(model, data, rec.buffer[:rows], snapshots=snaps)
         n_rows += rows
     peaks["pairs"] = int(s[PEAK_PAIRS])
     return event, n_rows, int(s[STEPS]), int(s[PAIR_STEPS]), int(s[FLIGHTS]), overflow

@@ -27,8 +27,8 @@ NO_PHI = np.zeros(0)
 NO_STATES = np.zeros(0, dtype=np.int64)
 
 #: Contact snapshots per simulated second kept for `spotsim replay`: its highest display rate.
-#: 100 Hz is ten samples of a 10 ms bounce; a snapshot takes ~50 us, under 0.5 % of a Case I
-#: or dual-arm run's wall time with the compiled step.
+#: 100 Hz is ten samples of a 10 ms bounce. The compiled loop copies each snapshot's pairs in
+#: place (`compiled.intervals`), so they cost it no return to Python.
 REPLAY_RATE_HZ = 100.0
 
 
@@ -84,8 +84,9 @@ class Recorder:
         self.buffer = np.empty((1, self.layout.width))
         # norms: the peak |force| and |torque|
         self.peaks = [dict(force=np.zeros(3), torque=np.zeros(3), norms=np.zeros(2), pairs=0) for _ in model.grasps]
-        # the replay's contact snapshots, every `replay_every`-th sample: spheres by their index
-        # in the first model, so that a weld (a new model) does not renumber them
+        # the replay's contact snapshots, every `replay_every`-th sample, as chunks of samples:
+        # spheres by their index in the first model, so that a weld (a new model) does not
+        # renumber them
         self.replay_every = max(1, int(round(1.0 / (REPLAY_RATE_HZ * model.scenario.simulation.dt_s))))
         self.face_names = face_names(model)
         self.snapshots: dict[str, list] = {k: [] for k in (
@@ -128,19 +129,18 @@ class Recorder:
             self.add_rows(model, data, self.buffer[:1])
         return code
 
-    def add_rows(self, model: Model, data, rows: np.ndarray) -> None:
-        """Keep rows (n, width), the last of them data's state; take the replay's snapshot if
-        that one is due."""
+    def add_rows(self, model: Model, data, rows: np.ndarray, snapshots: tuple | None = None) -> None:
+        """Keep rows (n, width), the last of them data's state, and the replay's snapshots:
+        those the compiled loop took of these rows (`compiled.intervals`), else data's if the
+        last row is due for one."""
         if not len(rows):
             return
         self.chunks.append(rows.copy())
         self.n_rows += len(rows)
-        if (self.n_rows - 1) % self.replay_every == 0:
+        if snapshots is not None:
+            self.add_snapshots(model, data.near_pairs, *snapshots)
+        elif (self.n_rows - 1) % self.replay_every == 0:
             self.snapshot(model, data, self.n_rows - 1)
-
-    def to_snapshot(self) -> int:
-        """Rows to record before the next snapshot is due (at least 1)."""
-        return self.replay_every - (self.n_rows - 1) % self.replay_every
 
     @property
     def momentum_drift(self) -> tuple[float, float]:
@@ -150,31 +150,39 @@ class Recorder:
         return s[DRIFT_LIN] / max(s[P_MAX], 1e-300), s[DRIFT_ANG] / max(s[L_MAX], 1e-300)
 
     def snapshot(self, model: Model, data, row: int) -> None:
-        """Keep what the replay draws at sample `row`: the pairs in contact (their spheres and
-        states), the faces in contact range and each module's combined contact force (world)."""
+        """Keep what the replay draws at sample `row`, from data's last step (`add_snapshots`)."""
+        c = data.contacts
+        n = 0 if c is None or c.state is None else len(c.state)
+        force_W = np.zeros((1, len(self.first.modules), 3))
+        for k, mod in enumerate(model.modules):
+            if mod.joint:  # a welded module takes no contact
+                force_W[0, k] = data.joint_force_W[mod.joint]
+        pairs = (c.master, c.slave, c.state) if n else (NO_STATES,) * 3
+        self.add_snapshots(model, data.near_pairs, np.array([row]), np.array([n]), force_W, *pairs)
+
+    def add_snapshots(self, model: Model, near_pairs, rows: np.ndarray, pairs: np.ndarray, force_W: np.ndarray,
+                      master: np.ndarray, slave: np.ndarray, state: np.ndarray) -> None:
+        """Keep what the replay draws at samples rows (n,): the pairs in contact (pairs (n,)
+        of them at each; their master and slave spheres and states, all concatenated), the
+        faces in contact range and each module's combined contact force, (n, n_modules, 3),
+        world. near_pairs: the broad phase's face pairs, the same at all these samples."""
         if self._ids[0] is not model:
             self._ids = (model, SphereIds(model, self.first, self.face_names))
         ids = self._ids[1]
-        s, c = self.snapshots, data.contacts
-        n = 0 if c is None or c.state is None else len(c.state)
-        in_range = np.zeros(len(self.face_names[0]) + len(self.face_names[1]), dtype=bool)
-        if n:
-            s["master"].append(ids.master[c.master].astype(np.int32))
-            s["slave"].append(ids.slave[c.slave].astype(np.int32))
-            s["state"].append(c.state.astype(np.int8))
-            in_range[ids.master_face[model.master.face[c.master]]] = True
-            in_range[ids.slave_face[model.slave.face[c.slave]]] = True
+        s = self.snapshots
+        in_range = np.zeros((len(rows), len(self.face_names[0]) + len(self.face_names[1])), dtype=bool)
         # coal's face pairs within the security margin (the last broad phase's)
-        near = ids.near(data.near_pairs)
-        in_range[ids.pair_faces[near]] = True
-        F = np.zeros((len(self.first.modules), 3))
-        for k, mod in enumerate(model.modules):
-            if mod.joint:  # a welded module takes no contact
-                F[k] = data.joint_force_W[mod.joint]
-        s["row"].append(row)
-        s["pairs"].append(n)
+        in_range[:, ids.pair_faces[ids.near(near_pairs)].ravel()] = True
+        sample = np.repeat(np.arange(len(rows)), pairs)
+        in_range[sample, ids.master_face[model.master.face[master]]] = True
+        in_range[sample, ids.slave_face[model.slave.face[slave]]] = True
+        s["master"].append(ids.master[master].astype(np.int32))
+        s["slave"].append(ids.slave[slave].astype(np.int32))
+        s["state"].append(state.astype(np.int8))
+        s["row"].append(np.asarray(rows, dtype=np.int64))
+        s["pairs"].append(np.asarray(pairs, dtype=np.int64))
         s["faces_in_range"].append(in_range)
-        s["force_W"].append(F)
+        s["force_W"].append(np.asarray(force_W, dtype=float))
 
     def arrays(self) -> dict[str, np.ndarray]:
         rows = np.concatenate(self.chunks) if self.chunks else np.zeros((0, self.layout.width))
@@ -183,15 +191,16 @@ class Recorder:
     def replay_arrays(self) -> dict[str, np.ndarray]:
         """The snapshots as the arrays of replay.npz (pairs of all snapshots concatenated)."""
         s = self.snapshots
-        cat = {k: np.concatenate(s[k]) if s[k] else np.zeros(0, dtype) for k, dtype in
-               (("master", np.int32), ("slave", np.int32), ("state", np.int8))}
+        n_faces = len(self.face_names[0]) + len(self.face_names[1])
+        cat = {k: np.concatenate(s[k]) if s[k] else np.zeros(shape, dtype) for k, shape, dtype in (
+            ("master", 0, np.int32), ("slave", 0, np.int32), ("state", 0, np.int8), ("row", 0, np.int64),
+            ("pairs", 0, np.int64), ("faces_in_range", (0, n_faces), bool),
+            ("force_W", (0, len(self.first.modules), 3), float))}
         return {
             "rate_hz": np.float64(REPLAY_RATE_HZ),
-            "row": np.asarray(s["row"], dtype=np.int64),
-            "pairs_end": np.cumsum(s["pairs"], dtype=np.int64),
-            **cat,
-            "faces_in_range": np.asarray(s["faces_in_range"], dtype=bool).reshape(len(s["row"]), -1),
-            "force_W": np.asarray(s["force_W"], dtype=float).reshape(len(s["row"]), -1, 3),
+            "row": cat["row"],
+            "pairs_end": np.cumsum(cat["pairs"], dtype=np.int64),
+            **{k: cat[k] for k in ("master", "slave", "state", "faces_in_range", "force_W")},
             "master_faces": np.asarray(self.face_names[0]),
             "slave_faces": np.asarray(self.face_names[1]),
         }
@@ -310,9 +319,10 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
     done = 0  # record intervals taken
     try:
         while done < n_records:
-            if compiled.applies(model, integrator):  # intervals up to the next snapshot in one call
+            if compiled.applies(model, integrator):  # many intervals in one call
                 event, n_rows, n_steps, n_pairs, n_free, overflow = compiled.run_records(
-                    model, data, min(n_records - done, rec.to_snapshot()), rec, J, JL, starts[-1], timeout, max_phi)
+                    model, data, min(n_records - done, compiled.RECORDS_PER_CALL), rec, J, JL, starts[-1], timeout,
+                    max_phi)
                 steps += n_steps
                 pair_steps += n_pairs
                 free_steps += n_free

@@ -192,7 +192,7 @@ def _node_hit(u, v, i, j, lift, w0, nu, nv, nh, radius, cutoff):
 def _push(found_m, found_s, n_found, row, s):
     """Append (row, s) to the growing buffers; returns them (reallocated when full)."""
     if n_found == found_m.shape[0]:
-        found_m, found_s = _grow(found_m), _grow(found_s)
+        found_m, found_s = grow(found_m), grow(found_s)
     found_m[n_found], found_s[n_found] = row, s
     return found_m, found_s
 
@@ -363,8 +363,8 @@ def build_pair_list(near, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_
                     if s < 0 or du * du + dv * dv >= r_sq:
                         continue
                     if n == lm.shape[0]:
-                        lm, ls, gap = _grow(lm), _grow(ls), _grow(gap)
-                        li, lj = _grow(li), _grow(lj)
+                        lm, ls, gap = grow(lm), grow(ls), grow(gap)
+                        li, lj = grow(li), grow(lj)
                     lm[n], ls[n], li[n], lj[n] = row, s, i, j
                     gap[n] = math.sqrt(du * du + dv * dv + lift * lift) - R
                     n += 1
@@ -384,7 +384,7 @@ def build_pair_list(near, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_
 
 
 @njit
-def _grow(a):
+def grow(a):
     return np.concatenate((a, np.empty(a.shape[0], dtype=a.dtype)))
 
 
