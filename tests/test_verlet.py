@@ -103,10 +103,11 @@ def test_kept_pair_list_finds_the_grid_search_pairs_after_any_small_motion(model
             for f in near:  # candidates left untested: their gap exceeds the motion's bound
                 if built.scan[f] or built.stop[f] == built.start[f]:
                     continue
+                A = np.empty((3, 3))
                 frame = _face_frame(f, model_I.face_table, M.normals_J, model_I.master_finger, model_I.master_axis_J,
-                                    data.opening, data.R_W, data.p_W)
+                                    data.opening, data.R_W, data.p_W, A)
                 table = model_I.face_table
-                moved = _moved(frame[4], frame[5], built.A[f], built.off[f], table.master_centre_J[f],
+                moved = _moved(A, frame[4], built.A[f], built.off[f], table.master_centre_J[f],
                                table.master_radius[f])
                 skipped += int(np.sum(built.gap[built.start[f]:built.stop[f]] > moved + GAP_SLACK))
     assert found > 100 and kept > 20 and skipped > 0
@@ -139,6 +140,7 @@ def test_pair_list_falls_back_to_the_grid_search_off_the_ball_regime(model_I, re
         # face pairs that face each other yet are searched anew: the fallback at work
         M = model_I.master
         scanned += any(pair_list.scan[f] and _face_frame(f, model_I.face_table, M.normals_J, model_I.master_finger,
-                                                      model_I.master_axis_J, data.opening, data.R_W, data.p_W)[0]
+                                                      model_I.master_axis_J, data.opening, data.R_W, data.p_W,
+                                                      np.empty((3, 3)))[0]
                        for f in near)
     assert found > 100 and scanned > 0

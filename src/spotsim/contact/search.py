@@ -124,23 +124,21 @@ def _dot(a, b):
 
 
 @njit
-def _face_frame(f, table, N1_J, finger1, axis1_J, opening, R_W, p_W):
+def _face_frame(f, table, N1_J, finger1, axis1_J, opening, R_W, p_W, A):
     """Face pair f's search frame: whether its faces face each other (Eq. 6 defined), the
-    common normal in face coordinates (n_u, n_v, n_h), the affine map (A, off) taking a master
-    centre in its joint's frame to face coordinates (u, v, height above the face plane), and
-    the common normal in world (3,)."""
+    common normal in face coordinates (n_u, n_v, n_h), the offset `off` of the affine map
+    A c + off taking a master centre c in its joint's frame to face coordinates (u, v, height
+    above the face plane), and the common normal in world (3-tuple). A: (3, 3), the map's
+    matrix, written in place (left as it was when the faces do not face each other)."""
     Rs, ps = R_W[table.slave_joint[f]], p_W[table.slave_joint[f]]
     b0, b1, b2 = mv3(Rs, table.t1_J[f]), mv3(Rs, table.t2_J[f]), mv3(Rs, table.n_J[f])
     Rm, pm = R_W[table.master_joint[f]], p_W[table.master_joint[f]]
     nm = mv3(Rm, N1_J[table.master_start[f]])
     dn = (b2[0] - nm[0], b2[1] - nm[1], b2[2] - nm[2])
     norm = math.sqrt(_dot(dn, dn))
-    A = np.empty((3, 3))
-    n_W = np.zeros(3)
     if norm <= NORMAL_EPS:
-        return False, 0.0, 0.0, 0.0, A, (0.0, 0.0, 0.0), n_W  # faces facing the same way never pair
-    for a in range(3):
-        n_W[a] = dn[a] / norm
+        return False, 0.0, 0.0, 0.0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)  # faces facing the same way never pair
+    n_W = (dn[0] / norm, dn[1] / norm, dn[2] / norm)
     # the common normal in face coordinates
     nu, nv, nh = _dot(dn, b0) / norm, _dot(dn, b1) / norm, _dot(dn, b2) / norm
     o = mv3(Rs, table.origin_J[f])
@@ -152,12 +150,13 @@ def _face_frame(f, table, N1_J, finger1, axis1_J, opening, R_W, p_W):
         A[1, k] = Rm[0, k] * b1[0] + Rm[1, k] * b1[1] + Rm[2, k] * b1[2]
         A[2, k] = Rm[0, k] * b2[0] + Rm[1, k] * b2[1] + Rm[2, k] * b2[2]
     first = table.master_start[f]
-    shift = opening[finger1[first]] * axis1_J[first]
+    x = opening[finger1[first]]
+    shift = (x * axis1_J[first, 0], x * axis1_J[first, 1], x * axis1_J[first, 2])
     e = (pm[0] - o[0] - ps[0], pm[1] - o[1] - ps[1], pm[2] - o[2] - ps[2])
     off = (A[0, 0] * shift[0] + A[0, 1] * shift[1] + A[0, 2] * shift[2] + _dot(e, b0),
            A[1, 0] * shift[0] + A[1, 1] * shift[1] + A[1, 2] * shift[2] + _dot(e, b1),
            A[2, 0] * shift[0] + A[2, 1] * shift[1] + A[2, 2] * shift[2] + _dot(e, b2))
-    return True, nu, nv, nh, A, off, n_W
+    return True, nu, nv, nh, off, n_W
 
 
 @njit
@@ -168,18 +167,17 @@ def _lift(A, off, c, radius):
 
 
 @njit
-def _grid_uv(A, off, c, radius):
-    """Master centre c's in-plane face coordinates in units of the slave grid step."""
-    return ((A[0, 0] * c[0] + A[0, 1] * c[1] + A[0, 2] * c[2] + off[0]) / radius,
-            (A[1, 0] * c[0] + A[1, 1] * c[1] + A[1, 2] * c[2] + off[1]) / radius)
+def _face_xy(A, off, c):
+    """Master centre c's in-plane face coordinates, m."""
+    return (A[0, 0] * c[0] + A[0, 1] * c[1] + A[0, 2] * c[2] + off[0],
+            A[1, 0] * c[0] + A[1, 1] * c[1] + A[1, 2] * c[2] + off[1])
 
 
 @njit
-def _node_hit(u, v, i, j, lift, w0, nu, nv, nh, radius, cutoff):
-    """Whether the pair of a master centre at (u, v, lift) and slave grid node (i, j) may be in
-    contact (Eq. 8-10 in face coordinates, a superset by SEARCH_SLACK); w0 = lift^2 - R^2."""
-    du = (u - i) * radius
-    dv = (v - j) * radius
+def _node_hit(du, dv, lift, w0, nu, nv, nh, cutoff):
+    """Whether the pair of a master centre and a slave grid node may be in contact (Eq. 8-10
+    in face coordinates, a superset by SEARCH_SLACK): du, dv, the centre's in-plane offset from
+    the node, and lift, its height above the plane of the slave centres, m; w0 = lift^2 - R^2."""
     chi = nu * du + nh * lift + nv * dv
     disc = chi * chi - (du * du + w0 + dv * dv)
     if disc < -SEARCH_SLACK * cutoff:
@@ -221,8 +219,9 @@ def grid_search(near, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_slav
     found_s = np.empty(64, dtype=np.int64)
     n_found = 0
     R = r1 + radius
+    A = np.empty((3, 3))
     for f in near:
-        facing, nu, nv, nh, A, off, _ = _face_frame(f, table, N1_J, finger1, axis1_J, opening, R_W, p_W)
+        facing, nu, nv, nh, off, _ = _face_frame(f, table, N1_J, finger1, axis1_J, opening, R_W, p_W, A)
         if not facing:
             continue
         n_uv = math.hypot(nu, nv)
@@ -233,7 +232,8 @@ def grid_search(near, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_slav
             lift = _lift(A, off, c, radius)
             if abs(lift) >= cutoff:  # slave centres lie `radius` above the face plane
                 continue
-            u, v = _grid_uv(A, off, c, radius)
+            x, y = _face_xy(A, off, c)
+            u, v = x / radius, y / radius  # in grid steps
             # within cutoff in 3-D means within sqrt(cutoff^2 - lift^2) in the face plane
             reach = math.sqrt(max(cutoff * cutoff - lift * lift, 0.0)) / radius
             if not (-reach < u < ni - 1 + reach and -reach < v < nj - 1 + reach):
@@ -256,7 +256,7 @@ def grid_search(near, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_slav
                 half = math.sqrt(max(reach * reach - (u - i) ** 2, 0.0))
                 for j in range(max(math.ceil(v - half), 0), min(math.floor(v + half), nj - 1) + 1):
                     s = maps[face, i, j]
-                    if s >= 0 and _node_hit(u, v, i, j, lift, w0, nu, nv, nh, radius, cutoff):
+                    if s >= 0 and _node_hit(x - i * radius, y - j * radius, lift, w0, nu, nv, nh, cutoff):
                         found_m, found_s = _push(found_m, found_s, n_found, row, s)
                         n_found += 1
     key = found_m[:n_found] * n_slave + found_s[:n_found]
@@ -283,8 +283,8 @@ class PairList(NamedTuple):
 
     master: np.ndarray  # (n,) master sphere of each candidate
     slave: np.ndarray  # (n,) slave sphere
-    node_i: np.ndarray  # (n,) the slave sphere's grid row and column on its face
-    node_j: np.ndarray
+    centre_J: np.ndarray  # (n, 3) the master sphere's centre, its joint's frame (fingers at opening 0), m
+    node: np.ndarray  # (n, 2) the slave sphere's grid node in its face's coordinates, m
     gap: np.ndarray  # (n,) |c1 - c2| - (r1 + r2) at the build, m
     start: np.ndarray  # (n_table,) each face pair's first candidate
     stop: np.ndarray  # (n_table,) one past its last
@@ -299,7 +299,7 @@ def empty_pair_list(n_face_pairs: int) -> PairList:
     """A pair list that holds nothing and must be built at its first use."""
     none = np.zeros(0, dtype=np.int64)
     ints, flags = np.zeros(n_face_pairs, dtype=np.int64), np.zeros(n_face_pairs, dtype=np.bool_)
-    return PairList(none, none, none, none, np.zeros(0), ints, ints.copy(), flags, flags.copy(),
+    return PairList(none, none, np.zeros((0, 3)), np.zeros((0, 2)), np.zeros(0), ints, ints.copy(), flags, flags.copy(),
                     np.zeros((n_face_pairs, 3)), np.zeros((n_face_pairs, 3, 3)), np.zeros((n_face_pairs, 3)))
 
 
@@ -324,7 +324,7 @@ def build_pair_list(near, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_
     normal_W, A_b, off_b = np.zeros((n_table, 3)), np.zeros((n_table, 3, 3)), np.zeros((n_table, 3))
     cap = 256
     lm, ls, gap = np.empty(cap, dtype=np.int64), np.empty(cap, dtype=np.int64), np.empty(cap)
-    li, lj = np.empty(cap, dtype=np.int64), np.empty(cap, dtype=np.int64)
+    nu_, nv_ = np.empty(cap), np.empty(cap)  # the node's face coordinates, m
     n = 0
     R = r1 + radius
     reach_3d = R + LIST_SKIN
@@ -332,7 +332,8 @@ def build_pair_list(near, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_
     inv = 1.0 / radius  # the list needs no exact grid coordinates: GAP_SLACK absorbs round-off
     for f in near:
         built[f] = True
-        facing, nu, nv, nh, A, off, n_W = _face_frame(f, table, N1_J, finger1, axis1_J, opening, R_W, p_W)
+        A = A_b[f]
+        facing, nu, nv, nh, off, n_W = _face_frame(f, table, N1_J, finger1, axis1_J, opening, R_W, p_W, A)
         if not facing:
             scan[f] = True
             continue
@@ -364,8 +365,8 @@ def build_pair_list(near, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_
                         continue
                     if n == lm.shape[0]:
                         lm, ls, gap = grow(lm), grow(ls), grow(gap)
-                        li, lj = grow(li), grow(lj)
-                    lm[n], ls[n], li[n], lj[n] = row, s, i, j
+                        nu_, nv_ = grow(nu_), grow(nv_)
+                    lm[n], ls[n], nu_[n], nv_[n] = row, s, i * radius, j * radius
                     gap[n] = math.sqrt(du * du + dv * dv + lift * lift) - R
                     n += 1
         if not ball:
@@ -373,13 +374,17 @@ def build_pair_list(near, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_
             n = first
             continue
         order = np.argsort(gap[first:n]) + first
-        lm[first:n], ls[first:n], li[first:n], lj[first:n], gap[first:n] = (
-            lm[order], ls[order], li[order], lj[order], gap[order])
+        lm[first:n], ls[first:n], nu_[first:n], nv_[first:n], gap[first:n] = (
+            lm[order], ls[order], nu_[order], nv_[order], gap[order])
         start[f], stop[f] = first, n
-        normal_W[f] = n_W
-        A_b[f] = A
+        normal_W[f, 0], normal_W[f, 1], normal_W[f, 2] = n_W
         off_b[f, 0], off_b[f, 1], off_b[f, 2] = off
-    return PairList(lm[:n].copy(), ls[:n].copy(), li[:n].copy(), lj[:n].copy(), gap[:n].copy(), start, stop, built,
+    # each candidate's master centre and node side by side, for the test at every step
+    centre, node = np.empty((n, 3)), np.empty((n, 2))
+    for q in range(n):
+        centre[q, 0], centre[q, 1], centre[q, 2] = C1_J[lm[q], 0], C1_J[lm[q], 1], C1_J[lm[q], 2]
+        node[q, 0], node[q, 1] = nu_[q], nv_[q]
+    return PairList(lm[:n].copy(), ls[:n].copy(), centre, node, gap[:n].copy(), start, stop, built,
                     scan, normal_W, A_b, off_b)
 
 
@@ -424,8 +429,8 @@ def listed_search(near, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_sl
     valid = True
     for m in range(k):
         f = near[m]
-        facing, nu, nv, nh, A, off, n_W = _face_frame(f, table, N1_J, finger1, axis1_J, opening, R_W, p_W)
-        A_k[m] = A
+        A = A_k[m]
+        facing, nu, nv, nh, off, n_W = _face_frame(f, table, N1_J, finger1, axis1_J, opening, R_W, p_W, A)
         off_k[m, 0], off_k[m, 1], off_k[m, 2] = off
         n_k[m, 0], n_k[m, 1], n_k[m, 2] = nu, nv, nh
         if not pair_list.built[f]:
@@ -441,7 +446,7 @@ def listed_search(near, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_sl
         pair_list = build_pair_list(near, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_slave, R_W, p_W,
                                     r1, radius, cutoff)
         moved[:] = 0.0
-    lm, ls, li, lj, gap = pair_list.master, pair_list.slave, pair_list.node_i, pair_list.node_j, pair_list.gap
+    lm, ls, centre, node, gap = pair_list.master, pair_list.slave, pair_list.centre_J, pair_list.node, pair_list.gap
     R = r1 + radius
     n_out = 0
     for m in range(k):
@@ -453,17 +458,20 @@ def listed_search(near, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_sl
         if pair_list.scan[f]:
             n_searched += 1
             continue
-        A, off, nu, nv, nh = A_k[m], off_k[m], n_k[m, 0], n_k[m, 1], n_k[m, 2]
+        A, nu, nv, nh = A_k[m], n_k[m, 0], n_k[m, 1], n_k[m, 2]
+        # the map's entries as scalars: `_face_xy` and `_lift`, term by term in their order
+        a00, a01, a02, a10, a11, a12 = A[0, 0], A[0, 1], A[0, 2], A[1, 0], A[1, 1], A[1, 2]
+        a20, a21, a22, o0, o1, o2 = A[2, 0], A[2, 1], A[2, 2], off_k[m, 0], off_k[m, 1], off_k[m, 2]
         reach = moved[m] + GAP_SLACK
         for idx in range(pair_list.start[f], pair_list.stop[f]):
             if gap[idx] > reach:
                 break  # ordered by gap: no later candidate can touch either
-            row = lm[idx]
-            c = C1_J[row]
-            lift = _lift(A, off, c, radius)
-            u, v = _grid_uv(A, off, c, radius)
-            if _node_hit(u, v, li[idx], lj[idx], lift, lift * lift - R * R, nu, nv, nh, radius, cutoff):
-                out_m[n], out_s[n] = row, ls[idx]
+            c0, c1, c2 = centre[idx, 0], centre[idx, 1], centre[idx, 2]
+            lift = a20 * c0 + a21 * c1 + a22 * c2 + o2 - radius
+            du = a00 * c0 + a01 * c1 + a02 * c2 + o0 - node[idx, 0]
+            dv = a10 * c0 + a11 * c1 + a12 * c2 + o1 - node[idx, 1]
+            if _node_hit(du, dv, lift, lift * lift - R * R, nu, nv, nh, cutoff):
+                out_m[n], out_s[n] = lm[idx], ls[idx]
                 n += 1
     out_m, out_s = out_m[:n], out_s[:n]
     if n_searched:  # face pairs outside the ball regime: searched anew
@@ -476,9 +484,27 @@ def listed_search(near, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_sl
         sm, ss, _ = grid_search(searched, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_slave, R_W, p_W,
                                 r1, radius, cutoff)
         out_m, out_s = np.concatenate((out_m, sm)), np.concatenate((out_s, ss))
-    key = out_m * n_slave + out_s
-    order = np.argsort(key)  # by key, as grid_search returns them
-    return (out_m[order], out_s[order], key[order]), pair_list
+    return _by_key(out_m, out_s, n_slave), pair_list  # by key, as grid_search returns them
+
+
+@njit
+def _by_key(master, slave, n_slave):
+    """(master, slave, key = master n_slave + slave) ordered by key, the keys unique; master
+    and slave are reordered in place. By insertion: the listed search finds its pairs in a
+    few runs (one per face pair), so its order is nearly the keys'."""
+    n = master.shape[0]
+    key = master * n_slave + slave
+    if n > 64:  # far from sorted, insertion would cost ~n^2
+        order = np.argsort(key)
+        return master[order], slave[order], key[order]
+    for a in range(1, n):
+        k, m, s = key[a], master[a], slave[a]
+        b = a - 1
+        while b >= 0 and key[b] > k:
+            key[b + 1], master[b + 1], slave[b + 1] = key[b], master[b], slave[b]
+            b -= 1
+        key[b + 1], master[b + 1], slave[b + 1] = k, m, s
+    return master, slave, key
 
 
 def face_slices(layers: LayerSet) -> list[slice]:
