@@ -425,14 +425,18 @@ def listed_search(near, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_sl
     does, and the pair list.
     """
     k = near.shape[0]
-    A_k, off_k, n_k, moved = np.empty((k, 3, 3)), np.empty((k, 3)), np.empty((k, 3)), np.empty(k)
+    # each face pair's map (rows 0-2) and offset (row 3), its normal in face coordinates (row
+    # 4) and the bound on its motion (row 5, first entry), in one block: a step makes dozens
+    # of small arrays, ~25 ns each
+    frames = np.empty((k, 6, 3))
+    moved = frames[:, 5, 0]
     valid = True
     for m in range(k):
         f = near[m]
-        A = A_k[m]
+        A = frames[m][:3]
         facing, nu, nv, nh, off, n_W = _face_frame(f, table, N1_J, finger1, axis1_J, opening, R_W, p_W, A)
-        off_k[m, 0], off_k[m, 1], off_k[m, 2] = off
-        n_k[m, 0], n_k[m, 1], n_k[m, 2] = nu, nv, nh
+        frames[m, 3, 0], frames[m, 3, 1], frames[m, 3, 2] = off
+        frames[m, 4, 0], frames[m, 4, 1], frames[m, 4, 2] = nu, nv, nh
         if not pair_list.built[f]:
             valid = False
         elif not pair_list.scan[f]:
@@ -451,17 +455,19 @@ def listed_search(near, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_sl
     n_out = 0
     for m in range(k):
         n_out += pair_list.stop[near[m]] - pair_list.start[near[m]]
-    out_m, out_s = np.empty(n_out, dtype=np.int64), np.empty(n_out, dtype=np.int64)
+    out = np.empty((2, n_out), dtype=np.int64)
+    out_m, out_s = out[0], out[1]
     n = n_searched = 0
     for m in range(k):
         f = near[m]
         if pair_list.scan[f]:
             n_searched += 1
             continue
-        A, nu, nv, nh = A_k[m], n_k[m, 0], n_k[m, 1], n_k[m, 2]
+        F = frames[m]
+        nu, nv, nh = F[4, 0], F[4, 1], F[4, 2]
         # the map's entries as scalars: `_face_xy` and `_lift`, term by term in their order
-        a00, a01, a02, a10, a11, a12 = A[0, 0], A[0, 1], A[0, 2], A[1, 0], A[1, 1], A[1, 2]
-        a20, a21, a22, o0, o1, o2 = A[2, 0], A[2, 1], A[2, 2], off_k[m, 0], off_k[m, 1], off_k[m, 2]
+        a00, a01, a02, a10, a11, a12 = F[0, 0], F[0, 1], F[0, 2], F[1, 0], F[1, 1], F[1, 2]
+        a20, a21, a22, o0, o1, o2 = F[2, 0], F[2, 1], F[2, 2], F[3, 0], F[3, 1], F[3, 2]
         reach = moved[m] + GAP_SLACK
         for idx in range(pair_list.start[f], pair_list.stop[f]):
             if gap[idx] > reach:
