@@ -14,10 +14,10 @@ import math
 import numpy as np
 import pinocchio as pin
 
-from .bodies import (add3, axpy3, body_origin3, body_rotation, cross3, free_bodies, free_body_acceleration, mm,
-                     mtv3, mv3, put3, quat_times_exp4, quat_to_rotation, sub3)
+from .bodies import (add3, axpy3, body_origin3, body_rotation, cross3, free_bodies, free_body_acceleration, mm9,
+                     mtv3, mtv9, mv3, mv9, put3, quat_rotation9, quat_times_exp4, sub3)
 from .errors import SimulationError
-from .jit import direct, njit
+from .jit import direct, njit, njit_inline
 from .step import contact_stage
 
 
@@ -50,12 +50,12 @@ def _set_centroid_state(bodies, b, q, v, p_G, v_G, quat, w):
     joint's quaternion (x, y, z, w), in place."""
     iq, iv = bodies.idx_q[b], bodies.idx_v[b]
     c = bodies.lever[b]
-    Rq = quat_to_rotation(quat[0], quat[1], quat[2], quat[3])
+    Rq = quat_rotation9(quat[0], quat[1], quat[2], quat[3])
     R_P = bodies.R_P[b]
     # p_G = p_P + R_P (x + Rq c)
-    put3(q, iq, sub3(mtv3(R_P, sub3(p_G, bodies.p_P[b])), mv3(Rq, c)))
+    put3(q, iq, sub3(mtv3(R_P, sub3(p_G, bodies.p_P[b])), mv9(Rq, c)))
     q[iq + 3], q[iq + 4], q[iq + 5], q[iq + 6] = quat[0], quat[1], quat[2], quat[3]
-    put3(v, iv, sub3(mtv3(mm(R_P, Rq), v_G), cross3(w, c)))
+    put3(v, iv, sub3(mtv9(mm9(R_P, Rq), v_G), cross3(w, c)))
     put3(v, iv + 3, w)
 
 
@@ -68,7 +68,7 @@ def _symplectic_euler_bodies(bodies, q, v, a, h, q_new, v_new):
                                q_new, v_new)
 
 
-@njit
+@njit_inline
 def _symplectic_euler_body(bodies, b, R, q, v, a_O, alpha, h, q_new, v_new):
     """Free body b's symplectic Euler step, into q_new, v_new, given its rotation R (from q) and
     its twist's derivative (a_O, alpha)."""

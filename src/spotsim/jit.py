@@ -34,6 +34,9 @@ if not os.environ.get("NUMBA_CACHE_DIR"):  # a directory the user chose wins
 #: Compiled, cached, and bit-for-bit IEEE arithmetic (no fast-math reassociation): the culled
 #: and the literal searches must give identical forces.
 njit = numba.njit(cache=True, fastmath=False, nogil=True)
+#: ... and compiled into each caller (numba IR inlining): a call that passes a dozen arrays costs
+#: a few hundred ns, a small kernel's arithmetic a few tens.
+njit_inline = numba.njit(cache=True, fastmath=False, nogil=True, inline="always")
 
 
 def direct(kernel):

@@ -18,7 +18,7 @@ import math
 
 import numpy as np
 
-from .bodies import bodies_centroid3, bodies_momentum, body_pose, kinetic_energy, mm, mtv3, mv3, sub3
+from .bodies import add3, bodies_centroid3, bodies_momentum, body_origin3, body_rotation_into, kinetic_energy, mtv3, mv3, sub3
 from .contact.friction import SLIPPING, STICKING
 from .jit import njit
 from .stability import ENERGY_FLOOR_J, ENERGY_GROWTH, mechanical_energy
@@ -101,11 +101,10 @@ def record_args(model, layout: Layout) -> tuple:
 
 
 @njit
-def quat_xyzw(R):
+def quat_xyzw(R, q):
     """The unit quaternion (x, y, z, w) of a rotation matrix, as Eigen's Quaternion(R)
-    computes it (Shepperd's method: the largest of w, x, y, z first)."""
+    computes it (Shepperd's method: the largest of w, x, y, z first), written into q (4,)."""
     trace = R[0, 0] + R[1, 1] + R[2, 2]
-    q = np.empty(4)
     if trace > 0.0:
         t = math.sqrt(trace + 1.0)
         q[3] = 0.5 * t
@@ -113,7 +112,7 @@ def quat_xyzw(R):
         q[0] = (R[2, 1] - R[1, 2]) * t
         q[1] = (R[0, 2] - R[2, 0]) * t
         q[2] = (R[1, 0] - R[0, 1]) * t
-        return q
+        return
     i = 0
     if R[1, 1] > R[0, 0]:
         i = 1
@@ -126,7 +125,6 @@ def quat_xyzw(R):
     q[3] = (R[k, j] - R[j, k]) * t
     q[j] = (R[j, i] + R[i, j]) * t
     q[k] = (R[k, i] + R[i, k]) * t
-    return q
 
 
 @njit
@@ -138,17 +136,19 @@ def rpy(R):
 
 
 @njit
-def _frame(bodies, q, frame_row, frame_R, frame_p, i):
-    """Frame i in the world: rotation (3, 3) and origin (3,)."""
+def _frame(bodies, q, frame_row, frame_R, frame_p, i, R, work):
+    """Frame i in the world: its rotation, written into R (3, 3), and its origin (3-tuple).
+    work: (3, 3) scratch."""
     b = frame_row[i]
     if b < 0:
-        return frame_R[i].copy(), frame_p[i].copy()
-    R, p = body_pose(bodies, b, q)
-    x = mv3(R, frame_p[i])
-    p[0] += x[0]
-    p[1] += x[1]
-    p[2] += x[2]
-    return mm(R, frame_R[i]), p
+        R[:] = frame_R[i]
+        return frame_p[i, 0], frame_p[i, 1], frame_p[i, 2]
+    body_rotation_into(bodies, b, q, work)
+    F = frame_R[i]
+    for a in range(3):  # R = work F, as `mm`
+        for c in range(3):
+            R[a, c] = work[a, 0] * F[0, c] + work[a, 1] * F[1, c] + work[a, 2] * F[2, c]
+    return add3(body_origin3(bodies, b, q), mv3(work, frame_p[i]))
 
 
 @njit
@@ -170,15 +170,17 @@ def sample(row, t, q, v, summary, n_pairs, state, opening, finger_load, last_ope
     bodies, frame_row, frame_R, frame_p, module_row, finger_map, _, robot_rows, system_rows, free_robot = args[:10]
     n_mod = module_row.shape[0]
     n_ee = frame_row.shape[0] - n_mod - 1
-    R_b, p_b = _frame(bodies, q, frame_row, frame_R, frame_p, k)
-    R_a, p_a = _frame(bodies, q, frame_row, frame_R, frame_p, n_mod + ee)
+    R = np.empty((4, 3, 3))  # scratch: an allocation costs ~25 ns, a row needs a dozen rotations
+    R_b, R_a, R_ab, work = R[0], R[1], R[2], R[3]
+    p_b = _frame(bodies, q, frame_row, frame_R, frame_p, k, R_b, work)
+    p_a = _frame(bodies, q, frame_row, frame_R, frame_p, n_mod + ee, R_a, work)
     row[0] = t
     at = 1
     at = _put(row, at, p_b)
-    at = _put(row, at, quat_xyzw(R_b))
+    quat_xyzw(R_b, row[at:at + 4])
+    at += 4
     at = _put(row, at, mtv3(R_a, sub3(p_b, p_a)), 1e3)  # O_b in O_a
-    R_ab = np.empty((3, 3))  # R_a^T R_b
-    for i in range(3):
+    for i in range(3):  # R_a^T R_b
         for j in range(3):
             R_ab[i, j] = R_a[0, i] * R_b[0, j] + R_a[1, i] * R_b[1, j] + R_a[2, i] * R_b[2, j]
     at = _put(row, at, rpy(R_ab), 180.0 / math.pi)
@@ -186,40 +188,43 @@ def sample(row, t, q, v, summary, n_pairs, state, opening, finger_load, last_ope
     b = module_row[k]
     if b >= 0:
         iv = bodies.idx_v[b]
-        R_j, _ = body_pose(bodies, b, q)
-        at = _put(row, at, mv3(R_j, v[iv:iv + 3]))
-        at = _put(row, at, mv3(R_j, v[iv + 3:iv + 6]))
+        body_rotation_into(bodies, b, q, work)
+        at = _put(row, at, mv3(work, v[iv:iv + 3]))
+        at = _put(row, at, mv3(work, v[iv + 3:iv + 6]))
     else:
-        at = _put(row, at, np.zeros(6))
-    wrench = np.zeros(6)  # on the module, in O_a: force, and moment about its centroid
-    if n_pairs:
-        wrench[:] = summary[:6]
-    at = _put(row, at, wrench)
+        row[at:at + 6] = 0.0
+        at += 6
+    # on the module, in O_a: force, and moment about its centroid
+    for i in range(6):
+        row[at + i] = summary[i] if n_pairs else 0.0
+    at += 6
     for i in range(finger_map.shape[0]):
         last_open[finger_map[i]] = opening[i]
     at = _put(row, at, last_open, 1e3)
-    loads = np.zeros(last_open.shape[0])
+    row[at:at + last_open.shape[0]] = 0.0  # the loads of fingers a weld left out
     for i in range(finger_map.shape[0]):
-        loads[finger_map[i]] = finger_load[i]
-    at = _put(row, at, loads)
+        row[at + finger_map[i]] = finger_load[i]
+    at += last_open.shape[0]
     n_slip = n_stick = 0
     for i in range(n_pairs):
         n_slip += state[i] == SLIPPING
         n_stick += state[i] == STICKING
-    at = _put(row, at, np.array([float(n_slip), float(n_stick), float(phase), float(grasp),
-                                 summary[7] * 1e6 if n_pairs else 0.0]))
+    at = _put(row, at, (float(n_slip), float(n_stick), float(phase), float(grasp),
+                        summary[7] * 1e6 if n_pairs else 0.0))
     if free_robot:
         at = _put(row, at, bodies_centroid3(bodies, robot_rows, q))
-        R, p = _frame(bodies, q, frame_row, frame_R, frame_p, frame_row.shape[0] - 1)
+        p = _frame(bodies, q, frame_row, frame_R, frame_p, frame_row.shape[0] - 1, R_b, work)
         at = _put(row, at, p)
-        at = _put(row, at, quat_xyzw(R))
+        quat_xyzw(R_b, row[at:at + 4])
+        at += 4
         at = _put(row, at, bodies_centroid3(bodies, system_rows, q))
         for i in range(n_mod):
-            R, p = _frame(bodies, q, frame_row, frame_R, frame_p, i)
+            p = _frame(bodies, q, frame_row, frame_R, frame_p, i, R_b, work)
             at = _put(row, at, p)
-            at = _put(row, at, quat_xyzw(R))
+            quat_xyzw(R_b, row[at:at + 4])
+            at += 4
         for i in range(n_ee):
-            R, p = _frame(bodies, q, frame_row, frame_R, frame_p, n_mod + i)
+            p = _frame(bodies, q, frame_row, frame_R, frame_p, n_mod + i, R_b, work)
             at = _put(row, at, p)
 
 
@@ -280,8 +285,8 @@ def close_interval(row, rs, J, JL, held, t, q, v, phi, mem_s, summary, n_pairs, 
     sample(row, t, q, v, summary, n_pairs, state, opening, finger_load, last_open, phase, grasp, ee, k, args)
     P, L, p_b, l_b, _ = bodies_momentum(args[0], args[6], q, v)
     rs[P_MAX], rs[L_MAX] = max(rs[P_MAX], p_b), max(rs[L_MAX], l_b)
-    dP = P - rs[P0:P0 + 3] - J
-    dL = L - rs[L0:L0 + 3] - JL
+    dP = (P[0] - rs[P0] - J[0], P[1] - rs[P0 + 1] - J[1], P[2] - rs[P0 + 2] - J[2])
+    dL = (L[0] - rs[L0] - JL[0], L[1] - rs[L0 + 1] - JL[1], L[2] - rs[L0 + 2] - JL[2])
     rs[DRIFT_LIN] = max(rs[DRIFT_LIN], math.sqrt(dP[0] ** 2 + dP[1] ** 2 + dP[2] ** 2))
     rs[DRIFT_ANG] = max(rs[DRIFT_ANG], math.sqrt(dL[0] ** 2 + dL[1] ** 2 + dL[2] ** 2))
     return code
