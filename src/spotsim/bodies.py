@@ -236,7 +236,7 @@ def body_pose(bodies, b, q):
     return body_rotation(bodies, b, q), p
 
 
-@njit
+@njit_inline
 def body_kinematics(bodies, q, v, R_W, p_W, w_W, vo_W):
     """Each free body's rotation, origin, angular velocity and origin velocity in the world,
     written into rows bodies.joint of R_W, p_W, w_W, vo_W (njoints, ...)."""

@@ -23,7 +23,7 @@ from .contact.forces import body_wrenches, contact_summary, pair_forces, raise_p
 from .contact.search import grow, listed_search
 from .grasp import PHASES
 from .integrators import SymplecticEuler, free_bodies_step
-from .jit import direct, njit
+from .jit import direct, njit, njit_inline
 from .record import DRIVE_WORK, ENERGY as ENERGY_RECORD, ENERGY_WORK as ENERGY_WORK_RECORD, NONFINITE as NONFINITE_RECORD
 from .record import close_interval, drive_power
 from .step import FREE_FLIGHT_SAFETY, Contacts, StateOverflow, _travel_rate, near_face_pairs
@@ -56,7 +56,7 @@ def loop_args(model) -> tuple:
             model.contact_kernel_args)
 
 
-@njit
+@njit_inline
 def substeps(h, q, v, R_W, p_W, w_W, vo_W, near, opening, opening_rate, mem_key, mem_s, mem_vminus,
              pair_list, s, peak_f, peak_t, peak_n, J, JL, rs, mine, watch, limits, consts):
     """The s[LEFT] steps of h (s) left in a record interval (fewer if it must return) of

@@ -83,7 +83,7 @@ def _symplectic_euler_body(bodies, b, R, q, v, a_O, alpha, h, q_new, v_new):
     _set_centroid_state(bodies, b, q_new, v_new, axpy3(h, v_G, p_G), v_G, quat, w)
 
 
-@njit
+@njit_inline
 def free_bodies_step(bodies, R_W, q, v, f_local, g_W, h):
     """`bodies.free_body_accelerations` and `_symplectic_euler` in one pass, for a model of
     free bodies only, with each body's rotation R_W[joint] at q (`bodies.body_kinematics`):

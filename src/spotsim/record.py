@@ -20,7 +20,7 @@ import numpy as np
 
 from .bodies import add3, bodies_centroid3, bodies_momentum, body_origin3, body_rotation_into, kinetic_energy, mtv3, mv3, sub3
 from .contact.friction import SLIPPING, STICKING
-from .jit import njit
+from .jit import njit, njit_inline
 from .stability import ENERGY_FLOOR_J, ENERGY_GROWTH, mechanical_energy
 
 #: What `close_interval` found: nothing wrong, a non-finite state (no row written), energy
@@ -158,7 +158,7 @@ def _put(row, at, x, scale=1.0):
     return at + len(x)
 
 
-@njit
+@njit_inline
 def sample(row, t, q, v, summary, n_pairs, state, opening, finger_load, last_open, phase, grasp, ee, k, args):
     """Write one row of the time series (`Layout`): the active grasp's module (end-effector
     `ee`, module `k`), its offset in the grasp frame, the last step's contact wrench and pairs,
@@ -241,7 +241,7 @@ def start_record(rs, q, v, args):
     rs[E_START] = kinetic_energy(bodies, q, v)  # no pair in contact at the start
 
 
-@njit
+@njit_inline
 def drive_power(finger_load, opening_rate):
     """A bound on the power the finger drives put into the bodies during a step, W: each
     finger's load along its axis (N, never negative) times its sliding speed (m/s)."""
@@ -251,7 +251,7 @@ def drive_power(finger_load, opening_rate):
     return power
 
 
-@njit
+@njit_inline
 def close_interval(row, rs, J, JL, held, t, q, v, phi, mem_s, summary, n_pairs, state, opening, finger_load,
                    last_open, phase, grasp, ee, k, args):
     """The run loop's work at the end of a record interval: returns OK, NONFINITE, ENERGY or

@@ -16,7 +16,7 @@ import pinocchio as pin
 from .bodies import body_kinematics
 from .contact.forces import body_wrenches, contact_summary, pair_forces
 from .contact.search import all_pairs, empty_pair_list, grid_search, listed_search
-from .jit import njit
+from .jit import njit, njit_inline
 from .grasp import FingerDrive, GraspPhase
 from .errors import SimulationError
 from .model import Model
@@ -338,7 +338,7 @@ def travel_rate(model: Model, data: Data) -> float:
     return _travel_rate(model.bodies.idx_v, rows, reach, data.v, data.opening_rate)
 
 
-@njit
+@njit_inline
 def _travel_rate(idx_v, rows, reach, v, opening_rate):
     rate = 0.0
     for x in opening_rate:

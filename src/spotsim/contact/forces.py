@@ -12,7 +12,7 @@ import math
 import numpy as np
 
 from ..bodies import add3, mv3
-from ..jit import njit
+from ..jit import njit, njit_inline
 from .detection import contact_point1, penetration1
 from .friction import bristle1
 from .normal import indentation, normal_force1
@@ -26,7 +26,7 @@ def _point_velocity(vo, w, o, point):
     return (vo[0] + w[1] * r2 - w[2] * r1, vo[1] + w[2] * r0 - w[0] * r2, vo[2] + w[0] * r1 - w[1] * r0)
 
 
-@njit
+@njit_inline
 def pair_forces(master, slave, key, C1_J, N1_J, joint1, finger1, axis1_J, C2_J, N2_J, joint2,
                 R_W, p_W, w_W, vo_W, opening, opening_rate, mem_key, mem_s, mem_vminus,
                 r1, r2, K, damping, floor, h, bristle):
@@ -118,7 +118,7 @@ def _add_wrench(F, T, ext_f, ext_t, j, partner, p, sign, f, p_W):
         ext_t[2] += sign * (p[0] * f[1] - p[1] * f[0])
 
 
-@njit
+@njit_inline
 def body_wrenches(master, slave, force, point, c1, c2, common_point, joint1, joint2, finger1,
                   finger_parent, finger_axis_J, R_W, p_W, njoints):
     """One wrench per body (Eq. 18-21): +f_i on the finger's body, -f_i on the module's.
@@ -162,7 +162,7 @@ def body_wrenches(master, slave, force, point, c1, c2, common_point, joint1, joi
     return local, F, T_O, ext_f, ext_t, load
 
 
-@njit
+@njit_inline
 def contact_summary(F, T_O, R_W, p_W, ee_joint, R_ee, module_joint, lever, speed, phi):
     """What the run watches each step, as an (8,) array: the combined contact force on the
     active module and its moment about the module's centroid, both in the grasp frame O_a
@@ -191,7 +191,7 @@ def contact_summary(F, T_O, R_W, p_W, ee_joint, R_ee, module_joint, lever, speed
     return out
 
 
-@njit
+@njit_inline
 def raise_peaks(force, torque, norms, summary):
     """Raise the per-axis peaks |force|, |torque| (3,) and the peak norms (2,) in place to
     include one step's `contact_summary`."""

@@ -13,7 +13,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..bodies import mv3
-from ..jit import njit
+from ..jit import njit, njit_inline
 from .detection import NORMAL_EPS
 
 #: The grid search keeps pairs whose penetration, computed in face coordinates, exceeds
@@ -411,7 +411,7 @@ def _moved(A, off, A_b, off_b, centre, spread):
     return math.sqrt(shift) + math.sqrt(norm_sq) * spread
 
 
-@njit
+@njit_inline
 def listed_search(near, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_slave, R_W, p_W, r1, radius,
                   cutoff, pair_list):
     """`grid_search`'s pairs, tested only among the candidates of a pair list kept between
