@@ -249,7 +249,7 @@ def body_kinematics(bodies, q, v, R_W, p_W, w_W, vo_W):
         put3(w_W[j], 0, mv3(R, v[iv + 3:iv + 6]))
 
 
-@njit
+@njit_inline
 def body_momentum3(bodies, b, q, v):
     """Free body b's linear momentum, its angular momentum about the world origin and its
     centroid (world), as 3-tuples."""
@@ -264,7 +264,7 @@ def body_momentum3(bodies, b, q, v):
     return p_b, l_b, p_G
 
 
-@njit
+@njit_inline
 def bodies_momentum(bodies, rows, q, v):
     """Linear and angular momentum (about the world origin) of the free bodies `rows`, summed,
     and the largest single body's linear and angular momentum magnitudes: (3,), (3,), float,
@@ -284,7 +284,7 @@ def bodies_momentum(bodies, rows, q, v):
     return P, L, p_max, l_max, c / m_sum
 
 
-@njit
+@njit_inline
 def bodies_centroid3(bodies, rows, q):
     """The centroid of the free bodies `rows` (world, m) as a 3-tuple: `bodies_momentum`'s,
     without the momenta."""
@@ -299,7 +299,7 @@ def bodies_centroid3(bodies, rows, q):
     return c0 / m_sum, c1 / m_sum, c2 / m_sum
 
 
-@njit
+@njit_inline
 def kinetic_energy(bodies, q, v):
     """Kinetic energy of all free bodies, J: 1/2 m |v_G|^2 + 1/2 omega . I_G omega."""
     total = 0.0

@@ -135,7 +135,7 @@ def rpy(R):
             math.atan2(R[1, 0], R[0, 0]))
 
 
-@njit
+@njit_inline
 def _frame(bodies, q, frame_row, frame_R, frame_p, i, R, work):
     """Frame i in the world: its rotation, written into R (3, 3), and its origin (3-tuple).
     work: (3, 3) scratch."""

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .bodies import kinetic_energy
-from .jit import njit
+from .jit import njit_inline
 
 #: Pairs sharing the load in the estimate: the shipped runs peak at 20-100 pairs in contact
 #: (Case I ~ 20 at its impacts, the dual-arm second grasp 62).
@@ -129,7 +129,7 @@ ENERGY_GROWTH = 10.0
 ENERGY_FLOOR_J = 1e-6
 
 
-@njit
+@njit_inline
 def mechanical_energy(bodies, q, v, phi, s, K, k_b):
     """Kinetic energy of the free bodies plus the energy stored in the contacts, J: Hertz
     0.8 K (phi/2)^2.5 per pair (the integral of K (phi/2)^1.5 dphi) and 1/2 k_b |s|^2 per

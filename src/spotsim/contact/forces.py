@@ -97,7 +97,7 @@ def pair_forces(master, slave, key, C1_J, N1_J, joint1, finger1, axis1_J, C2_J, 
             speed_out[:n], state_out[:n], s_out[:n], v_minus_out[:n])
 
 
-@njit
+@njit_inline
 def _add_wrench(F, T, ext_f, ext_t, j, partner, p, sign, f, p_W):
     """Add sign f (3-tuple), acting at p (3-tuple, world), to body j's force F[j] and moment
     T[j] about its origin, and to the external wrench when the partner body is fixed."""

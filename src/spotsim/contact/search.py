@@ -123,7 +123,7 @@ def _dot(a, b):
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
 
-@njit
+@njit_inline
 def _face_frame(f, table, N1_J, finger1, axis1_J, opening, R_W, p_W, A):
     """Face pair f's search frame: whether its faces face each other (Eq. 6 defined), the
     common normal in face coordinates (n_u, n_v, n_h), the offset `off` of the affine map
@@ -393,7 +393,7 @@ def grow(a):
     return np.concatenate((a, np.empty(a.shape[0], dtype=a.dtype)))
 
 
-@njit
+@njit_inline
 def _moved(A, off, A_b, off_b, centre, spread):
     """A bound on how far any master centre of a face pair has moved in face coordinates
     (relative to the slave spheres) since the pair list's build, m: the map x = A c + off
