@@ -144,3 +144,19 @@ def test_pair_list_falls_back_to_the_grid_search_off_the_ball_regime(model_I, re
                                                       np.empty((3, 3)))[0]
                        for f in near)
     assert found > 100 and scanned > 0
+
+
+def test_found_pairs_are_put_in_key_order_at_any_count():
+    """The listed search's ordering (insertion up to 64 pairs, argsort past them) gives the
+    pairs sorted by key, as np.argsort does, with master and slave kept together."""
+    from spotsim.contact.search import _by_key
+
+    rng = np.random.default_rng(11)
+    n_slave = 5000
+    for n in (0, 1, 7, 64, 65, 300):
+        keys = rng.choice(400 * n_slave, size=n, replace=False)  # unique, as a step's pairs are
+        master, slave = keys // n_slave, keys % n_slave
+        order = np.argsort(keys)
+        m, s, k = _by_key(master.copy(), slave.copy(), n_slave)
+        assert np.array_equal(k, keys[order])
+        assert np.array_equal(m, master[order]) and np.array_equal(s, slave[order])

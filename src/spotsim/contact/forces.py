@@ -132,7 +132,8 @@ def body_wrenches(master, slave, force, point, c1, c2, common_point, joint1, joi
     (n_fingers,) each finger's load along its opening axis, N (never negative).
     """
     # F, T (moment about each joint's origin, world axes), T_O and the external wrench as
-    # blocks of one array: an allocation costs ~25 ns, a step makes dozens
+    # blocks of one array (njoints + 1 rows: at least the external wrench's two): an
+    # allocation costs ~25 ns, a step makes dozens
     block = np.zeros((4, njoints + 1, 3))
     F, T, T_O, ext_f, ext_t = block[0][:njoints], block[1][:njoints], block[2][:njoints], block[3][0], block[3][1]
     load = np.zeros(finger_parent.shape[0])

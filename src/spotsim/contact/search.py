@@ -291,7 +291,7 @@ class PairList(NamedTuple):
     built: np.ndarray  # (n_table,) whether the face pair was among those the list was built for
     scan: np.ndarray  # (n_table,) whether it is searched anew at every step instead (not a ball)
     normal_W: np.ndarray  # (n_table, 3) its common normal (world) at the build
-    A: np.ndarray  # (n_table, 3, 3) its map of master centres to face coordinates at the build
+    A: np.ndarray  # (n_table, 3, 3) its map of master centres to face coordinates at the build (ball regime)
     off: np.ndarray  # (n_table, 3) and the map's offset (`_face_frame`)
 
 
