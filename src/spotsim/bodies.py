@@ -88,7 +88,7 @@ def mtv9(R, x):
 
 @njit
 def mm9(A, B):
-    """`mm` for A (3, 3) and B a 9-tuple, as a 9-tuple (row by row)."""
+    """A B for A (3, 3) and B a 9-tuple, as a 9-tuple (row by row)."""
     return (A[0, 0] * B[0] + A[0, 1] * B[3] + A[0, 2] * B[6],
             A[0, 0] * B[1] + A[0, 1] * B[4] + A[0, 2] * B[7],
             A[0, 0] * B[2] + A[0, 1] * B[5] + A[0, 2] * B[8],
@@ -138,14 +138,12 @@ def mv(R, x):
     return out
 
 
-@njit
-def mm(A, B):
-    """A B for two 3x3 matrices."""
-    out = np.empty((3, 3))
+@njit_inline
+def mm_into(A, B, out):
+    """A B for two 3x3 matrices, written into out (3, 3)."""
     for a in range(3):
         for b in range(3):
             out[a, b] = A[a, 0] * B[0, b] + A[a, 1] * B[1, b] + A[a, 2] * B[2, b]
-    return out
 
 
 @njit
@@ -157,17 +155,9 @@ def cross(a, b):
 
 
 @njit
-def quat_to_rotation(x, y, z, w):
-    """Rotation matrix (3, 3) of the unit quaternion (x, y, z, w)."""
-    R = np.empty((3, 3))
-    _put9(R, quat_rotation9(x, y, z, w))
-    return R
-
-
-@njit
 def quat_rotation9(x, y, z, w):
-    """`quat_to_rotation` as a 9-tuple, row by row: an array costs ~60 ns to allocate, several
-    times the arithmetic."""
+    """The rotation matrix of the unit quaternion (x, y, z, w) as a 9-tuple, row by row: an
+    array costs ~60 ns to allocate, several times the arithmetic."""
     return (1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - z * w), 2.0 * (x * z + y * w),
             2.0 * (x * y + z * w), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - x * w),
             2.0 * (x * z - y * w), 2.0 * (y * z + x * w), 1.0 - 2.0 * (x * x + y * y))
@@ -215,8 +205,8 @@ def body_rotation_into(bodies, b, q, out):
 
 @njit
 def body_rotation9(bodies, b, q):
-    """`body_rotation` as a 9-tuple, row by row: R_P quat_to_rotation(q), entry by entry as
-    `mm` and `quat_to_rotation` compute them, without their arrays."""
+    """`body_rotation` as a 9-tuple, row by row: R_P times the rotation of the joint's
+    quaternion (`mm9`, `quat_rotation9`)."""
     iq = bodies.idx_q[b]
     return mm9(bodies.R_P[b], quat_rotation9(q[iq + 3], q[iq + 4], q[iq + 5], q[iq + 6]))
 
@@ -226,14 +216,6 @@ def body_origin3(bodies, b, q):
     """Origin of free body b in the world, from q, as a 3-tuple."""
     iq = bodies.idx_q[b]
     return add3(mv3(bodies.R_P[b], q[iq:iq + 3]), bodies.p_P[b])
-
-
-@njit
-def body_pose(bodies, b, q):
-    """Rotation (3, 3) and origin (3,) of free body b in the world, from q."""
-    p = np.empty(3)
-    put3(p, 0, body_origin3(bodies, b, q))
-    return body_rotation(bodies, b, q), p
 
 
 @njit_inline

@@ -85,8 +85,9 @@ def substeps(h, q, v, R_W, p_W, w_W, vo_W, near, opening, opening_rate, mem_key,
     event = RAN
     while s[LEFT] > 0:
         # forces -> dynamics -> integrate (SymplecticEuler.advance)
-        # step._contact_kernels' chain, written out here: called as one kernel it cost ~4 us more
-        # a step (its ~40 arguments in and ~30 arrays out), a fifth of a step in contact
+        # step._contact_kernels' chain, written out here: called, it cost ~4 us more a step (its
+        # ~40 arguments in and ~30 arrays out), and numba cannot inline it (Python passes a call
+        # of more than 30 arguments as *args, which numba's inlining refuses)
         (_, table, maps, C1_J, N1_J, joint1, finger1, axis1_J, C2_J, N2_J, joint2, r1, r2, K, damping, floor,
          cutoff, bristle, common_point, finger_parent, finger_axis_J) = contact_args
         body_kinematics(bodies, q, v, R_W, p_W, w_W, vo_W)

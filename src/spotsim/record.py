@@ -18,7 +18,8 @@ import math
 
 import numpy as np
 
-from .bodies import add3, bodies_centroid3, bodies_momentum, body_origin3, body_rotation_into, kinetic_energy, mtv3, mv3, sub3
+from .bodies import (add3, bodies_centroid3, bodies_momentum, body_origin3, body_rotation_into, kinetic_energy,
+                     mm_into, mtv3, mv3, sub3)
 from .contact.friction import SLIPPING, STICKING
 from .jit import njit, njit_inline
 from .stability import ENERGY_FLOOR_J, ENERGY_GROWTH, mechanical_energy
@@ -144,11 +145,17 @@ def _frame(bodies, q, frame_row, frame_R, frame_p, i, R, work):
         R[:] = frame_R[i]
         return frame_p[i, 0], frame_p[i, 1], frame_p[i, 2]
     body_rotation_into(bodies, b, q, work)
-    F = frame_R[i]
-    for a in range(3):  # R = work F, as `mm`
-        for c in range(3):
-            R[a, c] = work[a, 0] * F[0, c] + work[a, 1] * F[1, c] + work[a, 2] * F[2, c]
+    mm_into(work, frame_R[i], R)
     return add3(body_origin3(bodies, b, q), mv3(work, frame_p[i]))
+
+
+@njit_inline
+def _put_pose(row, at, p, R):
+    """Write origin p (3,) and the quaternion of R (x, y, z, w) at row[at:]; returns the next
+    free column."""
+    at = _put(row, at, p)
+    quat_xyzw(R, row[at:at + 4])
+    return at + 4
 
 
 @njit
@@ -176,9 +183,7 @@ def sample(row, t, q, v, summary, n_pairs, state, opening, finger_load, last_ope
     p_a = _frame(bodies, q, frame_row, frame_R, frame_p, n_mod + ee, R_a, work)
     row[0] = t
     at = 1
-    at = _put(row, at, p_b)
-    quat_xyzw(R_b, row[at:at + 4])
-    at += 4
+    at = _put_pose(row, at, p_b, R_b)
     at = _put(row, at, mtv3(R_a, sub3(p_b, p_a)), 1e3)  # O_b in O_a
     for i in range(3):  # R_a^T R_b
         for j in range(3):
@@ -214,15 +219,11 @@ def sample(row, t, q, v, summary, n_pairs, state, opening, finger_load, last_ope
     if free_robot:
         at = _put(row, at, bodies_centroid3(bodies, robot_rows, q))
         p = _frame(bodies, q, frame_row, frame_R, frame_p, frame_row.shape[0] - 1, R_b, work)
-        at = _put(row, at, p)
-        quat_xyzw(R_b, row[at:at + 4])
-        at += 4
+        at = _put_pose(row, at, p, R_b)
         at = _put(row, at, bodies_centroid3(bodies, system_rows, q))
         for i in range(n_mod):
             p = _frame(bodies, q, frame_row, frame_R, frame_p, i, R_b, work)
-            at = _put(row, at, p)
-            quat_xyzw(R_b, row[at:at + 4])
-            at += 4
+            at = _put_pose(row, at, p, R_b)
         for i in range(n_ee):
             p = _frame(bodies, q, frame_row, frame_R, frame_p, n_mod + i, R_b, work)
             at = _put(row, at, p)

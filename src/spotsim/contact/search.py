@@ -324,7 +324,7 @@ def build_pair_list(near, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_
     normal_W, A_b, off_b = np.zeros((n_table, 3)), np.zeros((n_table, 3, 3)), np.zeros((n_table, 3))
     cap = 256
     lm, ls, gap = np.empty(cap, dtype=np.int64), np.empty(cap, dtype=np.int64), np.empty(cap)
-    nu_, nv_ = np.empty(cap), np.empty(cap)  # the node's face coordinates, m
+    node_u, node_v = np.empty(cap), np.empty(cap)  # the node's face coordinates, m
     n = 0
     R = r1 + radius
     reach_3d = R + LIST_SKIN
@@ -365,8 +365,8 @@ def build_pair_list(near, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_
                         continue
                     if n == lm.shape[0]:
                         lm, ls, gap = grow(lm), grow(ls), grow(gap)
-                        nu_, nv_ = grow(nu_), grow(nv_)
-                    lm[n], ls[n], nu_[n], nv_[n] = row, s, i * radius, j * radius
+                        node_u, node_v = grow(node_u), grow(node_v)
+                    lm[n], ls[n], node_u[n], node_v[n] = row, s, i * radius, j * radius
                     gap[n] = math.sqrt(du * du + dv * dv + lift * lift) - R
                     n += 1
         if not ball:
@@ -374,8 +374,8 @@ def build_pair_list(near, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_
             n = first
             continue
         order = np.argsort(gap[first:n]) + first
-        lm[first:n], ls[first:n], nu_[first:n], nv_[first:n], gap[first:n] = (
-            lm[order], ls[order], nu_[order], nv_[order], gap[order])
+        lm[first:n], ls[first:n], node_u[first:n], node_v[first:n], gap[first:n] = (
+            lm[order], ls[order], node_u[order], node_v[order], gap[order])
         start[f], stop[f] = first, n
         normal_W[f, 0], normal_W[f, 1], normal_W[f, 2] = n_W
         off_b[f, 0], off_b[f, 1], off_b[f, 2] = off
@@ -383,7 +383,7 @@ def build_pair_list(near, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_
     centre, node = np.empty((n, 3)), np.empty((n, 2))
     for q in range(n):
         centre[q, 0], centre[q, 1], centre[q, 2] = C1_J[lm[q], 0], C1_J[lm[q], 1], C1_J[lm[q], 2]
-        node[q, 0], node[q, 1] = nu_[q], nv_[q]
+        node[q, 0], node[q, 1] = node_u[q], node_v[q]
     return PairList(lm[:n].copy(), ls[:n].copy(), centre, node, gap[:n].copy(), start, stop, built,
                     scan, normal_W, A_b, off_b)
 
