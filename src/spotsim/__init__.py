@@ -6,11 +6,11 @@
     print(result.grasp["residual_offset_mm"])
 """
 
+from .build.model import Model, build_model
 from .errors import ModelError, ScenarioError, SimulationError, SpotsimError
-from .model import Model, build_model
 from .results import write_results
-from .run import Result, simulate
 from .scenario import Scenario, from_dict, load_scenario, replace, to_yaml
+from .sim.run import Result, simulate
 
 __all__ = [
     "Model",

@@ -235,14 +235,14 @@ def _replay(result_dir, args, run_code=None) -> int:
 
 
 def _config_path(arg: str | None) -> Path:
-    from .assets import CONFIG_DIR
+    from .build.assets import CONFIG_DIR
 
     return Path(arg) if arg else CONFIG_DIR / DEFAULT_SCENARIO
 
 
 def _load(path: Path, overrides):
-    from .model import build_model
-    from .run import check_start
+    from .build.model import build_model
+    from .sim.run import check_start
     from .scenario import load_scenario
 
     scenario = load_scenario(path, overrides)
@@ -285,7 +285,7 @@ def main(argv=None) -> int:
         return 2
     scenario, model = loaded
     from .scenario import to_yaml, tolerance_warnings
-    from .stability import stability_warnings
+    from .sim.stability import stability_warnings
 
     for w in tolerance_warnings(scenario) + stability_warnings(model):
         print(f"warning: {path}: {w}", file=sys.stderr)
@@ -294,7 +294,7 @@ def main(argv=None) -> int:
         return 0
 
     from .results import clear_summary, write_results
-    from .run import simulate
+    from .sim.run import simulate
 
     if args.replay:  # before the run: a missing meshcat is bad input, found before anything ran
         try:

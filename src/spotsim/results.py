@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .run import Result
+from .sim.run import Result
 from .scenario import to_yaml
 
 SUMMARY = "summary.json"

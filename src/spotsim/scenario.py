@@ -426,7 +426,7 @@ def replace(s: Scenario, **changes) -> Scenario:
 
 def xacro_defaults_agree() -> list[str]:
     """Differences between the scene XACRO's argument defaults and Geometry's defaults."""
-    from .assets import URDF_DIR, xacro_arg_defaults
+    from .build.assets import URDF_DIR, xacro_arg_defaults
 
     xacro = xacro_arg_defaults(URDF_DIR / "single_arm_scene.urdf.xacro")
     return [f"{f.name}: XACRO {xacro.get(f.name)} != scenario {f.default}"

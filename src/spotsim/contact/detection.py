@@ -14,7 +14,7 @@ NORMAL_EPS = 1e-9
 
 
 @njit
-def penetration1(c1, n1, r1, c2, n2, r2):
+def penetration(c1, n1, r1, c2, n2, r2):
     """Eq. (6), (8)-(10) for one sphere pair: common normal (3-tuple), penetration phi (m, how
     far A must move along n_c to just touch B) and whether they are in contact (the root of
     Eq. (8) is real and phi > 0). c1, n1, c2, n2: 3-vectors (world); r1, r2: radii, m."""
@@ -31,24 +31,9 @@ def penetration1(c1, n1, r1, c2, n2, r2):
     return (d0, d1, d2), phi, facing and disc >= 0.0 and phi > 0.0
 
 
-@njit
-def penetration(c1, n1, r1, c2, n2, r2):
-    """`penetration1` of k pairs: c1, n1: (k, 3) master centres and face normals in world, m;
-    r1 master radius, m. c2, n2: (k, 3) slave centres and normals; r2 slave radius.
-    Returns n_c (k, 3), phi (k,) in m, and in_contact (k,) bool.
-    """
-    k = c1.shape[0]
-    n_c = np.zeros((k, 3))
-    phi = np.empty(k)
-    hit = np.empty(k, dtype=np.bool_)
-    for i in range(k):
-        n, phi[i], hit[i] = penetration1(c1[i], n1[i], r1, c2[i], n2[i], r2)
-        n_c[i, 0], n_c[i, 1], n_c[i, 2] = n
-    return n_c, phi, hit
-
 
 @njit
-def contact_point1(c1, c2, r1, r2, n_c, phi):
+def contact_point(c1, c2, r1, r2, n_c, phi):
     """One contact point of a pair, shared by both bodies, m (3-tuple).
 
     [reading] With d = c1 - c2 + phi n_c (Eq. 7), the spheres would just touch at
@@ -60,15 +45,6 @@ def contact_point1(c1, c2, r1, r2, n_c, phi):
             c2[1] + share * (c1[1] - c2[1] + phi * n_c[1]) - 0.5 * phi * n_c[1],
             c2[2] + share * (c1[2] - c2[2] + phi * n_c[2]) - 0.5 * phi * n_c[2])
 
-
-@njit
-def contact_point(c1, c2, r1, r2, n_c, phi):
-    """`contact_point1` of k pairs, (k, 3)."""
-    k = c1.shape[0]
-    p = np.empty((k, 3))
-    for i in range(k):
-        p[i, 0], p[i, 1], p[i, 2] = contact_point1(c1[i], c2[i], r1, r2, n_c[i], phi[i])
-    return p
 
 
 def cutoff_distance(r1: float, r2: float, max_penetration: float) -> float:

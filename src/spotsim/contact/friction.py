@@ -2,12 +2,10 @@
 
 from __future__ import annotations
 
-import math
 from typing import NamedTuple
 
-import numpy as np
-
 from ..jit import njit
+from ..linalg import norm3
 
 #: Pair states, as the paper's Fig. 9 colours them.
 NONE, SLIPPING, STICKING = 0, 1, 2
@@ -28,11 +26,6 @@ class BristleParams(NamedTuple):
 
 
 @njit
-def _norm(x):
-    return math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2])
-
-
-@njit
 def _tangential(x, n):
     """Eq. (17): x - (x . n) n, as a 3-tuple."""
     xn = x[0] * n[0] + x[1] * n[1] + x[2] * n[2]
@@ -40,7 +33,7 @@ def _tangential(x, n):
 
 
 @njit
-def bristle1(s_prev, v, n_c, F_n, dt, p):
+def bristle(s_prev, v, n_c, F_n, dt, p):
     """One step of the bristle law for one pair.
 
     s_prev: deflection carried from the last step (zero at onset), m. v: velocity of A's
@@ -50,20 +43,20 @@ def bristle1(s_prev, v, n_c, F_n, dt, p):
     """
     # the carried deflection, kept in the current tangent plane with its length kept
     s = _tangential(s_prev, n_c)
-    old, new = _norm(s_prev), _norm(s)
+    old, new = norm3(s_prev), norm3(s)
     scale = old / new if new > 0.0 else 0.0
     s0, s1, s2 = s[0] * scale, s[1] * scale, s[2] * scale
     v_t = _tangential(v, n_c)
-    speed = _norm(v_t)
+    speed = norm3(v_t)
     slipping = speed > p.v_d
     s_max = (p.mu_k if slipping else p.mu_s) * F_n / p.k_b  # Eq. (16)
     s0, s1, s2 = s0 + v_t[0] * dt, s1 + v_t[1] * dt, s2 + v_t[2] * dt  # Eq. (15), first branch
-    saturated = _norm((s0, s1, s2)) >= s_max
+    saturated = norm3((s0, s1, s2)) >= s_max
     if saturated:
         # Eq. (15), second branch: the bristle lies at s_max along the sliding direction
         # (along its own deflection when there is no sliding)
         src = v_t if speed > 0.0 else (s0, s1, s2)
-        dir_norm = _norm(src)
+        dir_norm = norm3(src)
         if dir_norm > 0.0:
             s0, s1, s2 = s_max * src[0] / dir_norm, s_max * src[1] / dir_norm, s_max * src[2] / dir_norm
         else:
@@ -75,18 +68,3 @@ def bristle1(s_prev, v, n_c, F_n, dt, p):
     s_dot = (0.0, 0.0, 0.0) if saturated else v_t
     F_f = (-p.k_b * s0 - p.c_b * s_dot[0], -p.k_b * s1 - p.c_b * s_dot[1], -p.k_b * s2 - p.c_b * s_dot[2])  # Eq. (14)
     return (s0, s1, s2), F_f, SLIPPING if slipping else STICKING
-
-
-@njit
-def bristle_step(s_prev, v, n_c, F_n, dt, p):
-    """`bristle1` for k pairs: s_prev, v, n_c (k, 3), F_n (k,). Returns s (k, 3), friction
-    force on A (k, 3) in N, and the pair state (k,) int."""
-    k = s_prev.shape[0]
-    s = np.empty((k, 3))
-    F_f = np.empty((k, 3))
-    state = np.empty(k, dtype=np.int64)
-    for i in range(k):
-        s_i, f_i, state[i] = bristle1(s_prev[i], v[i], n_c[i], F_n[i], dt, p)
-        s[i, 0], s[i, 1], s[i, 2] = s_i
-        F_f[i, 0], F_f[i, 1], F_f[i, 2] = f_i
-    return s, F_f, state

@@ -27,7 +27,7 @@ def indentation(phi):
 
 
 @njit
-def normal_force1(delta, delta_dot, delta_dot_minus, K, factor):
+def normal_force(delta, delta_dot, delta_dot_minus, K, factor):
     """Eq. (11)-(12): magnitude of F_n = K delta^a + lambda delta^a delta_dot, never pulling.
 
     delta: indentation, m.  delta_dot: its rate, m/s (> 0 approaching).
@@ -36,12 +36,3 @@ def normal_force1(delta, delta_dot, delta_dot_minus, K, factor):
     """
     elastic = K * delta ** HERTZ_EXPONENT
     return max(elastic * (1.0 + factor * delta_dot / delta_dot_minus), 0.0)
-
-
-@njit
-def normal_force(delta, delta_dot, delta_dot_minus, K, factor):
-    """`normal_force1` of k pairs: (k,) arrays in, (k,) N out."""
-    F = np.empty(delta.shape[0])
-    for i in range(delta.shape[0]):
-        F[i] = normal_force1(delta[i], delta_dot[i], delta_dot_minus[i], K, factor)
-    return F

@@ -1,121 +1,96 @@
-"""Which sphere pairs to test: coal broad phase over face patches, then a local grid search.
+"""Stage: the sphere pairs to test (paper Sec. 3.1.2, Eq. 6-10), culled or literal.
 
-The paper's literal search (every master sphere against every slave sphere) is kept as
-`all_pairs`, the reference the culled search is tested against.
+The culled search takes the face pairs coal's broad phase left within its margin (`d.near`)
+and, inside them, only the candidates of a Verlet pair list kept between steps. The paper's
+literal search tests every master sphere against every slave sphere; it is the reference the
+culled search is tested against. Both give a superset (by SEARCH_SLACK) of the pairs in
+contact; the pair-force kernel decides.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
 
-from ..bodies import mv3
 from ..jit import njit, njit_inline
+from ..linalg import mv3
 from .detection import NORMAL_EPS
 
 #: The grid search keeps pairs whose penetration, computed in face coordinates, exceeds
-#: -SEARCH_SLACK (m); the shared kernel `penetration` then decides. The slack absorbs the
+#: -SEARCH_SLACK (m); the shared kernel `penetration1` then decides. The slack absorbs the
 #: round-off between the two formulas so that the search never drops a pair the kernel keeps.
 SEARCH_SLACK = 1e-12
+#: The pair list's reach beyond contact, m: it keeps the candidate pairs whose centres lie
+#: within r1 + r2 + LIST_SKIN. A candidate is tested only once the spheres may have closed its
+#: gap, so a wider skin costs little per step; a rebuild costs ~50 us.
+LIST_SKIN = 30e-6
+#: ... and while each listed face pair's common normal stays within this of the normal it was
+#: built with (|n - n_built|, unit vectors): the listed pairs are then those of the ball regime.
+LIST_NORMAL_TOL = 0.01
+#: A candidate is tested while its gap at the build is at most the bound on how far its master
+#: sphere has moved since then plus this, m: far above the round-off of the gaps and the bound
+#: (~1e-16 m) and the SEARCH_SLACK band of the test (< 1e-12 m), far below a sphere's motion.
+GAP_SLACK = 1e-9
+#: Found pairs are put in key order by insertion up to this many (the listed search finds them
+#: in a few runs, nearly ordered), by argsort past it (insertion would cost ~n^2).
+INSERTION_SORT_MAX = 64
 
 
+class Candidates(NamedTuple):
+    """Sphere pairs to test, sorted by key = master * |S2| + slave (keys unique)."""
 
-@dataclass(frozen=True)
-class LayerSet:
-    """All spheres of one role (master: fingers, slave: grooves), stacked.
-
-    centres_J, normals_J: (n, 3) in the frame of the joint carrying each sphere.
-    joint: (n,) that joint's index.  face: (n,) index of the face each sphere lies on.
-    """
-
-    radius: float
-    centres_J: np.ndarray
-    normals_J: np.ndarray
-    joint: np.ndarray
-    face: np.ndarray
-
-    def __post_init__(self):
-        groups = tuple((int(j), np.flatnonzero(self.joint == j)) for j in np.unique(self.joint))
-        # spheres of one joint are usually contiguous: a slice then avoids a gather per step
-        groups = tuple((j, slice(r[0], r[-1] + 1) if r[-1] - r[0] + 1 == len(r) else r) for j, r in groups)
-        object.__setattr__(self, "groups", groups)
-
-    def to_world(self, R_W, p_W, centres_J=None):
-        """World centres and normals (n, 3) given each joint's rotation R_W[j] and origin p_W[j].
-
-        centres_J: the centres to use instead of `self.centres_J` (fingers that have moved).
-        """
-        centres_J = self.centres_J if centres_J is None else centres_J
-        C, N = np.empty_like(centres_J), np.empty_like(self.normals_J)
-        for j, rows in self.groups:
-            C[rows] = centres_J[rows] @ R_W[j].T + p_W[j]
-            N[rows] = self.normals_J[rows] @ R_W[j].T
-        return C, N
+    master: np.ndarray  # (k,)
+    slave: np.ndarray  # (k,)
+    key: np.ndarray  # (k,)
 
 
-@dataclass(frozen=True)
-class SlaveGrid:
-    """A slave face's grid in its joint frame: sphere (i, j) is index_map[i, j] (-1 if none).
+class PairList(NamedTuple):
+    """The candidate pairs of the face pairs a search has built (`build_pair_list`), grouped
+    by face pair, each group ordered by gap."""
 
-    `face` indexes the stacked maps of all slave faces (`FacePairs.maps`).
-    """
-
-    joint: int
-    face: int
-    origin_J: np.ndarray
-    t1_J: np.ndarray
-    t2_J: np.ndarray
-    n_J: np.ndarray
-    shape: tuple[int, int]
-
-
-@dataclass(frozen=True)
-class FacePair:
-    """A master face and a slave face that may touch; `geom_pair` is its coal pair index."""
-
-    master_slice: slice
-    master_joint: int
-    slave: SlaveGrid
-    geom_pair: int
+    master: np.ndarray  # (n,) master sphere of each candidate
+    slave: np.ndarray  # (n,) slave sphere
+    centre_J: np.ndarray  # (n, 3) the master sphere's centre, its joint's frame (fingers at opening 0), m
+    node: np.ndarray  # (n, 2) the slave sphere's grid node in its face's coordinates, m
+    gap: np.ndarray  # (n,) |c1 - c2| - (r1 + r2) at the build, m
+    start: np.ndarray  # (n_table,) each face pair's first candidate
+    stop: np.ndarray  # (n_table,) one past its last
+    built: np.ndarray  # (n_table,) whether the face pair was among those the list was built for
+    scan: np.ndarray  # (n_table,) whether it is searched anew at every step instead (not a ball)
+    normal_W: np.ndarray  # (n_table, 3) its common normal (world) at the build
+    A: np.ndarray  # (n_table, 3, 3) its map of master centres to face coordinates at the build (ball regime)
+    off: np.ndarray  # (n_table, 3) and the map's offset (`_face_frame`)
 
 
-class FaceTable(NamedTuple):
-    """The face pairs of a model stacked as arrays, for the compiled search (one row a pair)."""
-
-    master_start: np.ndarray  # (n,) first master sphere of the pair's master face
-    master_stop: np.ndarray  # (n,) one past its last
-    master_joint: np.ndarray  # (n,)
-    slave_joint: np.ndarray  # (n,)
-    slave_face: np.ndarray  # (n,) index into the stacked slave grids (`maps`)
-    origin_J: np.ndarray  # (n, 3) the slave grid's reference vertex, its joint's frame, m
-    t1_J: np.ndarray  # (n, 3) the slave grid's in-plane axes and outward normal
-    t2_J: np.ndarray
-    n_J: np.ndarray
-    shape: np.ndarray  # (n, 2) grid size
-    # the mean of the master face's centres (its joint's frame, fingers at opening 0) and the
-    # farthest of them from it, m: `_moved` bounds every centre's motion from these
-    master_centre_J: np.ndarray  # (n, 3)
-    master_radius: np.ndarray  # (n,)
+def empty_pair_list(n_face_pairs: int) -> PairList:
+    """A pair list that holds nothing and must be built at its first use."""
+    none = np.zeros(0, dtype=np.int64)
+    ints, flags = np.zeros(n_face_pairs, dtype=np.int64), np.zeros(n_face_pairs, dtype=np.bool_)
+    return PairList(none, none, np.zeros((0, 3)), np.zeros((0, 2)), np.zeros(0), ints, ints.copy(), flags, flags.copy(),
+                    np.zeros((n_face_pairs, 3)), np.zeros((n_face_pairs, 3, 3)), np.zeros((n_face_pairs, 3)))
 
 
-def face_table(face_pairs, master_centres_J: np.ndarray) -> FaceTable:
-    """The face pairs as one `FaceTable`; master_centres_J: (|S1|, 3) every master centre."""
-    n = len(face_pairs)
-    faces = [master_centres_J[fp.master_slice] for fp in face_pairs]
-    centre = np.array([c.mean(axis=0) for c in faces], dtype=float).reshape(n, 3)
-    radius = np.array([np.linalg.norm(c - m, axis=1).max() for c, m in zip(faces, centre)], dtype=float)
-    vec = lambda name: np.array([getattr(fp.slave, name) for fp in face_pairs], dtype=float).reshape(n, 3)
-    ints = lambda values: np.array(values, dtype=np.int64)
-    return FaceTable(ints([fp.master_slice.start for fp in face_pairs]),
-                     ints([fp.master_slice.stop for fp in face_pairs]),
-                     ints([fp.master_joint for fp in face_pairs]),
-                     ints([fp.slave.joint for fp in face_pairs]),
-                     ints([fp.slave.face for fp in face_pairs]),
-                     vec("origin_J"), vec("t1_J"), vec("t2_J"), vec("n_J"),
-                     ints([fp.slave.shape for fp in face_pairs]).reshape(n, 2), centre, radius)
+def no_candidates() -> Candidates:
+    none = np.zeros(0, dtype=np.int64)
+    return Candidates(none, none.copy(), none.copy())
+
+
+@njit
+def find_pairs(m, d):
+    """Stage: d.candidates, the sphere pairs to test at the current kinematics: the culled
+    search (`listed_search`), or the paper's literal one (`literal_search`) when m.literal."""
+    if m.literal:
+        d.candidates = literal_search(m, d)
+    else:
+        d.candidates = listed_search(m, d)
+
+
+@njit
+def grow(a):
+    """a with its first axis doubled (the new half uninitialised)."""
+    return np.concatenate((a, np.empty(a.shape, dtype=a.dtype)))
 
 
 @njit
@@ -124,16 +99,17 @@ def _dot(a, b):
 
 
 @njit_inline
-def _face_frame(f, table, N1_J, finger1, axis1_J, opening, R_W, p_W, A):
-    """Face pair f's search frame: whether its faces face each other (Eq. 6 defined), the
-    common normal in face coordinates (n_u, n_v, n_h), the offset `off` of the affine map
-    A c + off taking a master centre c in its joint's frame to face coordinates (u, v, height
-    above the face plane), and the common normal in world (3-tuple). A: (3, 3), the map's
-    matrix, written in place (left as it was when the faces do not face each other)."""
+def _face_frame(table, master, R_W, p_W, opening, f, A):
+    """Face pair f's search frame at the joint poses R_W, p_W and the finger openings: whether
+    its faces face each other (Eq. 6 defined), the common normal in face coordinates (n_u,
+    n_v, n_h), the offset `off` of the affine map A c + off taking a master centre c in its
+    joint's frame to face coordinates (u, v, height above the face plane), and the common
+    normal in world (3-tuple). table: m.faces; master: m.master. A: (3, 3), the map's matrix,
+    written in place (left as it was when the faces do not face each other)."""
     Rs, ps = R_W[table.slave_joint[f]], p_W[table.slave_joint[f]]
     b0, b1, b2 = mv3(Rs, table.t1_J[f]), mv3(Rs, table.t2_J[f]), mv3(Rs, table.n_J[f])
     Rm, pm = R_W[table.master_joint[f]], p_W[table.master_joint[f]]
-    nm = mv3(Rm, N1_J[table.master_start[f]])
+    nm = mv3(Rm, master.normal_J[table.master_start[f]])
     dn = (b2[0] - nm[0], b2[1] - nm[1], b2[2] - nm[2])
     norm = math.sqrt(_dot(dn, dn))
     if norm <= NORMAL_EPS:
@@ -150,8 +126,9 @@ def _face_frame(f, table, N1_J, finger1, axis1_J, opening, R_W, p_W, A):
         A[1, k] = Rm[0, k] * b1[0] + Rm[1, k] * b1[1] + Rm[2, k] * b1[2]
         A[2, k] = Rm[0, k] * b2[0] + Rm[1, k] * b2[1] + Rm[2, k] * b2[2]
     first = table.master_start[f]
-    x = opening[finger1[first]]
-    shift = (x * axis1_J[first, 0], x * axis1_J[first, 1], x * axis1_J[first, 2])
+    x = opening[master.finger[first]]
+    axis = master.axis_J
+    shift = (x * axis[first, 0], x * axis[first, 1], x * axis[first, 2])
     e = (pm[0] - o[0] - ps[0], pm[1] - o[1] - ps[1], pm[2] - o[2] - ps[2])
     off = (A[0, 0] * shift[0] + A[0, 1] * shift[1] + A[0, 2] * shift[2] + _dot(e, b0),
            A[1, 0] * shift[0] + A[1, 1] * shift[1] + A[1, 2] * shift[2] + _dot(e, b1),
@@ -196,32 +173,25 @@ def _push(found_m, found_s, n_found, row, s):
 
 
 @njit
-def grid_search(near, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_slave, R_W, p_W, r1, radius,
-                cutoff):
-    """Sphere pairs in contact (Eq. 6-10) inside the face pairs `near`, found locally.
+def grid_search(m, d, near):
+    """The sphere pairs in contact (Eq. 6-10) inside the face pairs `near` (indices into
+    m.faces), found locally, as Candidates (a superset by SEARCH_SLACK).
 
-    The slave spheres of a face lie on a regular grid of step `radius`, `radius` above its
-    plane, so each master centre's grid coordinates (u, v) and lift above the plane bound
-    the slave spheres within `cutoff` (m) to a small window: no distance to a far sphere is
-    computed. Inside the window, the common normal is the face pair's, so Eq. (8) is
-    evaluated in face coordinates.
-    near: (m,) indices into `table` (a FaceTable) of the face pairs to search.
-    maps: (n_faces, ni, nj) global slave index of each grid node, -1 where there is none;
-    n_slave: the number of slave spheres.
-    C1_J, N1_J: (|S1|, 3) master centres (fingers at opening 0) and normals in their joints'
-    frames; finger1, axis1_J: each master sphere's finger and its opening axis; opening:
-    (n_fingers,) the fingers' openings, m. R_W, p_W: joint poses.
-    r1, radius: master and slave sphere radii, m.
-    Returns (master index, slave index, key = master * n_slave + slave) of the pairs, sorted
-    by key (a superset by SEARCH_SLACK of the pairs in contact).
+    The slave spheres of a face lie on a regular grid of step r2, r2 above its plane, so each
+    master centre's grid coordinates (u, v) and lift above the plane bound the slave spheres
+    within the cutoff to a small window: no distance to a far sphere is computed. Inside the
+    window, the common normal is the face pair's, so Eq. (8) is evaluated in face coordinates.
     """
+    table, master, C1_J, maps = m.faces, m.master, m.master.centre_J, m.slave.maps
+    R_W, p_W, opening = d.R_W, d.p_W, d.opening
+    r1, radius, cutoff = m.law.r1, m.law.r2, m.law.cutoff
     found_m = np.empty(64, dtype=np.int64)
     found_s = np.empty(64, dtype=np.int64)
     n_found = 0
     R = r1 + radius
     A = np.empty((3, 3))
     for f in near:
-        facing, nu, nv, nh, off, _ = _face_frame(f, table, N1_J, finger1, axis1_J, opening, R_W, p_W, A)
+        facing, nu, nv, nh, off, _ = _face_frame(table, master, R_W, p_W, opening, f, A)
         if not facing:
             continue
         n_uv = math.hypot(nu, nv)
@@ -259,55 +229,15 @@ def grid_search(near, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_slav
                     if s >= 0 and _node_hit(x - i * radius, y - j * radius, lift, w0, nu, nv, nh, cutoff):
                         found_m, found_s = _push(found_m, found_s, n_found, row, s)
                         n_found += 1
-    key = found_m[:n_found] * n_slave + found_s[:n_found]
+    key = found_m[:n_found] * m.slave.centre_J.shape[0] + found_s[:n_found]
     order = np.argsort(key)
-    return found_m[:n_found][order], found_s[:n_found][order], key[order]
-
-
-#: The pair list's reach beyond contact, m: it keeps the candidate pairs whose centres lie
-#: within r1 + r2 + LIST_SKIN. A candidate is tested only once the spheres may have closed its
-#: gap, so a wider skin costs little per step; a rebuild costs ~50 us.
-LIST_SKIN = 30e-6
-#: ... and while each listed face pair's common normal stays within this of the normal it was
-#: built with (|n - n_built|, unit vectors): the listed pairs are then those of the ball regime.
-LIST_NORMAL_TOL = 0.01
-#: A candidate is tested while its gap at the build is at most the bound on how far its master
-#: sphere has moved since then plus this, m: far above the round-off of the gaps and the bound
-#: (~1e-16 m) and the SEARCH_SLACK band of the test (< 1e-12 m), far below a sphere's motion.
-GAP_SLACK = 1e-9
-
-
-class PairList(NamedTuple):
-    """The candidate pairs of the face pairs a search has built (`build_pair_list`), grouped
-    by face pair, each group ordered by gap."""
-
-    master: np.ndarray  # (n,) master sphere of each candidate
-    slave: np.ndarray  # (n,) slave sphere
-    centre_J: np.ndarray  # (n, 3) the master sphere's centre, its joint's frame (fingers at opening 0), m
-    node: np.ndarray  # (n, 2) the slave sphere's grid node in its face's coordinates, m
-    gap: np.ndarray  # (n,) |c1 - c2| - (r1 + r2) at the build, m
-    start: np.ndarray  # (n_table,) each face pair's first candidate
-    stop: np.ndarray  # (n_table,) one past its last
-    built: np.ndarray  # (n_table,) whether the face pair was among those the list was built for
-    scan: np.ndarray  # (n_table,) whether it is searched anew at every step instead (not a ball)
-    normal_W: np.ndarray  # (n_table, 3) its common normal (world) at the build
-    A: np.ndarray  # (n_table, 3, 3) its map of master centres to face coordinates at the build (ball regime)
-    off: np.ndarray  # (n_table, 3) and the map's offset (`_face_frame`)
-
-
-def empty_pair_list(n_face_pairs: int) -> PairList:
-    """A pair list that holds nothing and must be built at its first use."""
-    none = np.zeros(0, dtype=np.int64)
-    ints, flags = np.zeros(n_face_pairs, dtype=np.int64), np.zeros(n_face_pairs, dtype=np.bool_)
-    return PairList(none, none, np.zeros((0, 3)), np.zeros((0, 2)), np.zeros(0), ints, ints.copy(), flags, flags.copy(),
-                    np.zeros((n_face_pairs, 3)), np.zeros((n_face_pairs, 3, 3)), np.zeros((n_face_pairs, 3)))
+    return Candidates(found_m[:n_found][order], found_s[:n_found][order], key[order])
 
 
 @njit
-def build_pair_list(near, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_slave, R_W, p_W, r1, radius,
-                    cutoff):
+def build_pair_list(m, d, near):
     """The candidate pairs of the face pairs `near` that can come into contact while the
-    spheres move less than LIST_SKIN relative to each other (a Verlet list).
+    spheres move less than LIST_SKIN relative to each other (a Verlet list), as a PairList.
 
     A face pair whose common normal makes chi = n . (c1 - c2) clearly positive for every pair
     within reach is in the ball regime: a pair there touches only if its centres are closer
@@ -315,8 +245,11 @@ def build_pair_list(near, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_
     with their gap, each face pair's candidates ordered by gap. Chi moves by at most the
     spheres' motion plus the normal's turn times the cutoff, which the margin covers. Any
     other face pair (faces tilted far from each other) is marked to be searched anew at every
-    step. Arguments as `grid_search`; returns a `PairList`.
+    step (`grid_search`).
     """
+    table, master, C1_J, maps = m.faces, m.master, m.master.centre_J, m.slave.maps
+    R_W, p_W, opening = d.R_W, d.p_W, d.opening
+    r1, radius, cutoff = m.law.r1, m.law.r2, m.law.cutoff
     n_table = table.master_start.shape[0]
     built = np.zeros(n_table, dtype=np.bool_)
     scan = np.zeros(n_table, dtype=np.bool_)
@@ -333,7 +266,7 @@ def build_pair_list(near, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_
     for f in near:
         built[f] = True
         A = A_b[f]
-        facing, nu, nv, nh, off, n_W = _face_frame(f, table, N1_J, finger1, axis1_J, opening, R_W, p_W, A)
+        facing, nu, nv, nh, off, n_W = _face_frame(table, master, R_W, p_W, opening, f, A)
         if not facing:
             scan[f] = True
             continue
@@ -388,11 +321,6 @@ def build_pair_list(near, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_
                     scan, normal_W, A_b, off_b)
 
 
-@njit
-def grow(a):
-    return np.concatenate((a, np.empty(a.shape[0], dtype=a.dtype)))
-
-
 @njit_inline
 def _moved(A, off, A_b, off_b, centre, spread):
     """A bound on how far any master centre of a face pair has moved in face coordinates
@@ -404,26 +332,30 @@ def _moved(A, off, A_b, off_b, centre, spread):
     for r in range(3):
         x = off[r] - off_b[r]
         for k in range(3):
-            d = A[r, k] - A_b[r, k]
-            x += d * centre[k]
-            norm_sq += d * d
+            delta = A[r, k] - A_b[r, k]
+            x += delta * centre[k]
+            norm_sq += delta * delta
         shift += x * x
     return math.sqrt(shift) + math.sqrt(norm_sq) * spread
 
 
-@njit_inline
-def listed_search(near, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_slave, R_W, p_W, r1, radius,
-                  cutoff, pair_list):
-    """`grid_search`'s pairs, tested only among the candidates of a pair list kept between
-    steps (`build_pair_list`).
+@njit
+def listed_search(m, d):
+    """`grid_search`'s pairs in d.near, tested only among the candidates of the pair list
+    d.pair_list, which it rebuilds when it must (`build_pair_list`); returns Candidates.
 
-    The list is rebuilt when a face pair in `near` was not among those it was built for, a
+    The list is rebuilt when a face pair in d.near was not among those it was built for, a
     face pair's normal has turned, or its master spheres may have moved LIST_SKIN relative
     to its slave spheres since the build (`_moved`, computed from the two poses: exact, not
     integrated over the steps). Within a face pair, only the candidates whose gap at the build
-    that motion could have closed are tested. Returns (master, slave, key) as `grid_search`
-    does, and the pair list.
+    that motion could have closed are tested.
     """
+    near, table, master = d.near, m.faces, m.master
+    R_W, p_W, opening = d.R_W, d.p_W, d.opening
+    r1, radius, cutoff = m.law.r1, m.law.r2, m.law.cutoff
+    pair_list = d.pair_list
+    built, scan, normal_b, A_b, off_b = pair_list.built, pair_list.scan, pair_list.normal_W, pair_list.A, pair_list.off
+    centre_b, spread = table.master_centre_J, table.master_radius
     k = near.shape[0]
     # each face pair's map (rows 0-2) and offset (row 3), its normal in face coordinates (row
     # 4) and the bound on its motion (row 5, first entry), in one block: a step makes dozens
@@ -431,45 +363,45 @@ def listed_search(near, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_sl
     frames = np.empty((k, 6, 3))
     moved = frames[:, 5, 0]
     valid = True
-    for m in range(k):
-        f = near[m]
-        A = frames[m][:3]
-        facing, nu, nv, nh, off, n_W = _face_frame(f, table, N1_J, finger1, axis1_J, opening, R_W, p_W, A)
-        frames[m, 3, 0], frames[m, 3, 1], frames[m, 3, 2] = off
-        frames[m, 4, 0], frames[m, 4, 1], frames[m, 4, 2] = nu, nv, nh
-        if not pair_list.built[f]:
+    for i in range(k):
+        f = near[i]
+        A = frames[i][:3]
+        facing, nu, nv, nh, off, n_W = _face_frame(table, master, R_W, p_W, opening, f, A)
+        frames[i, 3, 0], frames[i, 3, 1], frames[i, 3, 2] = off
+        frames[i, 4, 0], frames[i, 4, 1], frames[i, 4, 2] = nu, nv, nh
+        if not built[f]:
             valid = False
-        elif not pair_list.scan[f]:
-            turn = math.sqrt((n_W[0] - pair_list.normal_W[f, 0]) ** 2 + (n_W[1] - pair_list.normal_W[f, 1]) ** 2
-                             + (n_W[2] - pair_list.normal_W[f, 2]) ** 2)
-            moved[m] = _moved(A, off, pair_list.A[f], pair_list.off[f], table.master_centre_J[f],
-                              table.master_radius[f])
-            if not facing or turn > LIST_NORMAL_TOL or moved[m] >= LIST_SKIN - GAP_SLACK:
+        elif not scan[f]:
+            turn = math.sqrt((n_W[0] - normal_b[f, 0]) ** 2 + (n_W[1] - normal_b[f, 1]) ** 2
+                             + (n_W[2] - normal_b[f, 2]) ** 2)
+            moved[i] = _moved(A, off, A_b[f], off_b[f], centre_b[f], spread[f])
+            if not facing or turn > LIST_NORMAL_TOL or moved[i] >= LIST_SKIN - GAP_SLACK:
                 valid = False
     if not valid:
-        pair_list = build_pair_list(near, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_slave, R_W, p_W,
-                                    r1, radius, cutoff)
+        pair_list = build_pair_list(m, d, near)
+        d.pair_list = pair_list
         moved[:] = 0.0
     lm, ls, centre, node, gap = pair_list.master, pair_list.slave, pair_list.centre_J, pair_list.node, pair_list.gap
+    start, stop, scan = pair_list.start, pair_list.stop, pair_list.scan
     R = r1 + radius
     n_out = 0
-    for m in range(k):
-        n_out += pair_list.stop[near[m]] - pair_list.start[near[m]]
+    for i in range(k):
+        n_out += stop[near[i]] - start[near[i]]
     out = np.empty((2, n_out), dtype=np.int64)
     out_m, out_s = out[0], out[1]
     n = n_searched = 0
-    for m in range(k):
-        f = near[m]
-        if pair_list.scan[f]:
+    for i in range(k):
+        f = near[i]
+        if scan[f]:
             n_searched += 1
             continue
-        F = frames[m]
+        F = frames[i]
         nu, nv, nh = F[4, 0], F[4, 1], F[4, 2]
         # the map's entries as scalars: `_face_xy` and `_lift`, term by term in their order
         a00, a01, a02, a10, a11, a12 = F[0, 0], F[0, 1], F[0, 2], F[1, 0], F[1, 1], F[1, 2]
         a20, a21, a22, o0, o1, o2 = F[2, 0], F[2, 1], F[2, 2], F[3, 0], F[3, 1], F[3, 2]
-        reach = moved[m] + GAP_SLACK
-        for idx in range(pair_list.start[f], pair_list.stop[f]):
+        reach = moved[i] + GAP_SLACK
+        for idx in range(start[f], stop[f]):
             if gap[idx] > reach:
                 break  # ordered by gap: no later candidate can touch either
             c0, c1, c2 = centre[idx, 0], centre[idx, 1], centre[idx, 2]
@@ -484,78 +416,108 @@ def listed_search(near, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_sl
         searched = np.empty(n_searched, dtype=np.int64)
         n_searched = 0
         for f in near:
-            if pair_list.scan[f]:
+            if scan[f]:
                 searched[n_searched] = f
                 n_searched += 1
-        sm, ss, _ = grid_search(searched, table, C1_J, N1_J, finger1, axis1_J, opening, maps, n_slave, R_W, p_W,
-                                r1, radius, cutoff)
-        out_m, out_s = np.concatenate((out_m, sm)), np.concatenate((out_s, ss))
-    return _by_key(out_m, out_s, n_slave), pair_list  # by key, as grid_search returns them
+        found = grid_search(m, d, searched)
+        out_m, out_s = np.concatenate((out_m, found.master)), np.concatenate((out_s, found.slave))
+    return by_key(out_m, out_s, m.slave.centre_J.shape[0])
 
 
 @njit
-def _by_key(master, slave, n_slave):
-    """(master, slave, key = master n_slave + slave) ordered by key, the keys unique; master
-    and slave are reordered in place. By insertion: the listed search finds its pairs in a
-    few runs (one per face pair), so its order is nearly the keys'."""
+def by_key(master, slave, n_slave):
+    """Candidates of (master, slave), ordered by key = master n_slave + slave (keys unique);
+    master and slave are reordered in place."""
     n = master.shape[0]
     key = master * n_slave + slave
-    if n > 64:  # far from sorted, insertion would cost ~n^2
+    if n > INSERTION_SORT_MAX:
         order = np.argsort(key)
-        return master[order], slave[order], key[order]
+        return Candidates(master[order], slave[order], key[order])
     for a in range(1, n):
-        k, m, s = key[a], master[a], slave[a]
+        k, mm, s = key[a], master[a], slave[a]
         b = a - 1
         while b >= 0 and key[b] > k:
             key[b + 1], master[b + 1], slave[b + 1] = key[b], master[b], slave[b]
             b -= 1
-        key[b + 1], master[b + 1], slave[b + 1] = k, m, s
-    return master, slave, key
+        key[b + 1], master[b + 1], slave[b + 1] = k, mm, s
+    return Candidates(master, slave, key)
 
 
-def face_slices(layers: LayerSet) -> list[slice]:
-    """The contiguous run of spheres of each face of a stacked layer set."""
-    starts = np.flatnonzero(np.r_[True, np.diff(layers.face) != 0, True])
-    return [slice(a, b) for a, b in zip(starts[:-1], starts[1:])]
+@njit
+def _runs(face):
+    """(n_runs + 1,) the first sphere of each contiguous run of one face, and the end."""
+    starts = np.empty(face.shape[0] + 1, dtype=np.int64)
+    n = 0
+    for i in range(face.shape[0]):
+        if i == 0 or face[i] != face[i - 1]:
+            starts[n] = i
+            n += 1
+    starts[n] = face.shape[0]
+    return starts[:n + 1]
 
 
-def all_pairs(master: LayerSet, slave: LayerSet, C1_W, N1_W, C2_W, N2_W):
-    """The paper's literal search: every master sphere against every slave sphere, Eq. (6)-(10).
+@njit
+def world_spheres(m, d):
+    """The world centres and normals of every master and slave sphere at d's kinematics and
+    finger openings: (|S1|, 3) x 2, (|S2|, 3) x 2, m."""
+    M, S = m.master, m.slave
+    R_W, p_W, opening = d.R_W, d.p_W, d.opening
+    C1, N1 = np.empty_like(M.centre_J), np.empty_like(M.normal_J)
+    C2, N2 = np.empty_like(S.centre_J), np.empty_like(S.normal_J)
+    for i in range(C1.shape[0]):
+        R, p, x = R_W[M.joint[i]], p_W[M.joint[i]], opening[M.finger[i]]
+        c = (M.centre_J[i, 0] + x * M.axis_J[i, 0], M.centre_J[i, 1] + x * M.axis_J[i, 1],
+             M.centre_J[i, 2] + x * M.axis_J[i, 2])
+        C1[i, 0], C1[i, 1], C1[i, 2] = mv3(R, c)
+        N1[i, 0], N1[i, 1], N1[i, 2] = mv3(R, M.normal_J[i])
+        for a in range(3):
+            C1[i, a] += p[a]
+    for i in range(C2.shape[0]):
+        R, p = R_W[S.joint[i]], p_W[S.joint[i]]
+        C2[i, 0], C2[i, 1], C2[i, 2] = mv3(R, S.centre_J[i])
+        N2[i, 0], N2[i, 1], N2[i, 2] = mv3(R, S.normal_J[i])
+        for a in range(3):
+            C2[i, a] += p[a]
+    return C1, N1, C2, N2
 
-    C*_W, N*_W: (n, 3) world centres and normals of all spheres of each set. The spheres of
-    one face share its normal, so the pairs are evaluated a block of two faces at a time
-    (one common normal per block); no pair is skipped.
-    Returns (master index, slave index) of the pairs in contact (a superset by SEARCH_SLACK;
-    the shared kernel `penetration` decides).
+
+@njit
+def literal_search(m, d):
+    """The paper's literal search: every master sphere against every slave sphere, Eq. (6)-(10),
+    as Candidates (a superset by SEARCH_SLACK; `penetration1` decides).
+
+    The spheres of one face share its normal, so each block of two faces has one common
+    normal; no pair is skipped. Coordinates are taken relative to a point of the slave face, so
+    that |c1 - c2|^2, expanded, is free of cancellation: centres are within centimetres of it.
     """
-    found_m, found_s = [], []
-    R = master.radius + slave.radius
-    for b in face_slices(slave):
-        # coordinates relative to a point of the slave face keep |c1 - c2|^2, expanded below,
-        # free of cancellation: centres are within centimetres of it
-        origin = C2_W[b.start]
-        C2 = C2_W[b] - origin
-        C2_sq = np.einsum("ij,ij->i", C2, C2)
-        for a in face_slices(master):
-            dn = N2_W[b.start] - N1_W[a.start]
-            norm = np.linalg.norm(dn)
+    C1, N1, C2, N2 = world_spheres(m, d)
+    R = m.law.r1 + m.law.r2
+    master_runs, slave_runs = _runs(m.master.face), _runs(m.slave.face)
+    found_m = np.empty(64, dtype=np.int64)
+    found_s = np.empty(64, dtype=np.int64)
+    n_found = 0
+    for b in range(slave_runs.shape[0] - 1):
+        s0, s1 = slave_runs[b], slave_runs[b + 1]
+        origin = (C2[s0, 0], C2[s0, 1], C2[s0, 2])
+        for a in range(master_runs.shape[0] - 1):
+            a0, a1 = master_runs[a], master_runs[a + 1]
+            dn = (N2[s0, 0] - N1[a0, 0], N2[s0, 1] - N1[a0, 1], N2[s0, 2] - N1[a0, 2])
+            norm = math.sqrt(_dot(dn, dn))
             if norm <= NORMAL_EPS:
                 continue  # faces facing the same way: Eq. (6) undefined, no pair
-            n_c = dn / norm
-            C1 = C1_W[a] - origin
-            chi = (C1 @ n_c)[:, None] - (C2 @ n_c)[None, :]  # Eq. (9)
-            w = C1 @ C2.T
-            w *= -2.0
-            w += np.einsum("ij,ij->i", C1, C1)[:, None]
-            w += C2_sq[None, :] - R * R  # Eq. (10)
-            # phi = -chi + sqrt(chi^2 - w) > 0 with a real root  <=>  chi^2 >= w and
-            # (chi < 0 or w < 0): the same test without a square root
-            hit = chi * chi - w >= -SEARCH_SLACK * R
-            hit &= (chi < SEARCH_SLACK) | (w < SEARCH_SLACK * R)
-            i, j = np.nonzero(hit)
-            found_m.append(i + a.start)
-            found_s.append(j + b.start)
-    if not found_m:
-        empty = np.zeros(0, dtype=np.int64)
-        return empty, empty
-    return np.concatenate(found_m), np.concatenate(found_s)
+            n_c = (dn[0] / norm, dn[1] / norm, dn[2] / norm)
+            for i in range(a0, a1):
+                c1 = (C1[i, 0] - origin[0], C1[i, 1] - origin[1], C1[i, 2] - origin[2])
+                c1_n, c1_sq = _dot(c1, n_c), _dot(c1, c1)
+                for j in range(s0, s1):
+                    c2 = (C2[j, 0] - origin[0], C2[j, 1] - origin[1], C2[j, 2] - origin[2])
+                    chi = c1_n - _dot(c2, n_c)  # Eq. (9)
+                    w = c1_sq - 2.0 * _dot(c1, c2) + _dot(c2, c2) - R * R  # Eq. (10)
+                    # phi = -chi + sqrt(chi^2 - w) > 0 with a real root  <=>  chi^2 >= w and
+                    # (chi < 0 or w < 0): the same test without a square root
+                    if chi * chi - w >= -SEARCH_SLACK * R and (chi < SEARCH_SLACK or w < SEARCH_SLACK * R):
+                        found_m, found_s = _push(found_m, found_s, n_found, i, j)
+                        n_found += 1
+    key = found_m[:n_found] * C2.shape[0] + found_s[:n_found]
+    order = np.argsort(key)
+    return Candidates(found_m[:n_found][order], found_s[:n_found][order], key[order])

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import ModelError
+from ..errors import ModelError
 
 #: Points this close outside a face edge (in units of the grid step) still count as inside,
 #: so that grid points landing on an edge are not lost to round-off.

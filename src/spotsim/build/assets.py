@@ -7,11 +7,11 @@ import sys
 from functools import lru_cache
 from pathlib import Path
 
-from .errors import ModelError
+from ..errors import ModelError
 
 #: Repository root: spotsim is installed editable (see README), so `urdf/` and `config/`
 #: sit beside `src/`. SPOTSIM_ROOT overrides it for relocated assets.
-ROOT = Path(os.environ.get("SPOTSIM_ROOT", Path(__file__).resolve().parents[2]))
+ROOT = Path(os.environ.get("SPOTSIM_ROOT", Path(__file__).resolve().parents[3]))
 URDF_DIR = ROOT / "urdf"
 CONFIG_DIR = ROOT / "config"
 

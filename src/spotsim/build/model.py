@@ -1,0 +1,490 @@
+"""Scenario -> Model: the Pinocchio scene, its contact faces, sphere layers and parameters, and
+the compiled Model (`sim.model.SimModel`) a run's compiled code reads.
+
+Everything here is fixed for a run (a weld builds a new Model). The arms are self-locked
+during the grasp (paper Sec. 4.1), so their joints are reduced away with
+`pin.buildReducedModel`. The fingers' prismatic joints are reduced away too: their drive
+prescribes their motion, so they carry no dynamic degree of freedom. Their mass joins the body
+they are mounted on, their faces slide along their joint axes by the drive's opening, and
+their contact loads act on that body. The scene keeps one free-flyer per free body: the
+module(s) and, on the free-flying robot, the robot.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import coal
+import numpy as np
+import pinocchio as pin
+
+from ..contact.detection import cutoff_distance
+from ..contact.forces import ContactLaw
+from ..contact.friction import BristleParams
+from ..contact.layers import FaceTable, MasterSpheres, SlaveSpheres
+from ..contact.normal import damping_factor, hertz_stiffness
+from ..errors import ModelError, ScenarioError
+from ..sim.bodies import free_bodies
+from ..sim.integrators import METHODS, tableau
+from ..sim.model import (CompletionParams, DriveParams, Fingers, Grasps, IntegratorParams, Limits, ModelFields,
+                         RecordFrames, SimModel, sim_model)
+from ..sim.record import REPLAY_RATE_HZ, Layout
+from . import assets
+from .faces import contact_faces, sphere_layer
+from .scene import FINGER_NAMES, SceneSpec, check_inertias, frame, lock_joints, scene_spec, weld_urdf
+
+
+@dataclass(frozen=True)
+class ContactParams:
+    """Contact law constants: radii (m), Hertz K (N/m^1.5), damping factor, floors."""
+
+    r1: float
+    r2: float
+    K: float
+    damping_factor: float
+    approach_speed_floor: float
+    cutoff: float
+    margin: float
+    bristle: BristleParams
+    broad_phase: str
+    force_point: str = "common"
+    skin: float = 0.0  # the margin's extra beyond contact reach, m
+
+
+@dataclass(frozen=True)
+class Finger:
+    """A finger moved by its drive along its prismatic axis, on the body of joint `parent_joint`.
+
+    axis_J: (3,) its opening direction in that joint's frame. drive: index of its drive (its
+    end-effector). opening_touch, opening_start: openings (m) at first touch of a centred
+    groove and at start; the master spheres' centres are given at opening 0.
+    """
+
+    name: str
+    parent_joint: int
+    axis_J: np.ndarray
+    drive: int
+    opening_touch: float
+    opening_start: float
+
+
+@dataclass(frozen=True)
+class EndEffector:
+    """An end-effector's grasp frame O_a: its joint and placement in that joint's frame."""
+
+    name: str
+    joint: int
+    placement: pin.SE3
+
+
+@dataclass(frozen=True)
+class ModuleBody:
+    """A target module: its free-flyer joint (0 once welded) and its groove frame O_b's
+    placement in that joint's frame."""
+
+    name: str
+    prefix: str
+    joint: int
+    placement: pin.SE3
+
+
+@dataclass(frozen=True)
+class Model:
+    """A scene ready to run: the Pinocchio model and coal geometry, its bodies, fingers and
+    contact layers by name, and `sim`, the compiled Model its runs read."""
+
+    scenario: object
+    spec: SceneSpec
+    urdf: str
+    pin_model: pin.Model
+    geom_model: pin.GeometryModel
+    end_effectors: tuple[EndEffector, ...]
+    modules: tuple[ModuleBody, ...]
+    grasps: tuple[tuple[int, int], ...]  # (end-effector, module) in the order they are grasped
+    robot_joint: int  # the free-flying robot's joint, 0 for a fixed base
+    fingers: tuple[Finger, ...]
+    finger_geoms: tuple[tuple[int, int], ...]  # (geometry object, finger) of each finger patch
+    contact_joints: tuple[int, ...]  # joints carrying contact faces
+    params: ContactParams
+    q0: np.ndarray
+    v0: np.ndarray
+    free_joints: tuple[int, ...]
+    faces: tuple  # every contact face of the URDF, active or not (`faces.contact_faces`); a weld keeps them
+    layout: Layout  # the time series a run of this scene records (fixed by the unwelded scene)
+    sim: SimModel
+
+    @property
+    def master(self) -> MasterSpheres:
+        return self.sim.master
+
+    @property
+    def slave(self) -> SlaveSpheres:
+        return self.sim.slave
+
+    @cached_property
+    def face_names(self) -> tuple[list[str], list[str]]:
+        """The names of the master and of the slave faces, in the order of their layers' `face`
+        index: each face is one coal patch, added in that order (masters are `finger_geoms`)."""
+        objects = self.geom_model.geometryObjects
+        masters = [g for g, _ in self.finger_geoms]
+        slaves = [g for g in range(len(objects)) if g not in set(masters)]
+        return [objects[g].name for g in masters], [objects[g].name for g in slaves]
+
+    @cached_property
+    def groove_placements(self) -> list[tuple[int, pin.SE3]]:
+        """Each module's groove frame O_b as (joint, placement in it); a welded module's rides
+        on its end-effector's joint."""
+        return [groove_placement(self.pin_model, m) for m in self.modules]
+
+    @property
+    def module_joint(self) -> int:
+        """The first grasp's module joint (single-arm scenes have one)."""
+        return self.modules[self.grasps[0][1]].joint
+
+
+def groove_placement(model: pin.Model, module: ModuleBody) -> tuple[int, pin.SE3]:
+    """A module's groove frame O_b as (joint, placement in it): a welded module's rides on its
+    end-effector's joint."""
+    if module.joint:
+        return module.joint, module.placement
+    f = frame(model, f"{module.prefix}module")
+    return f.parentJoint, f.placement
+
+
+def contact_params(s) -> ContactParams:
+    c = s.contact
+    r1, r2 = c.sphere_radius_finger_mm * 1e-3, c.sphere_radius_groove_mm * 1e-3
+    cutoff = cutoff_distance(r1, r2, min(r1, r2))
+    return ContactParams(
+        r1=r1, r2=r2,
+        K=hertz_stiffness(c.youngs_modulus_finger_Pa, c.poisson_finger,
+                          c.youngs_modulus_groove_Pa, c.poisson_groove, r1, r2),
+        damping_factor=damping_factor(c.restitution),
+        approach_speed_floor=c.approach_speed_floor_m_s,
+        cutoff=cutoff,
+        # a sphere centre sits r off its face, so faces whose spheres may pair are within
+        # r1 + cutoff + r2 of each other; the skin keeps the culling conservative
+        margin=r1 + r2 + cutoff + c.skin_mm * 1e-3,
+        bristle=BristleParams(s.friction.mu_k, s.friction.mu_s, s.friction.bristle_stiffness_N_m,
+                              s.friction.bristle_damping_N_s_m, s.friction.velocity_deadband_m_s),
+        broad_phase=c.broad_phase,
+        force_point=c.force_point,
+        skin=c.skin_mm * 1e-3,
+    )
+
+
+def scene_fingers(spec: SceneSpec) -> list[str]:
+    """The finger links of the unwelded scene, in the order its Model lists its fingers."""
+    return [f"{prefix}{finger}" for _, prefix in spec.end_effectors for finger in FINGER_NAMES]
+
+
+def build_model(s, source: str = "<scenario>", welded: dict | None = None, urdf: str | None = None,
+                faces: tuple | None = None) -> Model:
+    """Build the immutable Model of a validated scenario (raises ModelError, ScenarioError).
+
+    welded: modules already grasped and welded (see `scene.scene_spec`). urdf: the scene's
+    compiled URDF (`Model.urdf`, any earlier welds in it), to weld into (`scene.weld_urdf`)
+    instead of compiling the XACRO again; faces: its contact faces (`Model.faces`), which a
+    weld does not change (they are given in their links' frames), instead of parsing them again.
+    """
+    spec = scene_spec(s, welded)
+    if urdf is None:
+        for arm, prefix in spec.arms:
+            assets.prefixed_arm(arm, prefix)
+        urdf = assets.compile_xacro(spec.xacro, spec.args)
+    else:
+        urdf = weld_urdf(urdf, spec)
+    try:
+        full = pin.buildModelFromXML(urdf)
+    except Exception as e:
+        raise ModelError(f"Pinocchio cannot build the scene: {e}") from e
+    check_inertias(full)
+    model, problems = lock_joints(full, spec)
+    if problems:
+        raise ScenarioError([f"{source}: {p}" for p in problems])
+    model.gravity = pin.Motion(np.array(s.simulation.gravity_m_s2), np.zeros(3))
+    robot_joint = model.getJointId(spec.robot_joint) if spec.robot_joint else 0
+
+    end_effectors = []
+    for name, prefix in spec.end_effectors:
+        f = frame(model, f"{prefix}grasp")
+        end_effectors.append(EndEffector(name, f.parentJoint, f.placement))
+    modules = []
+    for k, (name, prefix, _, _) in enumerate(spec.modules):
+        f = frame(model, f"{prefix}module")
+        joint = 0 if k in spec.welded_modules else f.parentJoint
+        modules.append(ModuleBody(name, prefix, joint, f.placement))
+    free = tuple(m.joint for m in modules if m.joint) + ((robot_joint,) if robot_joint else ())
+    check_inertias(model, joints=set(free))
+
+    params = contact_params(s)
+    active = [k for k in range(len(modules)) if k not in spec.welded_modules]
+    finger_links = [f"{prefix}{finger}" for e, (_, prefix) in enumerate(spec.end_effectors)
+                    if not any(g == (e, m) for m in spec.welded_modules for g in spec.grasps)
+                    for finger in FINGER_NAMES]
+    module_prefixes = [modules[k].prefix for k in active]
+    faces = tuple(contact_faces(urdf)) if faces is None else faces
+    layers = _contact_layers(model, faces, finger_links, module_prefixes, params)
+    movable = [j for j in layers.contact_joints if j and model.joints[j].shortname() != "JointModelFreeFlyer"]
+    if movable:  # the compiled kinematics reads contact bodies' poses from free-flyers only
+        raise ModelError(f"contact faces on joints {[model.names[j] for j in movable]}, which are neither "
+                         "fixed nor free-flyers: lock them (reduced away) or make them free")
+
+    q0 = pin.neutral(model)
+    data = model.createData()
+    pin.forwardKinematics(model, data, q0)
+    for k in active:
+        _, _, m, e = spec.modules[k]
+        ee = end_effectors[e]
+        oMa = data.oMi[ee.joint] * ee.placement
+        rpy = np.radians(m.initial_rpy_deg)
+        oMb = oMa * pin.SE3(pin.rpy.rpyToMatrix(*rpy), np.array(m.initial_offset_mm) * 1e-3)
+        j = modules[k].joint
+        jMb = model.jointPlacements[j].inverse() * oMb * modules[k].placement.inverse()
+        q0[model.idx_qs[j]:model.idx_qs[j] + 7] = pin.SE3ToXYZQUAT(jMb)
+
+    fingers = []
+    for link in finger_links:
+        f = frame(model, link)
+        e = next(i for i, (_, prefix) in enumerate(spec.end_effectors) if link.startswith(prefix))
+        mod = next(m for (ee, m) in spec.grasps if ee == e)
+        axis_J = f.placement.rotation[:, 2]  # prismatic finger joints open along their local z
+        touch = _opening_at_touch(model, f.parentJoint, axis_J, layers, layers.master_finger == len(fingers),
+                                  end_effectors[e], modules[mod], params)
+        start = touch + s.end_effector.start_gap_mm * 1e-3
+        fingers.append(Finger(link, f.parentJoint, axis_J, e, touch, start))
+    layout = Layout(scene_fingers(spec), bool(robot_joint), [m.name for m in modules], [e.name for e in end_effectors])
+    parts = _Parts(s, model, end_effectors, modules, spec.grasps, robot_joint, tuple(fingers), free, layers, params,
+                   layout)
+    return Model(s, spec, urdf, model, layers.geom, tuple(end_effectors), tuple(modules), spec.grasps, robot_joint,
+                 tuple(fingers), layers.finger_geoms, layers.contact_joints, params, q0, np.zeros(model.nv), free,
+                 faces, layout, sim_model(model_fields(parts)))
+
+
+@dataclass(frozen=True)
+class _Layers:
+    """The contact layers of the active faces, as `_contact_layers` builds them."""
+
+    geom: pin.GeometryModel
+    master_centre_J: np.ndarray
+    master_normal_J: np.ndarray
+    master_joint: np.ndarray
+    master_face: np.ndarray
+    master_finger: np.ndarray
+    slave: SlaveSpheres
+    faces: FaceTable
+    finger_geoms: tuple[tuple[int, int], ...]
+    contact_joints: tuple[int, ...]
+
+
+def _contact_layers(model, faces, finger_links, module_prefixes, params) -> _Layers:
+    """Sphere layers of the active contact faces, stacked by role, and the coal face patches.
+
+    Master faces: those on `finger_links`, placed at opening 0 on the joint the finger is
+    mounted on. Slave faces: those on links of the modules named by `module_prefixes`. Every
+    master face may touch every slave face: one coal collision pair (and one FaceTable row)
+    each.
+    """
+    geom = pin.GeometryModel()
+    roles = {"master": [], "slave": []}
+    finger_of_face, finger_geoms = [], []
+    for face in faces:
+        if face.link in finger_links:
+            role = "master"
+        elif any(face.link.startswith(p) for p in module_prefixes):
+            role = "slave"
+        else:
+            continue  # an idle or welded pair of faces: no contact work
+        f = frame(model, face.link)
+        j, jMl = f.parentJoint, f.placement
+        if role == "master":
+            finger_of_face.append(finger_links.index(face.link))
+            finger_geoms.append((len(geom.geometryObjects), finger_of_face[-1]))
+        verts_J = face.vertices_L @ jMl.rotation.T + jMl.translation
+        layer = sphere_layer(verts_J, params.r1 if role == "master" else params.r2)
+        T = face.T_LC
+        placement = jMl * pin.SE3(T[:3, :3], T[:3, 3])
+        gid = geom.addGeometryObject(pin.GeometryObject(face.name, j, placement, coal.Box(*face.box_size)))
+        roles[role].append((gid, j, layer))
+    if not roles["master"] or not roles["slave"]:
+        raise ModelError("the scene needs contact faces on both the fingers and a module")
+
+    def stack(entries):
+        centres = np.concatenate([e[2].centres for e in entries])
+        normals = np.concatenate([np.tile(e[2].normal, (len(e[2].centres), 1)) for e in entries])
+        joint = np.concatenate([np.full(len(e[2].centres), e[1], dtype=np.int64) for e in entries])
+        face = np.concatenate([np.full(len(e[2].centres), k, dtype=np.int64) for k, e in enumerate(entries)])
+        return centres, normals, joint, face
+
+    m_centres, m_normals, m_joint, m_face = stack(roles["master"])
+    s_centres, s_normals, s_joint, s_face = stack(roles["slave"])
+    master_finger = np.asarray(finger_of_face, dtype=np.int64)[m_face]
+    starts_m = np.cumsum([0] + [len(e[2].centres) for e in roles["master"]])
+    starts_s = np.cumsum([0] + [len(e[2].centres) for e in roles["slave"]])
+    shapes = np.array([e[2].index_map.shape for e in roles["slave"]])
+    maps = -np.ones((len(shapes), *shapes.max(axis=0)), dtype=np.int64)
+    for b, (_, _, lay) in enumerate(roles["slave"]):
+        ni, nj = lay.index_map.shape
+        maps[b, :ni, :nj] = np.where(lay.index_map >= 0, lay.index_map + starts_s[b], -1)
+    rows = []  # one per face pair, in the order of coal's collision pairs
+    for a, (gid_m, jm, _) in enumerate(roles["master"]):
+        centres = m_centres[starts_m[a]:starts_m[a + 1]]
+        middle = centres.mean(axis=0)
+        for b, (gid_s, js, lay) in enumerate(roles["slave"]):
+            geom.addCollisionPair(pin.CollisionPair(gid_m, gid_s))
+            rows.append((starts_m[a], starts_m[a + 1], jm, js, b, lay.origin, lay.t1, lay.t2, lay.normal,
+                         lay.index_map.shape, middle, np.linalg.norm(centres - middle, axis=1).max()))
+    column = lambda i, dtype=float: np.array([r[i] for r in rows], dtype=dtype)
+    table = FaceTable(column(0, np.int64), column(1, np.int64), column(2, np.int64), column(3, np.int64),
+                      column(4, np.int64), column(5).reshape(-1, 3), column(6).reshape(-1, 3),
+                      column(7).reshape(-1, 3), column(8).reshape(-1, 3), column(9, np.int64).reshape(-1, 2),
+                      column(10).reshape(-1, 3), column(11))
+    contact_joints = tuple(sorted({*m_joint.tolist(), *s_joint.tolist()}))
+    return _Layers(geom, m_centres, m_normals, m_joint, m_face, master_finger,
+                   SlaveSpheres(s_centres, s_normals, s_joint, s_face, maps), table, tuple(finger_geoms),
+                   contact_joints)
+
+
+def _opening_at_touch(model, parent_joint, axis_J, layers, on_finger, ee, module, params):
+    """The finger opening (m) at which its sphere layer first touches its groove, centred.
+
+    For each of the finger's faces opposed to a groove face (normals anti-parallel), the
+    sphere envelopes touch when the face planes are 2 (r1 + r2) apart; the finger moves
+    along its axis, so that distance is linear in the opening.
+    on_finger: (|S1|,) bool, the master spheres of this finger (given at opening 0).
+    """
+    q = pin.neutral(model)
+    data = model.createData()
+    pin.forwardKinematics(model, data, q)
+    oMa = data.oMi[ee.joint] * ee.placement
+    jMb = model.jointPlacements[module.joint].inverse() * oMa * module.placement.inverse()
+    iq = model.idx_qs[module.joint]
+    q[iq:iq + 7] = pin.SE3ToXYZQUAT(jMb)
+    pin.forwardKinematics(model, data, q)
+    oMf, oMm = data.oMi[parent_joint], data.oMi[module.joint]
+    axis_W = oMf.rotation @ axis_J
+    slave = layers.slave
+    on_module = slave.joint == module.joint
+    best = None
+    for fm in np.unique(layers.master_face[on_finger]):
+        k = np.flatnonzero(layers.master_face == fm)[0]
+        n_f = oMf.rotation @ layers.master_normal_J[k]
+        x_f = oMf.act(layers.master_centre_J[k] - params.r1 * layers.master_normal_J[k])
+        for fs in np.unique(slave.face[on_module]):
+            i = np.flatnonzero(slave.face == fs)[0]
+            n_g = oMm.rotation @ slave.normal_J[i]
+            if n_f @ n_g > -1 + 1e-9 or abs(axis_W @ n_g) < 1e-9:
+                continue
+            x_g = oMm.act(slave.centre_J[i] - params.r2 * slave.normal_J[i])
+            dist0 = (x_f - x_g) @ n_g
+            opening = (2 * (params.r1 + params.r2) - dist0) / (axis_W @ n_g)
+            best = opening if best is None else max(best, opening)
+    if best is None:
+        raise ModelError("a finger has no face opposed to a groove face")
+    return best
+
+
+# ------------------------------------------------------------------------ the compiled Model
+
+
+@dataclass(frozen=True)
+class _Parts:
+    """What `model_fields` assembles the compiled Model from."""
+
+    scenario: object
+    pin_model: pin.Model
+    end_effectors: list
+    modules: list
+    grasps: tuple
+    robot_joint: int
+    fingers: tuple
+    free_joints: tuple
+    layers: _Layers
+    params: ContactParams
+    layout: Layout
+
+
+def model_fields(p: _Parts) -> ModelFields:
+    """The fields of a scene's compiled Model."""
+    s, model, layers, params = p.scenario, p.pin_model, p.layers, p.params
+    bodies = free_bodies(model)
+    body_row = {int(j): b for b, j in enumerate(bodies.joint)}
+    axes = np.array([f.axis_J for f in p.fingers], dtype=float).reshape(-1, 3)
+    master = MasterSpheres(layers.master_centre_J, layers.master_normal_J, layers.master_joint, layers.master_face,
+                           layers.master_finger, np.ascontiguousarray(axes[layers.master_finger]))
+    fingers = Fingers(np.array([f.parent_joint for f in p.fingers], dtype=np.int64), axes,
+                      np.array([f.drive for f in p.fingers], dtype=np.int64))
+    ees, mods = [ee for ee, _ in p.grasps], [k for _, k in p.grasps]
+    grasps = Grasps(np.array(ees, dtype=np.int64), np.array(mods, dtype=np.int64),
+                    np.array([p.end_effectors[e].joint for e in ees], dtype=np.int64),
+                    np.array([p.end_effectors[e].placement.rotation for e in ees]).reshape(-1, 3, 3),
+                    np.array([p.modules[k].joint for k in mods], dtype=np.int64),
+                    np.array([model.inertias[p.modules[k].joint].lever for k in mods]).reshape(-1, 3))
+    reach = _sphere_reach(master, layers.slave, p.fingers)
+    reach = [(body_row[j], r) for j, r in reach if j != 0]
+    limits = Limits(min(params.r1, params.r2), params.skin,
+                    bool((master.joint == 0).any() or (layers.slave.joint == 0).any()),
+                    np.array([b for b, _ in reach], dtype=np.int64), np.array([r for _, r in reach], dtype=float))
+    c, ee, sim = s.completion, s.end_effector, s.simulation
+    A, b, c_nodes, e = tableau(sim.integrator.method)
+    integrator = IntegratorParams(METHODS.index(sim.integrator.method), len(e) > 0, A, b, c_nodes, e,
+                                  sim.integrator.rtol, sim.integrator.atol, sim.integrator.h_min_s,
+                                  sim.integrator.h_max_s)
+    law = ContactLaw(params.r1, params.r2, params.K, params.damping_factor, params.approach_speed_floor, params.cutoff,
+                     params.bristle, params.force_point == "common")
+    return ModelFields(bodies, np.array(model.gravity.linear), master, layers.slave, layers.faces, law,
+                    params.broad_phase == "none", fingers, grasps,
+                    DriveParams(ee.closing_speed_m_s, ee.grasp_load_N, ee.resume_fraction),
+                    CompletionParams(c.hold_s, c.max_contact_speed_m_s, c.max_net_force_N, c.phase_timeout_s),
+                    limits, _record_frames(p, body_row), integrator, sim.dt_s, sim.substeps)
+
+
+def _sphere_reach(master, slave, fingers) -> list[tuple[int, float]]:
+    """The farthest contact sphere from each contact joint's origin, fingers at any opening
+    within their travel (start opening), m."""
+    travel = max((f.opening_start for f in fingers), default=0.0)
+    reach = {}
+    for layers, extra in ((master, travel), (slave, 0.0)):
+        for j in np.unique(layers.joint):
+            r = np.linalg.norm(layers.centre_J[layers.joint == j], axis=1).max() + extra
+            reach[int(j)] = max(reach.get(int(j), 0.0), float(r))
+    return sorted(reach.items())
+
+
+def _record_frames(p: _Parts, body_row: dict) -> RecordFrames:
+    """What a record row reads: the modules' groove frames, the end-effectors' grasp frames and
+    the robot's base, each on its body's row (-1: fixed)."""
+    row_of = lambda j: body_row[j] if j else -1
+    frames = [(row_of(j), M) for j, M in (groove_placement(p.pin_model, m) for m in p.modules)]
+    frames += [(row_of(e.joint), e.placement) for e in p.end_effectors]
+    frames.append((row_of(p.robot_joint), None))
+    rows = lambda joints: np.array([body_row[j] for j in joints], dtype=np.int64)
+    dt = p.scenario.simulation.dt_s
+    return RecordFrames(
+        row=np.array([r for r, _ in frames], dtype=np.int64),
+        R=np.array([np.eye(3) if M is None else M.rotation for _, M in frames]).reshape(-1, 3, 3),
+        p=np.array([np.zeros(3) if M is None else M.translation for _, M in frames]).reshape(-1, 3),
+        module_row=np.array([row_of(m.joint) for m in p.modules], dtype=np.int64),
+        # each finger of this model among the unwelded scene's (a weld leaves some out)
+        finger_map=np.array([p.layout.fingers.index(f.name) for f in p.fingers], dtype=np.int64),
+        all_rows=np.arange(len(body_row), dtype=np.int64),
+        robot_rows=rows([p.robot_joint] if p.robot_joint else []),
+        system_rows=rows(p.free_joints),
+        free_robot=p.layout.free_robot,
+        # the drives' work bounds the energy only without gravity (which does work of its own)
+        energy_bound=not np.any(p.pin_model.gravity.linear),
+        width=p.layout.width,
+        replay_every=max(1, int(round(1.0 / (REPLAY_RATE_HZ * dt)))))
+
+
+def grasp_frame(model: Model, data: pin.Data, ee: int) -> pin.SE3:
+    """End-effector `ee`'s grasp frame O_a in world, from the kinematics in `data`."""
+    e = model.end_effectors[ee]
+    return data.oMi[e.joint] * e.placement
+
+
+def groove_frame(model: Model, data: pin.Data, k: int) -> pin.SE3:
+    """Module `k`'s groove frame O_b in world (a welded module rides on its end-effector)."""
+    joint, placement = model.groove_placements[k]
+    return data.oMi[joint] * placement

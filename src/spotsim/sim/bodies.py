@@ -1,0 +1,211 @@
+"""Free bodies (free-flyer joints) as arrays: their kinematics, centroid states and momenta.
+
+After the locked joints are reduced away every body of a scene is either fixed (joint 0) or
+free (a free-flyer child of the world), so the placements and velocities the contact needs
+follow from q and v directly. Quaternions are Pinocchio's XYZQUAT order: (x, y, z, qx, qy, qz,
+qw). Pinocchio keeps a free-flyer's velocity in its body frame: v = (v_O, omega).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+import pinocchio as pin
+
+from ..errors import ModelError
+from ..jit import njit, njit_inline
+from ..linalg import add3, cross3, mm9, mtv3, mtv9, mv3, mv9, put3, put9, quat_rotation9, sub3
+
+
+class FreeBodies(NamedTuple):
+    """The free-flyer joints of a model, one row each."""
+
+    joint: np.ndarray  # (n,) joint index
+    idx_q: np.ndarray  # (n,) first index of its configuration in q (xyz, then quaternion)
+    idx_v: np.ndarray  # (n,) first index of its velocity in v (v_O, then omega; body frame)
+    R_P: np.ndarray  # (n, 3, 3) the joint's placement in the world (its parent), rotation
+    p_P: np.ndarray  # (n, 3) and translation, m
+    lever: np.ndarray  # (n, 3) the body's centroid in its joint frame, m
+    mass: np.ndarray  # (n,) kg
+    inertia_G: np.ndarray  # (n, 3, 3) rotational inertia about the centroid, joint axes, kg m^2
+
+
+def free_flyers(model: pin.Model) -> list[int]:
+    """The joints of `model` that are free-flyers."""
+    return [j for j in range(1, model.njoints) if model.joints[j].shortname() == "JointModelFreeFlyer"]
+
+
+def free_bodies(model: pin.Model) -> FreeBodies:
+    """The free-flyer joints of `model`, which must be all its joints, each a child of the
+    world (raises ModelError otherwise)."""
+    joints = free_flyers(model)
+    others = [model.names[j] for j in range(1, model.njoints) if j not in joints or model.parents[j] != 0]
+    if others:
+        raise ModelError(f"joints {others} are neither locked nor free-flyers on the world: the compiled "
+                         "core integrates free bodies only")
+    ints = lambda values: np.array(values, dtype=np.int64)
+    return FreeBodies(ints(joints), ints([model.idx_qs[j] for j in joints]),
+                      ints([model.idx_vs[j] for j in joints]),
+                      np.array([model.jointPlacements[j].rotation for j in joints]).reshape(-1, 3, 3),
+                      np.array([model.jointPlacements[j].translation for j in joints]).reshape(-1, 3),
+                      np.array([model.inertias[j].lever for j in joints]).reshape(-1, 3),
+                      np.array([model.inertias[j].mass for j in joints], dtype=float),
+                      np.array([model.inertias[j].inertia for j in joints]).reshape(-1, 3, 3))
+
+
+# ------------------------------------------------------------------------------- poses
+
+
+@njit
+def body_rotation9(bodies, b, q):
+    """Rotation of free body b in the world as a 9-tuple, row by row: R_P times the rotation
+    of the joint's quaternion."""
+    iq = bodies.idx_q[b]
+    return mm9(bodies.R_P[b], quat_rotation9(q[iq + 3], q[iq + 4], q[iq + 5], q[iq + 6]))
+
+
+@njit
+def body_rotation_into(bodies, b, q, out):
+    """`body_rotation9`, written into out (3, 3)."""
+    put9(out, body_rotation9(bodies, b, q))
+
+
+@njit
+def body_rotation(bodies, b, q):
+    """Rotation (3, 3) of free body b in the world, from q."""
+    R = np.empty((3, 3))
+    body_rotation_into(bodies, b, q, R)
+    return R
+
+
+@njit
+def body_origin3(bodies, b, q):
+    """Origin of free body b in the world, from q, as a 3-tuple."""
+    iq = bodies.idx_q[b]
+    return add3(mv3(bodies.R_P[b], q[iq:iq + 3]), bodies.p_P[b])
+
+
+@njit
+def kinematics(m, d):
+    """Stage 1: each free body's rotation, origin, angular velocity and origin velocity in the
+    world, into rows m.bodies.joint of d.R_W, d.p_W, d.w_W, d.vo_W (fixed bodies stay at the
+    identity)."""
+    bodies, q, v = m.bodies, d.q, d.v
+    R_W, p_W, w_W, vo_W = d.R_W, d.p_W, d.w_W, d.vo_W
+    for b in range(bodies.joint.shape[0]):
+        j, iv = bodies.joint[b], bodies.idx_v[b]
+        R = R_W[j]
+        body_rotation_into(bodies, b, q, R)
+        put3(p_W[j], 0, body_origin3(bodies, b, q))
+        put3(vo_W[j], 0, mv3(R, v[iv:iv + 3]))
+        put3(w_W[j], 0, mv3(R, v[iv + 3:iv + 6]))
+
+
+# ------------------------------------------------------------------------------- centroids
+
+
+@njit
+def centroid_state_at(bodies, b, R, q, v):
+    """World centroid position and velocity, rotation, and body angular velocity of free body
+    b, given its rotation R (from q): 3-tuple, 3-tuple, R, 3-tuple."""
+    iv = bodies.idx_v[b]
+    c = bodies.lever[b]
+    v_O, w = v[iv:iv + 3], v[iv + 3:iv + 6]
+    return add3(body_origin3(bodies, b, q), mv3(R, c)), mv3(R, add3(v_O, cross3(w, c))), R, (w[0], w[1], w[2])
+
+
+@njit
+def centroid_state(bodies, b, q, v):
+    """`centroid_state_at` with the rotation computed from q."""
+    return centroid_state_at(bodies, b, body_rotation(bodies, b, q), q, v)
+
+
+@njit
+def centroid_acceleration(R, c, v_O, w, a_O, alpha):
+    """d/dt of R (v_O + w x c): the centroid's world acceleration from the body-frame twist
+    (v_O, w) and its derivative (a_O, alpha); c is the centroid in the body frame. A 3-tuple."""
+    return mv3(R, add3(add3(add3(a_O, cross3(w, v_O)), cross3(alpha, c)), cross3(w, cross3(w, c))))
+
+
+@njit
+def set_centroid_state(bodies, b, q, v, p_G, v_G, quat, w):
+    """Write free body b's configuration and velocity from its world centroid state and its
+    joint's quaternion (x, y, z, w), in place."""
+    iq, iv = bodies.idx_q[b], bodies.idx_v[b]
+    c = bodies.lever[b]
+    Rq = quat_rotation9(quat[0], quat[1], quat[2], quat[3])
+    R_P = bodies.R_P[b]
+    # p_G = p_P + R_P (x + Rq c)
+    put3(q, iq, sub3(mtv3(R_P, sub3(p_G, bodies.p_P[b])), mv9(Rq, c)))
+    q[iq + 3], q[iq + 4], q[iq + 5], q[iq + 6] = quat[0], quat[1], quat[2], quat[3]
+    put3(v, iv, sub3(mtv9(mm9(R_P, Rq), v_G), cross3(w, c)))
+    put3(v, iv + 3, w)
+
+
+# ------------------------------------------------------------------------------- momenta
+
+
+@njit_inline
+def body_momentum3(bodies, b, q, v):
+    """Free body b's linear momentum, its angular momentum about the world origin and its
+    centroid (world), as 3-tuples."""
+    iv = bodies.idx_v[b]
+    R = body_rotation9(bodies, b, q)
+    m, lever = bodies.mass[b], bodies.lever[b]
+    w = v[iv + 3:iv + 6]
+    v_G = mv9(R, add3(v[iv:iv + 3], cross3(w, lever)))
+    p_G = add3(body_origin3(bodies, b, q), mv9(R, lever))
+    p_b = (m * v_G[0], m * v_G[1], m * v_G[2])
+    l_b = add3(cross3(p_G, p_b), mv9(R, mv3(bodies.inertia_G[b], w)))
+    return p_b, l_b, p_G
+
+
+@njit_inline
+def bodies_momentum(bodies, rows, q, v):
+    """Linear and angular momentum (about the world origin) of the free bodies `rows`, summed,
+    and the largest single body's linear and angular momentum magnitudes: (3,), (3,), float,
+    float. Also their centroid (3,), m."""
+    P, L, c = np.zeros(3), np.zeros(3), np.zeros(3)
+    p_max = l_max = m_sum = 0.0
+    for b in rows:
+        p_b, l_b, p_G = body_momentum3(bodies, b, q, v)
+        m = bodies.mass[b]
+        for i in range(3):
+            P[i] += p_b[i]
+            L[i] += l_b[i]
+            c[i] += m * p_G[i]
+        m_sum += m
+        p_max = max(p_max, math.sqrt(p_b[0] ** 2 + p_b[1] ** 2 + p_b[2] ** 2))
+        l_max = max(l_max, math.sqrt(l_b[0] ** 2 + l_b[1] ** 2 + l_b[2] ** 2))
+    return P, L, p_max, l_max, c / m_sum
+
+
+@njit_inline
+def bodies_centroid3(bodies, rows, q):
+    """The centroid of the free bodies `rows` (world, m) as a 3-tuple: `bodies_momentum`'s,
+    without the momenta."""
+    c0 = c1 = c2 = m_sum = 0.0
+    for b in rows:
+        m = bodies.mass[b]
+        p_G = add3(body_origin3(bodies, b, q), mv9(body_rotation9(bodies, b, q), bodies.lever[b]))
+        c0 += m * p_G[0]
+        c1 += m * p_G[1]
+        c2 += m * p_G[2]
+        m_sum += m
+    return c0 / m_sum, c1 / m_sum, c2 / m_sum
+
+
+@njit_inline
+def kinetic_energy(bodies, q, v):
+    """Kinetic energy of all free bodies, J: 1/2 m |v_G|^2 + 1/2 omega . I_G omega."""
+    total = 0.0
+    for b in range(bodies.joint.shape[0]):
+        iv = bodies.idx_v[b]
+        w = v[iv + 3:iv + 6]
+        v_G = add3(v[iv:iv + 3], cross3(w, bodies.lever[b]))  # body axes; the norm is frame-free
+        Iw = mv3(bodies.inertia_G[b], w)
+        total += 0.5 * bodies.mass[b] * (v_G[0] * v_G[0] + v_G[1] * v_G[1] + v_G[2] * v_G[2]) + \
+            0.5 * (w[0] * Iw[0] + w[1] * Iw[1] + w[2] * Iw[2])
+    return total

@@ -1,0 +1,49 @@
+"""Stage: what a run keeps of each step: counts, the active grasp's peaks, the drives' work and
+the external impulse on the free bodies (for the momentum balance)."""
+
+from __future__ import annotations
+
+import math
+
+from ..jit import njit, njit_inline
+from ..linalg import cross, mv
+
+
+@njit
+def raise_peaks(d):
+    """Raise the active grasp's peaks to include the last step's contact wrench and pairs."""
+    g, s = d.active, d.summary
+    f, tau = s.force_A, s.torque_A
+    for a in range(3):
+        d.peak_force[g, a] = max(d.peak_force[g, a], abs(f[a]))
+        d.peak_torque[g, a] = max(d.peak_torque[g, a], abs(tau[a]))
+    d.peak_force_norm[g] = max(d.peak_force_norm[g], math.sqrt(f[0] ** 2 + f[1] ** 2 + f[2] ** 2))
+    d.peak_torque_norm[g] = max(d.peak_torque_norm[g], math.sqrt(tau[0] ** 2 + tau[1] ** 2 + tau[2] ** 2))
+    d.peak_pairs[g] = max(d.peak_pairs[g], d.contacts.key.shape[0])
+
+
+@njit
+def bookkeeping(m, d, h):
+    """Stage: count the step of h (s), raise the peaks, add the drives' work and the external
+    impulse: the fixed bodies' contact forces (a fixed base; between free bodies every contact
+    force is internal) and gravity, at the poses of the step's last force evaluation."""
+    if not d.stalled[m.grasps.ee[d.active]]:
+        d.held = False
+    n = d.contacts.key.shape[0]
+    d.steps += 1
+    d.pair_steps += n
+    d.drive_work += h * d.drive_power
+    if n:
+        raise_peaks(d)
+    if m.limits.fixed_contact:
+        for i in range(3):
+            d.impulse_W[i] += h * d.external_force_W[i]
+            d.impulse_moment_O_W[i] += h * d.external_torque_O_W[i]
+    g_W = m.gravity_W
+    if g_W[0] != 0.0 or g_W[1] != 0.0 or g_W[2] != 0.0:
+        bodies = m.bodies
+        for b in range(bodies.joint.shape[0]):
+            j = bodies.joint[b]
+            r_G = d.p_W[j] + mv(d.R_W[j], bodies.lever[b])
+            d.impulse_W[:] += h * bodies.mass[b] * g_W
+            d.impulse_moment_O_W[:] += h * cross(r_G, bodies.mass[b] * g_W)

@@ -1,0 +1,191 @@
+"""The compiled Data: everything that changes during a run, in one mutable structure.
+
+`Data` is a structure of `structs` (a numba structref): compiled code reads and writes its
+fields by name (`d.t += h`, `d.contacts = ...`) and passes it as one pointer. Its fields are
+those of `DataFields`, one place that names and documents them. From Python a field reads as
+an attribute (`data.q`: arrays are the live arrays, numbers a copy), and `data.assign(t=...)`
+writes fields.
+
+Arrays of a fixed size (q, v, the kinematics, the per-grasp records) are written in place;
+those whose size changes with the contacts (the pairs, their memory, the pair list) are
+replaced whole by the stage that makes them.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+from numba.experimental import structref
+
+from ..contact.forces import Contacts, Memory, no_contacts, no_memory
+from ..contact.search import Candidates, PairList, empty_pair_list, no_candidates
+from ..contact.wrenches import Loads, Summary, no_loads, no_summary
+from ..structs import StructProxy, StructType, new_struct, register, view
+
+#: Record rows the row buffer holds: the compiled loop returns to Python after at most this
+#: many (each return updates the progress bar and lets Ctrl-C in); 250 rows are 0.25 s
+#: simulated at the default record interval.
+ROWS_PER_CALL = 250
+#: The grasp phases, in order.
+APPROACH, SELF_CENTRING, COMPLETE = 0, 1, 2
+PHASE_NAMES = ("approach", "self_centring", "complete")
+#: Numbers per free body in a Runge-Kutta state: centroid (world), quaternion, centroid
+#: velocity (world), angular velocity (body).
+RK_STATE = 13
+
+
+class Snapshots(NamedTuple):
+    """The replay's contact snapshots taken during one call of the loop (`sim.record`)."""
+
+    row: np.ndarray  # (cap,) the run's row each is taken at
+    pairs: np.ndarray  # (cap,) pairs in contact at it
+    force_W: np.ndarray  # (cap, n_modules, 3) each module's combined contact force, world, N
+    master: np.ndarray  # (cap_pairs,) the pairs of all snapshots, concatenated
+    slave: np.ndarray
+    state: np.ndarray
+
+
+class DataFields(NamedTuple):
+    """The fields of Data: the state of a run, its bookkeeping and its scratch buffers."""
+
+    # the state
+    t: float  # s
+    q: np.ndarray  # (nq,) configuration (free-flyers: xyz, quaternion xyzw)
+    v: np.ndarray  # (nv,) velocity (free-flyers: v_O, omega in the body frame)
+    a: np.ndarray  # (nv,) acceleration at the last force evaluation
+    opening: np.ndarray  # (n_f,) each finger's opening, m
+    opening_rate: np.ndarray  # (n_f,) its rate during the coming step, m/s
+    # the kinematics of the last force evaluation, rows by joint (fixed bodies: identity)
+    R_W: np.ndarray  # (njoints, 3, 3)
+    p_W: np.ndarray  # (njoints, 3) m
+    w_W: np.ndarray  # (njoints, 3) angular velocity, world, rad/s
+    vo_W: np.ndarray  # (njoints, 3) the joint origin's velocity, world, m/s
+    # the broad phase (coal, refreshed from Python) and the search
+    near: np.ndarray  # (k,) the face pairs coal kept within its margin
+    travel: float  # bound on any two spheres' relative motion since coal's last run, m
+    pair_list: PairList
+    candidates: Candidates
+    # the contact of the last force evaluation
+    contacts: Contacts
+    memory: Memory  # what the pairs carry into the next evaluation (the last committed one)
+    loads: Loads
+    summary: Summary
+    external_force_W: np.ndarray  # (3,) fixed bodies' force on the free ones, mean over the last step, N
+    external_torque_O_W: np.ndarray  # (3,) its moment about the world origin, N m
+    # the grasps: the active one's drive and phase, and each one's record
+    active: int  # the grasp under way
+    stalled: np.ndarray  # (n_ee,) each end-effector's drive holds at the grasp load
+    phase: np.ndarray  # (n_g,) APPROACH, SELF_CENTRING or COMPLETE
+    held_since: float  # since when the completion criteria hold, s (nan: they do not)
+    t_start: np.ndarray  # (n_g,) when each grasp's drive started, s (nan: not yet)
+    t_contact: np.ndarray  # (n_g,) its first contact, s (nan: none yet)
+    t_complete: np.ndarray  # (n_g,) its completion, s (nan: not complete)
+    peak_force: np.ndarray  # (n_g, 3) per axis of O_a, the largest |contact force| on the module, N
+    peak_torque: np.ndarray  # (n_g, 3) ... and |moment about its centroid|, N m
+    peak_force_norm: np.ndarray  # (n_g,) N
+    peak_torque_norm: np.ndarray  # (n_g,) N m
+    peak_pairs: np.ndarray  # (n_g,) most pairs in contact at once
+    # the run's bookkeeping
+    impulse_W: np.ndarray  # (3,) external impulse on the free bodies (fixed contacts, gravity), N s
+    impulse_moment_O_W: np.ndarray  # (3,) its moment about the world origin, N m s
+    drive_power: float  # the finger drives' power during the last step (a bound), W
+    drive_work: float  # the work they did since the start (a bound), J
+    steps: int  # dynamics steps taken
+    pair_steps: int  # pairs in contact summed over the steps
+    flights: int  # record intervals taken as one free-flight step
+    evaluations: int  # force evaluations
+    accepted: int  # steps accepted (all but an adaptive integrator's rejected tries)
+    rejected: int  # adaptive steps rejected
+    energy_start: float  # mechanical energy at the start, J
+    energy_now: float  # ... at the last record, J
+    energy_passive: float  # ... when the current passive phase began, J (nan: not in one)
+    momentum_start: np.ndarray  # (3,) the free bodies' linear momentum at the start, kg m/s
+    angular_momentum_start: np.ndarray  # (3,) their angular momentum about the world origin
+    momentum_max: float  # the largest single body's linear momentum, kg m/s
+    angular_momentum_max: float  # ... angular momentum, kg m^2/s
+    momentum_drift: float  # the largest |momentum - start - external impulse| recorded
+    angular_momentum_drift: float
+    # the record interval under way (`sim.loop`)
+    left: int  # steps left in it
+    h: float  # its dynamics step, s
+    t_end: float  # its end, s
+    flight: bool  # taken as one free-flight step
+    held: bool  # the active drive held the fingers through all of it so far
+    # the integrator
+    h_next: float  # the step an adaptive integrator tries next, s (0: none yet)
+    fsal: bool  # the last committed evaluation can be the next step's first stage
+    fsal_t: float  # ... at this time,
+    fsal_rate: np.ndarray  # (n_f,) ... with these finger rates:
+    fsal_dy: np.ndarray  # (13 n_bodies,) its state derivative
+    fsal_external: np.ndarray  # (6,) its external wrench (force, moment about the origin)
+    # the record rows and replay snapshots of one call of the loop
+    rows: np.ndarray  # (ROWS_PER_CALL, width)
+    n_rows: int
+    row_index: int  # the run's index of the next row
+    last_open: np.ndarray  # (n_f of the first model,) each finger's last opening, m
+    snapshots: Snapshots
+    n_snapshots: int
+    n_snapshot_pairs: int
+
+
+@structref.register
+class DataType(StructType):
+    pass
+
+
+class Data(StructProxy):
+    """A run's compiled Data (see `DataFields` for its fields)."""
+
+    def copy(self) -> Data:
+        """A deep copy: no array shared."""
+        return new_struct(_copied(view(self)))
+
+
+register(DataType, DataFields, Data)
+
+
+def _copied(x):
+    if isinstance(x, np.ndarray):
+        return x.copy()
+    if isinstance(x, tuple) and hasattr(x, "_fields"):
+        return type(x)(*(_copied(v) for v in x))
+    return x
+
+
+def make_data(model, rows: int = ROWS_PER_CALL) -> Data:
+    """The Data of a run's start on `model` (a `build.model.Model`): at rest in q0, the fingers
+    at their start openings, no contact, every grasp still to come."""
+    sim = model.sim
+    nj, n_f = model.pin_model.njoints, len(model.fingers)
+    n_g, n_ee, n_mod = len(model.grasps), len(model.end_effectors), len(model.modules)
+    nan = lambda n: np.full(n, np.nan)
+    snap_cap = rows // sim.record.replay_every + 1
+    ints = lambda n: np.zeros(n, dtype=np.int64)
+    f = DataFields(
+        t=0.0, q=model.q0.copy(), v=model.v0.copy(), a=np.zeros(model.pin_model.nv),
+        opening=np.array([f.opening_start for f in model.fingers], dtype=float).reshape(n_f),
+        opening_rate=np.zeros(n_f),
+        R_W=np.tile(np.eye(3), (nj, 1, 1)), p_W=np.zeros((nj, 3)), w_W=np.zeros((nj, 3)), vo_W=np.zeros((nj, 3)),
+        near=ints(0), travel=math.inf, pair_list=empty_pair_list(len(sim.faces.master_start)),
+        candidates=no_candidates(), contacts=no_contacts(), memory=no_memory(), loads=no_loads(nj, n_f),
+        summary=no_summary(), external_force_W=np.zeros(3), external_torque_O_W=np.zeros(3),
+        active=0, stalled=np.zeros(n_ee, dtype=np.bool_), phase=ints(n_g), held_since=math.nan,
+        t_start=np.r_[0.0, nan(n_g - 1)], t_contact=nan(n_g), t_complete=nan(n_g),
+        peak_force=np.zeros((n_g, 3)), peak_torque=np.zeros((n_g, 3)), peak_force_norm=np.zeros(n_g),
+        peak_torque_norm=np.zeros(n_g), peak_pairs=ints(n_g),
+        impulse_W=np.zeros(3), impulse_moment_O_W=np.zeros(3), drive_power=0.0, drive_work=0.0,
+        steps=0, pair_steps=0, flights=0, evaluations=0, accepted=0, rejected=0,
+        energy_start=0.0, energy_now=0.0, energy_passive=math.nan, momentum_start=np.zeros(3),
+        angular_momentum_start=np.zeros(3), momentum_max=0.0, angular_momentum_max=0.0, momentum_drift=0.0,
+        angular_momentum_drift=0.0,
+        left=0, h=sim.dt / sim.substeps, t_end=0.0, flight=False, held=False,
+        h_next=0.0, fsal=False, fsal_t=0.0, fsal_rate=np.zeros(n_f),
+        fsal_dy=np.zeros(RK_STATE * len(sim.bodies.joint)), fsal_external=np.zeros(6),
+        rows=np.zeros((rows, sim.record.width)), n_rows=0, row_index=0,
+        last_open=np.array([f.opening_start for f in model.fingers], dtype=float).reshape(n_f),
+        snapshots=Snapshots(ints(snap_cap), ints(snap_cap), np.zeros((snap_cap, n_mod, 3)), ints(64), ints(64),
+                            ints(64)),
+        n_snapshots=0, n_snapshot_pairs=0)
+    return new_struct(f)

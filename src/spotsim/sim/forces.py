@@ -1,0 +1,24 @@
+"""One force evaluation: the contact stages of the paper's Fig. 5, in order.
+
+kinematics -> sphere pairs -> pair forces -> wrenches (-> what the step watches). Every
+integrator evaluates the forces through this one function (`sim.integrators`).
+"""
+
+from __future__ import annotations
+
+from ..contact.forces import pair_forces
+from ..contact.search import find_pairs
+from ..contact.wrenches import body_wrenches, contact_summary
+from ..jit import njit, njit_inline
+from .bodies import kinematics
+
+
+@njit
+def forces(m, d, h):
+    """The contact wrenches at d's state (q, v, the finger openings and rates), the bristles
+    bent over h (s) from d.memory, which is left as it is."""
+    kinematics(m, d)  # Eq. (1): the bodies' poses and velocities
+    find_pairs(m, d)  # Eq. (6)-(10): culled, or the paper's literal all-pairs search
+    pair_forces(m, d, h)  # Eq. (11)-(17), per pair
+    body_wrenches(m, d)  # Eq. (18)-(21), one wrench per body
+    contact_summary(m, d)  # the active module's wrench in O_a, the fastest and deepest pair

@@ -1,0 +1,263 @@
+"""Time integrators, compiled: each advances d by one step through the same stages.
+
+An integrator is one function `f(m, d, h) -> h_taken` that evaluates the forces
+(`sim.forces.forces`) and the accelerations (`sim.dynamics.accelerations`) where its scheme
+needs them, commits the pair memory of the state it ends at, updates (q, v), and sets the
+step's mean external wrench on the free bodies (for the momentum balance). `integrate`
+dispatches on the model's method; a new integrator is one more such function and its code.
+
+Free bodies hang on free-flyer joints, whose velocity Pinocchio keeps in the body frame. The
+integrators advance each free body's centroid in the world frame instead: contact forces come
+in equal and opposite pairs, so the sum of m_i a_G,i is zero to round-off and the total linear
+momentum, and the system's centroid velocity, stay exact. A body-frame twist update does not
+keep them: its error grows with (omega h)^2.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..contact.forces import commit_memory
+from ..jit import njit, njit_inline
+from ..linalg import axpy3, put3, quat_times_exp4
+from .bodies import body_rotation, centroid_acceleration, centroid_state, centroid_state_at, set_centroid_state
+from .data import RK_STATE
+from .dynamics import accelerations
+from .forces import forces
+
+SYMPLECTIC_EULER, RK4, DOPRI5 = range(3)
+METHODS = ("symplectic_euler", "rk4", "dopri5")
+#: An adaptive step grows at most, and shrinks at least, by these factors per try; its error
+#: ratio r scales it by SAFETY r^(-1/5) in between (Hairer, Norsett and Wanner, II.4).
+GROW_MAX, SHRINK_MIN, SAFETY = 5.0, 0.2, 0.9
+
+
+@njit_inline
+def integrate(m, d, h):
+    """One step of at most h (s) by the model's integrator: the step taken, s, or 0.0 if an
+    adaptive step fell below its least size (the run has diverged)."""
+    if m.integrator.method == SYMPLECTIC_EULER:
+        symplectic_euler(m, d, h)
+        return h
+    return runge_kutta(m, d, h)
+
+
+# ------------------------------------------------------------------------- symplectic Euler
+
+
+@njit_inline
+def _euler_body(bodies, b, R, q, v, a_O, alpha, h):
+    """Free body b's symplectic Euler step, in place, given its rotation R (from q) and its
+    twist's derivative (a_O, alpha): v_G += h a_G and omega += h alpha, then x_G += h v_G and
+    R <- R exp(h omega), centroid in world, rotation in body."""
+    iq = bodies.idx_q[b]
+    iv = bodies.idx_v[b]
+    p_G, v_G, R, w = centroid_state_at(bodies, b, R, q, v)
+    a_G = centroid_acceleration(R, bodies.lever[b], v[iv:iv + 3], w, a_O, alpha)
+    v_G = axpy3(h, a_G, v_G)
+    w = axpy3(h, alpha, w)
+    # a unit quaternion, or the round-off in R compounds from step to step
+    quat = quat_times_exp4(q[iq + 3:iq + 7], h * w[0], h * w[1], h * w[2])
+    set_centroid_state(bodies, b, q, v, axpy3(h, v_G, p_G), v_G, quat, w)
+
+
+@njit
+def symplectic_euler(m, d, h):
+    """Semi-implicit Euler, the paper's fixed-step explicit scheme: forces and accelerations
+    at the step's start, velocities first, then positions with the new velocities."""
+    forces(m, d, h)
+    commit_memory(d)
+    accelerations(m, d)
+    bodies, a = m.bodies, d.a
+    for b in range(bodies.joint.shape[0]):
+        iv = bodies.idx_v[b]
+        _euler_body(bodies, b, d.R_W[bodies.joint[b]], d.q, d.v, a[iv:iv + 3], a[iv + 3:iv + 6], h)
+    loads = d.loads
+    d.external_force_W[:] = loads.external_force_W
+    d.external_torque_O_W[:] = loads.external_torque_O_W
+    d.evaluations += 1
+    d.accepted += 1
+
+
+# --------------------------------------------------------------------------- Runge-Kutta
+# The free bodies' state for Runge-Kutta methods: per body RK_STATE numbers, the centroid's
+# world position, the joint's unit quaternion (x, y, z, w), the centroid's world velocity and
+# the body angular velocity. Pairwise contact forces keep sum m a_G = 0 at every stage, so a
+# linear combination of stages keeps the total linear momentum to round-off.
+
+
+@njit
+def pack(bodies, q, v):
+    """The Runge-Kutta state y of the free bodies at (q, v)."""
+    y = np.empty(RK_STATE * bodies.joint.shape[0])
+    for b in range(bodies.joint.shape[0]):
+        p_G, v_G, _, w = centroid_state(bodies, b, q, v)
+        iq, o = bodies.idx_q[b], RK_STATE * b
+        put3(y, o, p_G)
+        y[o + 3:o + 7] = q[iq + 3:iq + 7]
+        put3(y, o + 7, v_G)
+        put3(y, o + 10, w)
+    return y
+
+
+@njit
+def unpack(bodies, y, q, v):
+    """Write the state y into (q, v), in place; quaternions normalised."""
+    for b in range(bodies.joint.shape[0]):
+        o = RK_STATE * b
+        quat = y[o + 3:o + 7] / np.linalg.norm(y[o + 3:o + 7])
+        set_centroid_state(bodies, b, q, v, y[o:o + 3].copy(), y[o + 7:o + 10].copy(), quat, y[o + 10:o + 13].copy())
+
+
+@njit
+def derivative(bodies, y, q, v, a):
+    """dy/dt at the state y = (q, v) given the accelerations a there."""
+    dy = np.empty_like(y)
+    for b in range(bodies.joint.shape[0]):
+        o, iv = RK_STATE * b, bodies.idx_v[b]
+        R = body_rotation(bodies, b, q)
+        w = v[iv + 3:iv + 6]
+        x, qy, z, qw = y[o + 3], y[o + 4], y[o + 5], y[o + 6]
+        dy[o:o + 3] = y[o + 7:o + 10]
+        # q' = q (x) (omega, 0) / 2, omega in the body frame
+        dy[o + 3] = 0.5 * (qw * w[0] + qy * w[2] - z * w[1])
+        dy[o + 4] = 0.5 * (qw * w[1] + z * w[0] - x * w[2])
+        dy[o + 5] = 0.5 * (qw * w[2] + x * w[1] - qy * w[0])
+        dy[o + 6] = -0.5 * (x * w[0] + qy * w[1] + z * w[2])
+        put3(dy, o + 7, centroid_acceleration(R, bodies.lever[b], v[iv:iv + 3], w, a[iv:iv + 3], a[iv + 3:iv + 6]))
+        dy[o + 10:o + 13] = a[iv + 3:iv + 6]
+    return dy
+
+
+@njit
+def error_norm(err, y0, y1, rtol, atol):
+    """RMS of err scaled by atol + rtol max(|y0|, |y1|), per component."""
+    total = 0.0
+    for i in range(err.shape[0]):
+        sc = atol + rtol * max(abs(y0[i]), abs(y1[i]))
+        total += (err[i] / sc) ** 2
+    return math.sqrt(total / err.shape[0])
+
+
+@njit
+def _stage(m, d, y, dt, opening0, commit, external):
+    """dy at the state y, dt (s) into the step (the fingers at opening0 + dt times their rates,
+    the bristles bent over dt from the memory); its external wrench goes into external (6,).
+    commit: the memory is then that of this evaluation."""
+    unpack(m.bodies, y, d.q, d.v)
+    for i in range(d.opening.shape[0]):
+        d.opening[i] = opening0[i] + dt * d.opening_rate[i]
+    forces(m, d, dt)
+    if commit:
+        commit_memory(d)
+    accelerations(m, d)
+    d.evaluations += 1
+    external[:3] = d.loads.external_force_W
+    external[3:] = d.loads.external_torque_O_W
+    return derivative(m.bodies, y, d.q, d.v, d.a)
+
+
+@njit
+def _combine(y0, h, weights, k, n_k):
+    """y0 + h sum_j weights[j] k[j] over the first n_k stages, the zero weights left out."""
+    acc = np.zeros(y0.shape[0])
+    for j in range(n_k):
+        if weights[j] != 0.0:
+            for x in range(acc.shape[0]):
+                acc[x] = acc[x] + weights[j] * k[j, x]
+    out = np.empty(y0.shape[0])
+    for x in range(out.shape[0]):
+        out[x] = y0[x] + h * acc[x]
+    return out
+
+
+@njit
+def runge_kutta(m, d, h):
+    """One accepted step of an explicit Runge-Kutta method (the model's tableau), of h or, if
+    adaptive, of at most min(h, d.h_next) with error control (d.h before its first step): returns the step taken, or 0.0
+    if it fell below h_min.
+
+    Each stage evaluates the forces at its state with the pair memory of the step's start
+    ([reading] a stage at t0 + c h bends each bristle by v_t c h from its start deflection,
+    and new pairs take the stage's approach speed). Only the accepted end commits the memory,
+    from its state with the whole step (bending by v_t h); that evaluation is also the next
+    step's first stage while the finger rates stay as they were. The fingers move at the
+    drive's rate through the step.
+    """
+    p = m.integrator
+    s = p.b.shape[0]
+    opening0 = d.opening.copy()
+    y0 = pack(m.bodies, d.q, d.v)
+    k = np.empty((s, y0.shape[0]))
+    external = np.empty((s, 6))
+    if d.fsal and d.fsal_t == d.t and np.array_equal(d.fsal_rate, d.opening_rate):
+        k[0] = d.fsal_dy
+        external[0] = d.fsal_external
+    else:
+        k[0] = _stage(m, d, y0, 0.0, opening0, False, external[0])
+    if p.adaptive:  # its last step's estimate, or before any, the interval's step
+        h = min(h, d.h_next if d.h_next > 0.0 else d.h)
+    while True:
+        for i in range(1, s):
+            k[i] = _stage(m, d, _combine(y0, h, p.A[i], k, i), p.c[i] * h, opening0, False, external[i])
+        y1 = _combine(y0, h, p.b, k, s)
+        if not p.adaptive:
+            break
+        zero = np.zeros(y0.shape[0])
+        ratio = error_norm(_combine(zero, h, p.e, k, s), y0, y1, p.rtol, p.atol)
+        if ratio <= 1.0:
+            grow = GROW_MAX if ratio == 0.0 else min(GROW_MAX, max(SHRINK_MIN, SAFETY * ratio ** -0.2))
+            d.h_next = min(p.h_max, h * grow)
+            break
+        d.rejected += 1
+        h *= max(SHRINK_MIN, SAFETY * ratio ** -0.2)
+        if h < p.h_min:
+            return 0.0
+    d.accepted += 1
+    # the step's external impulse: the stages' wrenches, weighted
+    mean = np.zeros(6)
+    for i in range(s):
+        if p.b[i] != 0.0:
+            for x in range(6):
+                mean[x] = mean[x] + p.b[i] * external[i, x]
+    # the accepted end: commit the pair memory; this is the next step's first stage
+    # (it leaves d at y1, the fingers at their opening after h)
+    end = np.empty(6)
+    d.fsal_dy[:] = _stage(m, d, y1, h, opening0, True, end)
+    d.fsal, d.fsal_t = True, d.t + h
+    d.fsal_rate[:] = d.opening_rate
+    d.fsal_external[:] = end
+    d.external_force_W[:] = mean[:3]
+    d.external_torque_O_W[:] = mean[3:]
+    return h
+
+
+# ------------------------------------------------------------------------------- tableaus
+
+
+def tableau(method: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The Butcher tableau (A, b, c, e) of an explicit Runge-Kutta method; e: the embedded
+    error estimate's weights (empty for a fixed-step method)."""
+    if method == "rk4":  # the classical fourth-order method
+        A = ((0.0, 0.0, 0.0, 0.0), (0.5, 0.0, 0.0, 0.0), (0.0, 0.5, 0.0, 0.0), (0.0, 0.0, 1.0, 0.0))
+        return np.array(A), np.array((1 / 6, 1 / 3, 1 / 3, 1 / 6)), np.array((0.0, 0.5, 0.5, 1.0)), np.zeros(0)
+    if method == "dopri5":  # Dormand-Prince 5(4), its last stage at the step's end (FSAL)
+        A = np.zeros((7, 7))
+        rows = ((), (1 / 5,), (3 / 40, 9 / 40), (44 / 45, -56 / 15, 32 / 9),
+                (19372 / 6561, -25360 / 2187, 64448 / 6561, -212 / 729),
+                (9017 / 3168, -355 / 33, 46732 / 5247, 49 / 176, -5103 / 18656),
+                (35 / 384, 0.0, 500 / 1113, 125 / 192, -2187 / 6784, 11 / 84))
+        for i, row in enumerate(rows):
+            A[i, :len(row)] = row
+        b = np.array((35 / 384, 0.0, 500 / 1113, 125 / 192, -2187 / 6784, 11 / 84, 0.0))
+        b4 = np.array((5179 / 57600, 0.0, 7571 / 16695, 393 / 640, -92097 / 339200, 187 / 2100, 1 / 40))
+        return A, b, np.array((0.0, 1 / 5, 3 / 10, 4 / 5, 8 / 9, 1.0, 1.0)), b - b4
+    if method == "symplectic_euler":
+        return np.zeros((0, 0)), np.zeros(0), np.zeros(0), np.zeros(0)
+    raise ValueError(f"unknown integrator {method!r}; valid: {', '.join(METHODS)}")
+
+
+#: Each method's order (for the studies' convergence checks).
+ORDER = {"symplectic_euler": 1, "rk4": 4, "dopri5": 5}

@@ -1,0 +1,98 @@
+"""The record intervals of a run, compiled: steps, records, and why the loop stops.
+
+A record interval of dt is one free-flight step when nothing can touch within it
+(`step.free_flight`), else `substeps` steps of dt / substeps (an adaptive integrator: its own
+steps until dt is covered). Each ends with a record (`record.close_interval`). The loop returns
+to Python when coal's face pairs must be refreshed (the Verlet skin is used up), when its row
+buffer is full, when the grasp phase completes or times out, or when the run diverges.
+"""
+
+from __future__ import annotations
+
+from ..jit import njit
+from .data import COMPLETE
+from .record import ENERGY as ENERGY_RECORD
+from .record import ENERGY_WORK as ENERGY_WORK_RECORD
+from .record import NONFINITE as NONFINITE_RECORD
+from .record import close_interval
+from .step import free_flight, step
+
+#: Why `run_intervals` returned: it recorded the rows asked for; the skin is used up (refresh
+#: coal and go on); the grasp phase completed or timed out; a pair penetrated deeper than a
+#: sphere radius; the state became non-finite; energy grew in a passive phase, or past what
+#: the drives could have put in; an adaptive step fell below its least size.
+RAN, REFRESH, STOPPED, TOO_DEEP, NONFINITE, ENERGY, ENERGY_WORK, UNDERFLOW = range(8)
+#: An adaptive integrator's interval is covered once less than this share of dt is left.
+INTERVAL_COVERED = 1e-9
+
+
+@njit
+def begin_interval(m, d):
+    """Set up the next record interval: one free-flight step of dt, or steps of dt / substeps
+    (an adaptive integrator's own, up to dt)."""
+    d.flight = free_flight(m, d)
+    d.flights += d.flight
+    d.t_end = d.t + m.dt
+    if d.flight:
+        d.left, d.h = 1, m.dt
+    elif m.integrator.adaptive:
+        d.left, d.h = 1, m.dt / m.substeps
+    else:
+        d.left, d.h = m.substeps, m.dt / m.substeps
+    d.held = d.stalled[m.grasps.ee[d.active]]  # the drive holds through the interval so far
+
+
+@njit
+def interval_steps(m, d):
+    """The steps left in the interval under way (fewer if the loop must return): RAN, or why
+    it stopped early (REFRESH, STOPPED, TOO_DEEP, UNDERFLOW)."""
+    adaptive = m.integrator.adaptive and not d.flight
+    while d.left > 0:
+        h = step(m, d, d.t_end - d.t if adaptive else d.h)
+        if h == 0.0:
+            return UNDERFLOW
+        if adaptive:
+            d.left = 1 if d.t_end - d.t > INTERVAL_COVERED * m.dt else 0
+        else:
+            d.left -= 1
+        if d.contacts.key.shape[0] and d.summary.max_penetration > m.limits.max_penetration:
+            return TOO_DEEP
+        g = d.active
+        if d.phase[g] == COMPLETE or d.t - d.t_start[g] > m.completion.phase_timeout:
+            return STOPPED
+        if not m.literal and d.travel > m.limits.skin and d.left > 0:
+            return REFRESH
+    return RAN
+
+
+@njit
+def run_intervals(m, d, n_records):
+    """Up to n_records record intervals of the active grasp (at most d.rows' length), their
+    rows and snapshots into d.rows and d.snapshots; returns why it stopped (RAN when all
+    n_records rows are written).
+
+    Enter with coal's face pairs fresh (d.travel within the skin) or within an interval: it
+    then takes at least one step.
+    """
+    d.n_rows = d.n_snapshots = d.n_snapshot_pairs = 0
+    while True:
+        if d.left == 0:
+            if not m.literal and d.travel > m.limits.skin:
+                return REFRESH
+            begin_interval(m, d)
+        event = interval_steps(m, d)
+        if event == REFRESH or event == TOO_DEEP or event == UNDERFLOW:
+            return event
+        d.left = 0  # the interval ends here (early if its phase ended)
+        code = close_interval(m, d)
+        if code == NONFINITE_RECORD:
+            return NONFINITE
+        if code == ENERGY_RECORD:
+            return ENERGY
+        if code == ENERGY_WORK_RECORD:
+            return ENERGY_WORK
+        g = d.active
+        if d.phase[g] == COMPLETE or d.t - d.t_start[g] > m.completion.phase_timeout:
+            return STOPPED
+        if d.n_rows == n_records:
+            return RAN

@@ -1,0 +1,292 @@
+"""What a run records at the end of each record interval, compiled.
+
+`close_interval` is the loop's work between two record intervals: the divergence checks (a
+non-finite state, energy growth), one row of the time series (`sample`), the momentum balance,
+and the replay's contact snapshot when one is due. A row is one float vector laid out by
+`Layout`; the run stacks the rows and splits them into named time series at the end. Frames
+are computed from q directly: every body is free (a free-flyer child of the world) or fixed, so
+a frame is a body's pose times a constant placement.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..contact.friction import SLIPPING, STICKING
+from ..contact.search import grow
+from ..jit import njit, njit_inline
+from ..linalg import add3, mm_into, mtv3, mv3, sub3
+from .data import Snapshots
+from .bodies import bodies_centroid3, bodies_momentum, body_origin3, body_rotation_into, kinetic_energy
+from .stability import ENERGY_FLOOR_J, ENERGY_GROWTH, mechanical_energy
+
+#: What `close_interval` found: nothing wrong, a non-finite state (no row written), energy
+#: growth in a passive phase, or more energy than the drives could have put in (the row
+#: written for both).
+OK, NONFINITE, ENERGY, ENERGY_WORK = range(4)
+
+#: Contact snapshots per simulated second kept for `spotsim replay`: its highest display rate.
+#: 100 Hz is ten samples of a 10 ms bounce.
+REPLAY_RATE_HZ = 100.0
+#: Time series recorded as integers (the others are floats).
+INTEGER_SERIES = ("pairs_slipping", "pairs_sticking", "phase", "grasp")
+
+
+class Layout:
+    """The time series of a run and their columns in a row, fixed by its unwelded scene.
+
+    fingers: the scene's finger names; free_robot: the robot floats; modules, end_effectors:
+    their names. columns: {name: (first column, width)}; a width-1 series is a 1-D array, the
+    others (n, width).
+    """
+
+    def __init__(self, fingers: list[str], free_robot: bool, modules: list[str], end_effectors: list[str]):
+        n_f = len(fingers)
+        spec = [("t", 1), ("module_pos_m", 3), ("module_quat_xyzw", 4), ("offset_mm", 3), ("rpy_deg", 3),
+                ("module_vel_m_s", 3), ("module_omega_rad_s", 3), ("force_N", 3), ("torque_Nm", 3),
+                ("finger_opening_mm", n_f), ("finger_load_N", n_f), ("pairs_slipping", 1),
+                ("pairs_sticking", 1), ("phase", 1), ("grasp", 1), ("max_penetration_um", 1)]
+        self.free_robot = free_robot
+        if free_robot:
+            spec += [("robot_centroid_m", 3), ("base_pos_m", 3), ("base_quat_xyzw", 4), ("system_centroid_m", 3)]
+            for name in modules:
+                spec += [(f"{name}_pos_m", 3), (f"{name}_quat_xyzw", 4)]
+            spec += [(f"{name}_pos_m", 3) for name in end_effectors]
+        self.columns, start = {}, 0
+        for name, width in spec:
+            self.columns[name] = (start, width)
+            start += width
+        self.width = start
+        self.fingers = list(fingers)
+
+    def split(self, rows: np.ndarray) -> dict[str, np.ndarray]:
+        """The named series of stacked rows (n, width)."""
+        out = {}
+        for name, (start, width) in self.columns.items():
+            x = rows[:, start] if width == 1 else rows[:, start:start + width]
+            out[name] = x.astype(np.int64) if name in INTEGER_SERIES else x.copy()
+        return out
+
+
+@njit
+def quat_xyzw(R, q):
+    """The unit quaternion (x, y, z, w) of a rotation matrix, as Eigen's Quaternion(R)
+    computes it (Shepperd's method: the largest of w, x, y, z first), written into q (4,)."""
+    trace = R[0, 0] + R[1, 1] + R[2, 2]
+    if trace > 0.0:
+        t = math.sqrt(trace + 1.0)
+        q[3] = 0.5 * t
+        t = 0.5 / t
+        q[0] = (R[2, 1] - R[1, 2]) * t
+        q[1] = (R[0, 2] - R[2, 0]) * t
+        q[2] = (R[1, 0] - R[0, 1]) * t
+        return
+    i = 0
+    if R[1, 1] > R[0, 0]:
+        i = 1
+    if R[2, 2] > R[i, i]:
+        i = 2
+    j, k = (i + 1) % 3, (i + 2) % 3
+    t = math.sqrt(R[i, i] - R[j, j] - R[k, k] + 1.0)
+    q[i] = 0.5 * t
+    t = 0.5 / t
+    q[3] = (R[k, j] - R[j, k]) * t
+    q[j] = (R[j, i] + R[i, j]) * t
+    q[k] = (R[k, i] + R[i, k]) * t
+
+
+@njit
+def rpy(R):
+    """Roll, pitch, yaw (rad) of R = Rz(yaw) Ry(pitch) Rx(roll), pitch in [-pi/2, pi/2]: the
+    angles `pinocchio.rpy.matrixToRpy` returns, away from pitch = +-pi/2."""
+    return (math.atan2(R[2, 1], R[2, 2]), math.atan2(-R[2, 0], math.sqrt(R[2, 1] ** 2 + R[2, 2] ** 2)),
+            math.atan2(R[1, 0], R[0, 0]))
+
+
+@njit_inline
+def _frame(m, q, i, R, work):
+    """Frame i of m.record in the world: its rotation, written into R (3, 3), and its origin
+    (3-tuple). work: (3, 3) scratch."""
+    frames = m.record
+    b = frames.row[i]
+    if b < 0:
+        R[:] = frames.R[i]
+        return frames.p[i, 0], frames.p[i, 1], frames.p[i, 2]
+    body_rotation_into(m.bodies, b, q, work)
+    mm_into(work, frames.R[i], R)
+    return add3(body_origin3(m.bodies, b, q), mv3(work, frames.p[i]))
+
+
+@njit_inline
+def _put_pose(row, at, p, R):
+    """Write origin p (3,) and the quaternion of R (x, y, z, w) at row[at:]; returns the next
+    free column."""
+    at = _put(row, at, p)
+    quat_xyzw(R, row[at:at + 4])
+    return at + 4
+
+
+@njit
+def _put(row, at, x, scale=1.0):
+    for i in range(len(x)):
+        row[at + i] = scale * x[i]
+    return at + len(x)
+
+
+@njit
+def sample(m, d, row):
+    """Write one row of the time series (`Layout`) into row: the active grasp's module, its
+    offset in the grasp frame, the last step's contact wrench and pairs, the fingers, and for a
+    free-flying robot its centroids and frames. Updates d.last_open."""
+    frames, bodies, q, v = m.record, m.bodies, d.q, d.v
+    g = d.active
+    ee, k = m.grasps.ee[g], m.grasps.module[g]
+    n_pairs = d.contacts.key.shape[0]
+    s = d.summary
+    n_mod = frames.module_row.shape[0]
+    n_ee = frames.row.shape[0] - n_mod - 1
+    R = np.empty((4, 3, 3))  # scratch: an allocation costs ~25 ns, a row needs a dozen rotations
+    R_b, R_a, R_ab, work = R[0], R[1], R[2], R[3]
+    p_b = _frame(m, q, k, R_b, work)
+    p_a = _frame(m, q, n_mod + ee, R_a, work)
+    row[0] = d.t
+    at = 1
+    at = _put_pose(row, at, p_b, R_b)
+    at = _put(row, at, mtv3(R_a, sub3(p_b, p_a)), 1e3)  # O_b in O_a
+    for i in range(3):  # R_a^T R_b
+        for j in range(3):
+            R_ab[i, j] = R_a[0, i] * R_b[0, j] + R_a[1, i] * R_b[1, j] + R_a[2, i] * R_b[2, j]
+    at = _put(row, at, rpy(R_ab), 180.0 / math.pi)
+    # the module's velocity and angular velocity, world
+    b = frames.module_row[k]
+    if b >= 0:
+        iv = bodies.idx_v[b]
+        body_rotation_into(bodies, b, q, work)
+        at = _put(row, at, mv3(work, v[iv:iv + 3]))
+        at = _put(row, at, mv3(work, v[iv + 3:iv + 6]))
+    else:
+        row[at:at + 6] = 0.0
+        at += 6
+    # on the module, in O_a: force, and moment about its centroid
+    for i in range(3):
+        row[at + i] = s.force_A[i] if n_pairs else 0.0
+        row[at + 3 + i] = s.torque_A[i] if n_pairs else 0.0
+    at += 6
+    last_open = d.last_open
+    for i in range(frames.finger_map.shape[0]):
+        last_open[frames.finger_map[i]] = d.opening[i]
+    at = _put(row, at, last_open, 1e3)
+    row[at:at + last_open.shape[0]] = 0.0  # the loads of fingers a weld left out
+    for i in range(frames.finger_map.shape[0]):
+        row[at + frames.finger_map[i]] = d.loads.finger_load[i]
+    at += last_open.shape[0]
+    n_slip = n_stick = 0
+    for i in range(n_pairs):
+        n_slip += d.contacts.state[i] == SLIPPING
+        n_stick += d.contacts.state[i] == STICKING
+    at = _put(row, at, (float(n_slip), float(n_stick), float(d.phase[g]), float(g),
+                        s.max_penetration * 1e6 if n_pairs else 0.0))
+    if frames.free_robot:
+        at = _put(row, at, bodies_centroid3(bodies, frames.robot_rows, q))
+        p = _frame(m, q, frames.row.shape[0] - 1, R_b, work)
+        at = _put_pose(row, at, p, R_b)
+        at = _put(row, at, bodies_centroid3(bodies, frames.system_rows, q))
+        for i in range(n_mod):
+            p = _frame(m, q, i, R_b, work)
+            at = _put_pose(row, at, p, R_b)
+        for i in range(n_ee):
+            p = _frame(m, q, n_mod + i, R_b, work)
+            at = _put(row, at, p)
+
+
+@njit
+def _snapshot(m, d):
+    """Add the replay's snapshot of the row just written: the pairs in contact and their
+    states, each module's combined contact force (world)."""
+    snaps = d.snapshots
+    c = d.contacts
+    n = c.master.shape[0]
+    i, at = d.n_snapshots, d.n_snapshot_pairs
+    master, slave, state = snaps.master, snaps.slave, snaps.state
+    while at + n > master.shape[0]:
+        master, slave, state = grow(master), grow(slave), grow(state)
+    if master.shape[0] != snaps.master.shape[0]:
+        snaps = Snapshots(snaps.row, snaps.pairs, snaps.force_W, master, slave, state)
+        d.snapshots = snaps
+    snaps.row[i], snaps.pairs[i] = d.row_index, n
+    master[at:at + n] = c.master
+    slave[at:at + n] = c.slave
+    state[at:at + n] = c.state
+    for k in range(m.record.module_row.shape[0]):
+        b = m.record.module_row[k]
+        for a in range(3):  # a welded module takes no contact
+            snaps.force_W[i, k, a] = d.loads.force_W[m.bodies.joint[b], a] if b >= 0 else 0.0
+    d.n_snapshots = i + 1
+    d.n_snapshot_pairs = at + n
+
+
+@njit
+def record_row(m, d):
+    """Write the next row of d.rows from d's state, and its snapshot when one is due."""
+    sample(m, d, d.rows[d.n_rows])
+    if d.row_index % m.record.replay_every == 0:
+        _snapshot(m, d)
+    d.n_rows += 1
+    d.row_index += 1
+
+
+@njit
+def begin_record(m, d):
+    """The record at a run's start: the momentum and energy the balances start from, the
+    largest body momenta, and the first row."""
+    P, L, p_max, l_max, _ = bodies_momentum(m.bodies, m.record.all_rows, d.q, d.v)
+    d.energy_passive = np.nan
+    d.momentum_max, d.angular_momentum_max = p_max, l_max
+    d.momentum_start[:] = P
+    d.angular_momentum_start[:] = L
+    d.energy_start = kinetic_energy(m.bodies, d.q, d.v)  # no pair in contact at the start
+    d.n_rows = d.n_snapshots = d.n_snapshot_pairs = 0
+    record_row(m, d)
+
+
+@njit
+def close_interval(m, d):
+    """The loop's work at the end of a record interval: returns OK, NONFINITE, ENERGY or
+    ENERGY_WORK.
+
+    A NaN or an infinity anywhere in (q, v) is NONFINITE, and nothing is recorded. When the
+    drive held the fingers through the whole interval (d.held: a passive phase), the
+    mechanical energy may not grow past ENERGY_GROWTH times its value when the phase began
+    plus ENERGY_FLOOR_J: else ENERGY. In any phase it may not grow past ENERGY_GROWTH times its
+    value at the start plus the work the finger drives have done, plus ENERGY_FLOOR_J: the
+    drives are the only source of energy in zero gravity, so more is the integrator's
+    (ENERGY_WORK). Both keep the row. Then the row and the momentum balance: the largest drift
+    of the free bodies' momentum from its start less the external impulse, and the largest
+    single-body momenta.
+    """
+    q, v = d.q, d.v
+    if not math.isfinite(np.sum(q) + np.sum(v)):
+        return NONFINITE
+    code = OK
+    E = mechanical_energy(m.bodies, q, v, d.contacts.phi, d.memory.s, m.law.K, m.law.bristle.k_b)
+    d.energy_now = E
+    if d.held:
+        if math.isnan(d.energy_passive):
+            d.energy_passive = E
+        elif E > ENERGY_GROWTH * d.energy_passive + ENERGY_FLOOR_J:
+            code = ENERGY
+    else:
+        d.energy_passive = np.nan
+    if code == OK and m.record.energy_bound and E > ENERGY_GROWTH * (d.energy_start + d.drive_work) + ENERGY_FLOOR_J:
+        code = ENERGY_WORK
+    record_row(m, d)
+    P, L, p_b, l_b, _ = bodies_momentum(m.bodies, m.record.all_rows, q, v)
+    d.momentum_max, d.angular_momentum_max = max(d.momentum_max, p_b), max(d.angular_momentum_max, l_b)
+    P0, L0, J, JL = d.momentum_start, d.angular_momentum_start, d.impulse_W, d.impulse_moment_O_W
+    dP = (P[0] - P0[0] - J[0], P[1] - P0[1] - J[1], P[2] - P0[2] - J[2])
+    dL = (L[0] - L0[0] - JL[0], L[1] - L0[1] - JL[1], L[2] - L0[2] - JL[2])
+    d.momentum_drift = max(d.momentum_drift, math.sqrt(dP[0] ** 2 + dP[1] ** 2 + dP[2] ** 2))
+    d.angular_momentum_drift = max(d.angular_momentum_drift, math.sqrt(dL[0] ** 2 + dL[1] ** 2 + dL[2] ** 2))
+    return code

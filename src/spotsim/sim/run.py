@@ -1,0 +1,255 @@
+"""A run: the compiled loop driven through a scenario's grasp sequence, with coal refreshed,
+modules welded, the record kept and the outcome reported.
+
+Python does what only Python can (coal's broad phase, building a welded model) and the
+reporting; every step and record is the compiled loop's (`loop.run_intervals`).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..build.model import Model, build_model
+from ..contact.search import literal_search
+from ..errors import ScenarioError
+from ..scenario import modules_of, tolerance_warnings
+from .bodies import kinematics
+from .broadphase import BroadPhase, StateOverflow
+from .data import COMPLETE, ROWS_PER_CALL, SELF_CENTRING, make_data
+from .loop import ENERGY, ENERGY_WORK, NONFINITE, REFRESH, TOO_DEEP, UNDERFLOW, run_intervals
+from .phase import completion_criteria
+from .record import begin_record
+from .recorder import Recorder
+from .stability import ENERGY_GROWTH, stability_warnings
+from .weld import weld
+
+COMPLETED, INCOMPLETE, DIVERGED, INTERRUPTED = "completed", "incomplete", "diverged", "interrupted"
+
+
+@dataclass
+class Result:
+    """What a run produced: `summary` (the summary.json contract) and `timeseries` arrays."""
+
+    scenario: object
+    model: Model
+    summary: dict
+    timeseries: dict[str, np.ndarray] = field(repr=False)
+    replay: dict[str, np.ndarray] = field(default_factory=dict, repr=False)  # replay.npz
+
+    @property
+    def status(self) -> str:
+        return self.summary["status"]
+
+    @property
+    def grasp(self) -> dict:
+        """The first grasp's entry of the summary (the only one of a single-arm run)."""
+        return self.summary["grasps"][0]
+
+
+def simulate(scenario, *, model: Model | None = None, progress: bool = False,
+             source: str = "<scenario>") -> Result:
+    """Run a scenario's grasps in sequence to completion, divergence or time-out.
+
+    Never raises on physics. progress: a progress bar (tqdm) on stderr. Ctrl-C ends the run
+    with status `interrupted` and keeps what was recorded.
+    """
+    model = model or build_model(scenario, source)
+    check_start(model, source)
+    n_records = int(round(scenario.simulation.duration_s / scenario.simulation.dt_s))
+    data = make_data(model)
+    broad = None if model.sim.literal else BroadPhase(model)
+    rec = Recorder(model)
+    begin_record(model.sim, data)
+    rec.collect(model, data)
+    status, message, welds = INCOMPLETE, "", []
+    bar = progress_bar(n_records, progress)
+    wall0 = time.perf_counter()
+    done = 0  # record intervals taken
+    try:
+        while done < n_records:
+            if broad is not None and data.travel > model.params.skin:
+                try:
+                    broad.refresh(data)  # the Verlet skin is used up
+                except StateOverflow as e:
+                    status, message = DIVERGED, f"{e} at t = {data.t:.4f} s"
+                    break
+            event = run_intervals(model.sim, data, min(n_records - done, ROWS_PER_CALL))
+            rows = rec.collect(model, data)
+            done += rows
+            bar.update(rows)
+            if event == REFRESH:
+                continue
+            v = data.view()
+            message = _divergence(model, v, event)
+            if message:
+                status = DIVERGED
+                break
+            g = v.active
+            if v.phase[g] == COMPLETE:
+                if g + 1 == len(model.grasps):
+                    status = COMPLETED
+                    message = f"{'all grasps' if len(model.grasps) > 1 else 'grasp'} complete at t = {v.t:.4f} s"
+                    break
+                model, data = weld(model, data, source)
+                broad = None if model.sim.literal else BroadPhase(model)
+                welds.append(v.t)
+            elif v.t - v.t_start[g] > model.sim.completion.phase_timeout:
+                message = _why_incomplete(model, data, "the phase time-out")
+                break
+        else:
+            message = _why_incomplete(model, data, "the time-out")
+    except KeyboardInterrupt:
+        status, message = INTERRUPTED, f"interrupted by the user at t = {data.t:.4f} s"
+    finally:
+        bar.close()
+    wall = time.perf_counter() - wall0
+    series = rec.arrays()
+    summary = _summary(scenario, model, data.view(), rec, series, status, message, wall, welds)
+    return Result(scenario, model, summary, series, rec.replay_arrays())
+
+
+def _divergence(model: Model, v, event: int) -> str:
+    """Why the run has diverged, from the loop's event and d's fields v, or ''."""
+    if event == TOO_DEEP:
+        return (f"penetration {v.summary.max_penetration * 1e3:.3f} mm exceeds the sphere radius "
+                f"{model.sim.limits.max_penetration * 1e3:.3f} mm at t = {v.t:.4f} s")
+    if event == NONFINITE:  # a NaN or an infinity anywhere; nothing recorded
+        return f"state became non-finite by t = {v.t:.4f} s"
+    if event == ENERGY_WORK:  # energy from nowhere; its record is kept
+        return (f"energy grew to {v.energy_now:.3g} J, more than {ENERGY_GROWTH:g} times the "
+                f"{v.energy_start:.3g} J at the start plus the {v.drive_work:.3g} J the finger "
+                f"drives did, at t = {v.t:.4f} s")
+    if event == ENERGY:  # a passive phase gained energy; its record is kept
+        return (f"energy grew from {v.energy_passive:.3g} J to {v.energy_now:.3g} J while the "
+                f"drive held the fingers (a passive phase) at t = {v.t:.4f} s")
+    if event == UNDERFLOW:
+        return (f"adaptive step fell below h_min_s = {model.sim.integrator.h_min:g} s at "
+                f"t = {v.t:.4f} s")
+    return ""
+
+
+def progress_bar(total: int, enabled: bool, what: str = "simulating", unit: str = "ms"):
+    """A progress bar on stderr; when not enabled, or stderr is not a terminal (CI logs,
+    pipes), a disabled one whose calls do nothing."""
+    from tqdm import tqdm
+
+    return tqdm(total=total, unit=unit, desc=what, leave=False, disable=None if enabled else True)
+
+
+def _why_incomplete(model: Model, data, limit: str) -> str:
+    v = data.view()
+    ee, k = model.grasps[v.active]
+    who = f"{model.end_effectors[ee].name} on {model.modules[k].name}"
+    if v.phase[v.active] != SELF_CENTRING:
+        return f"{who}: no contact by {limit} t = {v.t:.3f} s: the fingers never reached the groove"
+    unmet = [name for name, ok in completion_criteria(model, data).items() if not ok]
+    if not len(v.contacts.key):
+        unmet.insert(0, "contact lost")
+    return (f"{who}: self-centring did not complete by {limit} t = {v.t:.3f} s; "
+            f"unmet at the end: {'; '.join(unmet) or 'criteria not held for hold_s'}")
+
+
+def _time(x: float) -> float | None:
+    return None if math.isnan(x) else float(x)
+
+
+def _summary(s, model, v, rec, series, status, message, wall, welds) -> dict:
+    """The summary.json of a run from its last model, its Data's fields v and its record."""
+    grasps, phases = [], []
+    for g, (ee, k) in enumerate(model.grasps):
+        completed = _time(v.t_complete[g])
+        rows = np.flatnonzero(series["grasp"] == g)
+        last = rows[-1] if len(rows) else None
+        done = completed is not None and last is not None
+        offset = series["offset_mm"][last] if done else None
+        times = {name: x for name, x in (("self_centring", _time(v.t_contact[g])), ("complete", completed))
+                 if x is not None}
+        phases.append({"approach": _time(v.t_start[g]), **times})
+        entry = {
+            "end_effector": model.end_effectors[ee].name,
+            "module": model.modules[k].name,
+            "started_s": _time(v.t_start[g]),
+            "contact_onset_s": _time(v.t_contact[g]),
+            "completed_s": completed,
+            "residual_offset_mm": None if offset is None else [float(x) for x in offset],
+            "residual_offset_norm_mm": None if offset is None else float(np.linalg.norm(offset)),
+            "residual_rpy_deg": None if not done else [float(x) for x in series["rpy_deg"][last]],
+            "peak_force_N": [float(x) for x in v.peak_force[g]],
+            "peak_torque_Nm": [float(x) for x in v.peak_torque[g]],
+            "peak_force_norm_N": float(v.peak_force_norm[g]),
+            "peak_torque_norm_Nm": float(v.peak_torque_norm[g]),
+            "max_active_pairs": int(v.peak_pairs[g]),
+            "final_offset_mm": None if last is None else [float(x) for x in series["offset_mm"][last]],
+        }
+        if "robot_centroid_m" in series and len(rows):
+            # the FDR centroid's displacement over this grasp: from its drive's start to its
+            # completion (or the end of the record), taken within one body (the FDR in the
+            # first grasp, the FDR + TM-1 composite after the weld)
+            d = series["robot_centroid_m"][last] - series["robot_centroid_m"][rows[0]]
+            entry["robot_centroid_displacement_mm"] = [float(x) for x in d * 1e3]
+        grasps.append(entry)
+    free = bool(model.robot_joint)
+    sim = s.simulation
+    return {
+        "scenario": s.name,
+        "status": status,
+        "message": message,
+        "wall_time_s": wall,
+        "sim_time_s": v.t,
+        "steps": v.steps,
+        "pair_steps": v.pair_steps,  # sphere pairs in contact, summed over the steps
+        "dt_s": sim.dt_s,
+        "substeps": sim.substeps,
+        "dynamics_dt_s": sim.dt_s / sim.substeps,
+        # steps of a whole record interval, taken where no contact could start within it
+        "free_flight_steps": v.flights,
+        "integrator": {"method": sim.integrator.method, "accepted_steps": v.accepted, "rejected_steps": v.rejected,
+                       "force_evaluations": v.evaluations},
+        "broad_phase": s.contact.broad_phase,
+        "phases": phases[0] if len(phases) == 1 else phases,
+        "welds_s": welds,
+        "grasps": grasps,
+        "momentum": {
+            "linear_drift_rel": v.momentum_drift / max(v.momentum_max, 1e-300),
+            "angular_drift_rel": v.angular_momentum_drift / max(v.angular_momentum_max, 1e-300),
+            "definition": (
+                "max over the run of |total momentum of the free bodies - initial|, relative to "
+                "the largest single body's momentum (angular about the world origin); the robot "
+                "floats freely, so momentum is conserved" if free else
+                "max over the run of |momentum - initial - impulse of the contact forces and "
+                "gravity| of the module, relative to its largest momentum (angular about the "
+                "world origin); the base is fixed, so momentum is not conserved"),
+        },
+        "spheres": {"finger": int(len(model.master.centre_J)), "groove": int(len(model.slave.centre_J))},
+        "fingers": rec.layout.fingers,
+        "warnings": tolerance_warnings(s) + stability_warnings(model),
+    }
+
+
+def initial_contacts(model: Model) -> int:
+    """Sphere pairs already in contact at the start, by the literal all-pairs search (which
+    finds pairs at any depth, where the culled search only looks as deep as a run may go
+    before it is declared diverged)."""
+    data = make_data(model)
+    kinematics(model.sim, data)
+    # spheres of faces whose patches coal finds apart by more than the margin do not touch
+    if not model.sim.literal and not len(BroadPhase(model).near(data.q, data.opening)):
+        return 0
+    return len(literal_search(model.sim, data).key)
+
+
+def check_start(model: Model, source: str) -> None:
+    """Reject a scenario whose fingers and groove interpenetrate at the start."""
+    n = initial_contacts(model)
+    if n:
+        s = model.scenario
+        offsets = "; ".join(f"{k}.initial_offset_mm = {list(m.initial_offset_mm)}"
+                            for k, m in modules_of(s).items())
+        raise ScenarioError([
+            f"{source}: {offsets}: fingers and groove interpenetrate at the start ({n} sphere "
+            f"pairs); widen end_effector.start_gap_mm = {s.end_effector.start_gap_mm} or move "
+            f"the module"])

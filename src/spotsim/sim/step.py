@@ -1,0 +1,68 @@
+"""One simulation step, the paper's Fig. 5 in order, and the bound on how far it moves things.
+
+    integrate: kinematics -> sphere pairs -> pair forces -> wrenches -> dynamics -> update
+    drive -> grasp phase -> bookkeeping
+
+The integrator evaluates the forces and the dynamics where its scheme needs them
+(`sim.integrators`); the rest runs once per step, after it.
+"""
+
+from __future__ import annotations
+
+import math
+
+from ..jit import njit
+from .bookkeeping import bookkeeping
+from .drive import finger_drive, move_fingers
+from .integrators import SYMPLECTIC_EULER, integrate
+from .phase import grasp_phase
+
+#: Free flight takes the travel bound at the start of a step times this for the whole step: in
+#: zero gravity and without contact the centroid velocities are constant and the fingers close
+#: at their set speed; only the spin's direction changes, and bodies are barely moving then.
+FREE_FLIGHT_SAFETY = 2.0
+
+
+@njit
+def step(m, d, h):
+    """One step of at most h (s): returns the step taken (an adaptive integrator may take
+    less), or 0.0 if its step fell below its least size (the run has diverged)."""
+    t0 = d.t
+    h = integrate(m, d, h)  # forces (Eq. 1-21) -> accelerations (Eq. 22-23) -> update
+    if h == 0.0:
+        return 0.0
+    finger_drive(m, d)  # the active drive sets its fingers' rate for the next step
+    if m.integrator.method == SYMPLECTIC_EULER:
+        move_fingers(d, h)  # at the rate just set: its velocity-first update (Runge-Kutta moves them in its stages)
+    d.t += h
+    d.travel += h * travel_rate(m, d)
+    grasp_phase(m, d)  # approach -> self-centring -> complete
+    bookkeeping(m, d, d.t - t0 if m.integrator.adaptive else h)
+    return h
+
+
+@njit
+def travel_rate(m, d):
+    """A bound on how fast any two contact spheres approach each other, m/s: the sum over the
+    free contact bodies of |v_O| + |omega| reach, plus the fastest finger slide."""
+    rate = 0.0
+    for x in d.opening_rate:
+        rate = max(rate, abs(x))
+    idx_v, v = m.bodies.idx_v, d.v
+    for b, r in zip(m.limits.reach_rows, m.limits.reach):
+        iv = idx_v[b]  # a free-flyer's v = (v_O, omega) in its frame; norms are frame-free
+        rate += math.sqrt(v[iv] ** 2 + v[iv + 1] ** 2 + v[iv + 2] ** 2) + \
+            math.sqrt(v[iv + 3] ** 2 + v[iv + 4] ** 2 + v[iv + 5] ** 2) * r
+    return rate
+
+
+@njit
+def free_flight(m, d):
+    """Whether no sphere pair can come into contact within the next record interval, so that
+    one step of it (no contact forces, zero gravity) is exact for the centroids: coal's face
+    pairs are all beyond its margin and the travel bound over the interval keeps within the
+    skin. Never with the literal search or gravity."""
+    g = m.gravity_W
+    if m.literal or g[0] != 0.0 or g[1] != 0.0 or g[2] != 0.0:
+        return False
+    return d.near.shape[0] == 0 and d.travel + FREE_FLIGHT_SAFETY * m.dt * travel_rate(m, d) <= m.limits.skin
