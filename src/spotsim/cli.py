@@ -242,8 +242,8 @@ def _config_path(arg: str | None) -> Path:
 
 def _load(path: Path, overrides):
     from .build.model import build_model
-    from .sim.run import check_start
     from .scenario import load_scenario
+    from .sim.run import check_start
 
     scenario = load_scenario(path, overrides)
     model = build_model(scenario, str(path))

@@ -11,8 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .sim.run import Result
 from .scenario import to_yaml
+from .sim.run import Result
 
 SUMMARY = "summary.json"
 REPLAY = "replay.npz"  # what `spotsim replay` draws besides the timeseries

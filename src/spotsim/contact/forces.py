@@ -91,56 +91,50 @@ def pair_forces(m, d, h):
     keeps its onset speed and bristle; a new one starts from its approach speed (floored)
     and an unbent bristle. The memory is left as it is (`commit_memory`).
     """
-    law = m.law
-    C1_J, N1_J, joint1, finger1, axis1_J = m.master.centre_J, m.master.normal_J, m.master.joint, m.master.finger, \
-        m.master.axis_J
-    C2_J, N2_J, joint2 = m.slave.centre_J, m.slave.normal_J, m.slave.joint
-    cand, mem = d.candidates, d.memory
-    master, slave, keys = cand.master, cand.slave, cand.key
-    mem_key, mem_s, mem_vminus = mem.key, mem.s, mem.v_minus
-    R_W, p_W, w_W, vo_W = d.R_W, d.p_W, d.w_W, d.vo_W
-    opening, opening_rate = d.opening, d.opening_rate
-    r1, r2, K, damping, floor, bristle_params = law.r1, law.r2, law.K, law.damping, law.floor, law.bristle
-    k = master.shape[0]
+    k = d.candidates.master.shape[0]
     # the outputs as rows of three blocks: an allocation costs ~25 ns, a step makes dozens
     ints, scalars, vectors = np.empty((4, k), dtype=np.int64), np.empty((3, k)), np.empty((5, k, 3))
     out_m, out_s, out_key, state_out = ints[0], ints[1], ints[2], ints[3]
     phi_out, speed_out, v_minus_out = scalars[0], scalars[1], scalars[2]
     point_out, c1_out, c2_out, force_out, s_out = vectors[0], vectors[1], vectors[2], vectors[3], vectors[4]
-    n_mem = mem_key.shape[0]
+    r1, r2 = m.law.r1, m.law.r2
+    n_mem = d.memory.key.shape[0]
     pos = 0  # both key lists are sorted: the memory is merged, not searched
     n = 0
+    # fields are read where they are used: numba then takes no reference to them (a local
+    # holding an array costs two atomic reference counts a call)
     for i in range(k):
-        mi, sl = master[i], slave[i]
-        j1, j2 = joint1[mi], joint2[sl]
-        R1, R2 = R_W[j1], R_W[j2]
-        shift = opening[finger1[mi]]  # the finger has slid along its axis
-        c1 = add3(mv3(R1, (C1_J[mi, 0] + shift * axis1_J[mi, 0], C1_J[mi, 1] + shift * axis1_J[mi, 1],
-                           C1_J[mi, 2] + shift * axis1_J[mi, 2])), p_W[j1])
-        c2 = add3(mv3(R2, C2_J[sl]), p_W[j2])
-        n_c, phi, hit = penetration(c1, mv3(R1, N1_J[mi]), r1, c2, mv3(R2, N2_J[sl]), r2)
+        mi, sl = d.candidates.master[i], d.candidates.slave[i]
+        j1, j2 = m.master.joint[mi], m.slave.joint[sl]
+        shift = d.opening[m.master.finger[mi]]  # the finger has slid along its axis
+        c1 = add3(mv3(d.R_W[j1], (m.master.centre_J[mi, 0] + shift * m.master.axis_J[mi, 0],
+                                  m.master.centre_J[mi, 1] + shift * m.master.axis_J[mi, 1],
+                                  m.master.centre_J[mi, 2] + shift * m.master.axis_J[mi, 2])), d.p_W[j1])
+        c2 = add3(mv3(d.R_W[j2], m.slave.centre_J[sl]), d.p_W[j2])
+        n_c, phi, hit = penetration(c1, mv3(d.R_W[j1], m.master.normal_J[mi]), r1, c2,
+                                    mv3(d.R_W[j2], m.slave.normal_J[sl]), r2)
         if not hit:
             continue
         point = contact_point(c1, c2, r1, r2, n_c, phi)
-        slide = mv3(R1, axis1_J[mi])
-        rate = opening_rate[finger1[mi]]
-        v_A = _point_velocity(vo_W[j1], w_W[j1], p_W[j1], point)
-        v_B = _point_velocity(vo_W[j2], w_W[j2], p_W[j2], point)
+        slide = mv3(d.R_W[j1], m.master.axis_J[mi])
+        rate = d.opening_rate[m.master.finger[mi]]
+        v_A = _point_velocity(d.vo_W[j1], d.w_W[j1], d.p_W[j1], point)
+        v_B = _point_velocity(d.vo_W[j2], d.w_W[j2], d.p_W[j2], point)
         v_rel = ((slide[0] * rate + v_A[0]) - v_B[0], (slide[1] * rate + v_A[1]) - v_B[1],
                  (slide[2] * rate + v_A[2]) - v_B[2])
         # rate of delta = phi / 2
         delta_dot = -0.5 * (v_rel[0] * n_c[0] + v_rel[1] * n_c[1] + v_rel[2] * n_c[2])
-        key = keys[i]
-        while pos < n_mem and mem_key[pos] < key:
+        key = d.candidates.key[i]
+        while pos < n_mem and d.memory.key[pos] < key:
             pos += 1
-        if pos < n_mem and mem_key[pos] == key:
-            v_minus = mem_vminus[pos]
-            s_prev = (mem_s[pos, 0], mem_s[pos, 1], mem_s[pos, 2])
+        if pos < n_mem and d.memory.key[pos] == key:
+            v_minus = d.memory.v_minus[pos]
+            s_prev = (d.memory.s[pos, 0], d.memory.s[pos, 1], d.memory.s[pos, 2])
         else:
-            v_minus = max(delta_dot, floor)
+            v_minus = max(delta_dot, m.law.floor)
             s_prev = (0.0, 0.0, 0.0)
-        F_n = normal_force(indentation(phi), delta_dot, v_minus, K, damping)
-        s, F_f, state = bristle(s_prev, v_rel, n_c, F_n, h, bristle_params)
+        F_n = normal_force(indentation(phi), delta_dot, v_minus, m.law.K, m.law.damping)
+        s, F_f, state = bristle(s_prev, v_rel, n_c, F_n, h, m.law.bristle)
         out_m[n], out_s[n], out_key[n] = mi, sl, key
         phi_out[n], v_minus_out[n], state_out[n] = phi, v_minus, state
         for a in range(3):

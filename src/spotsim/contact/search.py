@@ -99,17 +99,16 @@ def _dot(a, b):
 
 
 @njit_inline
-def _face_frame(table, master, R_W, p_W, opening, f, A):
-    """Face pair f's search frame at the joint poses R_W, p_W and the finger openings: whether
-    its faces face each other (Eq. 6 defined), the common normal in face coordinates (n_u,
-    n_v, n_h), the offset `off` of the affine map A c + off taking a master centre c in its
-    joint's frame to face coordinates (u, v, height above the face plane), and the common
-    normal in world (3-tuple). table: m.faces; master: m.master. A: (3, 3), the map's matrix,
-    written in place (left as it was when the faces do not face each other)."""
-    Rs, ps = R_W[table.slave_joint[f]], p_W[table.slave_joint[f]]
-    b0, b1, b2 = mv3(Rs, table.t1_J[f]), mv3(Rs, table.t2_J[f]), mv3(Rs, table.n_J[f])
-    Rm, pm = R_W[table.master_joint[f]], p_W[table.master_joint[f]]
-    nm = mv3(Rm, master.normal_J[table.master_start[f]])
+def _face_frame(m, d, f, A):
+    """Face pair f's search frame at d's kinematics and finger openings: whether its faces
+    face each other (Eq. 6 defined), the common normal in face coordinates (n_u, n_v, n_h),
+    the offset `off` of the affine map A c + off taking a master centre c in its joint's frame
+    to face coordinates (u, v, height above the face plane), and the common normal in world
+    (3-tuple). A: (3, 3), the map's matrix, written in place (left as it was when the faces
+    do not face each other)."""
+    js, jm, first = m.faces.slave_joint[f], m.faces.master_joint[f], m.faces.master_start[f]
+    b0, b1, b2 = mv3(d.R_W[js], m.faces.t1_J[f]), mv3(d.R_W[js], m.faces.t2_J[f]), mv3(d.R_W[js], m.faces.n_J[f])
+    nm = mv3(d.R_W[jm], m.master.normal_J[first])
     dn = (b2[0] - nm[0], b2[1] - nm[1], b2[2] - nm[2])
     norm = math.sqrt(_dot(dn, dn))
     if norm <= NORMAL_EPS:
@@ -117,19 +116,17 @@ def _face_frame(table, master, R_W, p_W, opening, f, A):
     n_W = (dn[0] / norm, dn[1] / norm, dn[2] / norm)
     # the common normal in face coordinates
     nu, nv, nh = _dot(dn, b0) / norm, _dot(dn, b1) / norm, _dot(dn, b2) / norm
-    o = mv3(Rs, table.origin_J[f])
+    o = mv3(d.R_W[js], m.faces.origin_J[f])
     # a master centre c (its joint's frame) in face coordinates is A c + off: the rows of A are
     # the face axes in the master's frame, and off holds the master origin and the finger's
     # opening, which shifts all the face's spheres alike (a face is on one finger)
     for k in range(3):
-        A[0, k] = Rm[0, k] * b0[0] + Rm[1, k] * b0[1] + Rm[2, k] * b0[2]
-        A[1, k] = Rm[0, k] * b1[0] + Rm[1, k] * b1[1] + Rm[2, k] * b1[2]
-        A[2, k] = Rm[0, k] * b2[0] + Rm[1, k] * b2[1] + Rm[2, k] * b2[2]
-    first = table.master_start[f]
-    x = opening[master.finger[first]]
-    axis = master.axis_J
-    shift = (x * axis[first, 0], x * axis[first, 1], x * axis[first, 2])
-    e = (pm[0] - o[0] - ps[0], pm[1] - o[1] - ps[1], pm[2] - o[2] - ps[2])
+        A[0, k] = d.R_W[jm, 0, k] * b0[0] + d.R_W[jm, 1, k] * b0[1] + d.R_W[jm, 2, k] * b0[2]
+        A[1, k] = d.R_W[jm, 0, k] * b1[0] + d.R_W[jm, 1, k] * b1[1] + d.R_W[jm, 2, k] * b1[2]
+        A[2, k] = d.R_W[jm, 0, k] * b2[0] + d.R_W[jm, 1, k] * b2[1] + d.R_W[jm, 2, k] * b2[2]
+    x = d.opening[m.master.finger[first]]
+    shift = (x * m.master.axis_J[first, 0], x * m.master.axis_J[first, 1], x * m.master.axis_J[first, 2])
+    e = (d.p_W[jm, 0] - o[0] - d.p_W[js, 0], d.p_W[jm, 1] - o[1] - d.p_W[js, 1], d.p_W[jm, 2] - o[2] - d.p_W[js, 2])
     off = (A[0, 0] * shift[0] + A[0, 1] * shift[1] + A[0, 2] * shift[2] + _dot(e, b0),
            A[1, 0] * shift[0] + A[1, 1] * shift[1] + A[1, 2] * shift[2] + _dot(e, b1),
            A[2, 0] * shift[0] + A[2, 1] * shift[1] + A[2, 2] * shift[2] + _dot(e, b2))
@@ -182,8 +179,7 @@ def grid_search(m, d, near):
     within the cutoff to a small window: no distance to a far sphere is computed. Inside the
     window, the common normal is the face pair's, so Eq. (8) is evaluated in face coordinates.
     """
-    table, master, C1_J, maps = m.faces, m.master, m.master.centre_J, m.slave.maps
-    R_W, p_W, opening = d.R_W, d.p_W, d.opening
+    table, C1_J, maps = m.faces, m.master.centre_J, m.slave.maps
     r1, radius, cutoff = m.law.r1, m.law.r2, m.law.cutoff
     found_m = np.empty(64, dtype=np.int64)
     found_s = np.empty(64, dtype=np.int64)
@@ -191,7 +187,7 @@ def grid_search(m, d, near):
     R = r1 + radius
     A = np.empty((3, 3))
     for f in near:
-        facing, nu, nv, nh, off, _ = _face_frame(table, master, R_W, p_W, opening, f, A)
+        facing, nu, nv, nh, off, _ = _face_frame(m, d, f, A)
         if not facing:
             continue
         n_uv = math.hypot(nu, nv)
@@ -247,8 +243,7 @@ def build_pair_list(m, d, near):
     other face pair (faces tilted far from each other) is marked to be searched anew at every
     step (`grid_search`).
     """
-    table, master, C1_J, maps = m.faces, m.master, m.master.centre_J, m.slave.maps
-    R_W, p_W, opening = d.R_W, d.p_W, d.opening
+    table, C1_J, maps = m.faces, m.master.centre_J, m.slave.maps
     r1, radius, cutoff = m.law.r1, m.law.r2, m.law.cutoff
     n_table = table.master_start.shape[0]
     built = np.zeros(n_table, dtype=np.bool_)
@@ -266,7 +261,7 @@ def build_pair_list(m, d, near):
     for f in near:
         built[f] = True
         A = A_b[f]
-        facing, nu, nv, nh, off, n_W = _face_frame(table, master, R_W, p_W, opening, f, A)
+        facing, nu, nv, nh, off, n_W = _face_frame(m, d, f, A)
         if not facing:
             scan[f] = True
             continue
@@ -350,13 +345,7 @@ def listed_search(m, d):
     integrated over the steps). Within a face pair, only the candidates whose gap at the build
     that motion could have closed are tested.
     """
-    near, table, master = d.near, m.faces, m.master
-    R_W, p_W, opening = d.R_W, d.p_W, d.opening
-    r1, radius, cutoff = m.law.r1, m.law.r2, m.law.cutoff
-    pair_list = d.pair_list
-    built, scan, normal_b, A_b, off_b = pair_list.built, pair_list.scan, pair_list.normal_W, pair_list.A, pair_list.off
-    centre_b, spread = table.master_centre_J, table.master_radius
-    k = near.shape[0]
+    k = d.near.shape[0]
     # each face pair's map (rows 0-2) and offset (row 3), its normal in face coordinates (row
     # 4) and the bound on its motion (row 5, first entry), in one block: a step makes dozens
     # of small arrays, ~25 ns each
@@ -364,35 +353,34 @@ def listed_search(m, d):
     moved = frames[:, 5, 0]
     valid = True
     for i in range(k):
-        f = near[i]
+        f = d.near[i]
         A = frames[i][:3]
-        facing, nu, nv, nh, off, n_W = _face_frame(table, master, R_W, p_W, opening, f, A)
+        facing, nu, nv, nh, off, n_W = _face_frame(m, d, f, A)
         frames[i, 3, 0], frames[i, 3, 1], frames[i, 3, 2] = off
         frames[i, 4, 0], frames[i, 4, 1], frames[i, 4, 2] = nu, nv, nh
-        if not built[f]:
+        if not d.pair_list.built[f]:
             valid = False
-        elif not scan[f]:
-            turn = math.sqrt((n_W[0] - normal_b[f, 0]) ** 2 + (n_W[1] - normal_b[f, 1]) ** 2
-                             + (n_W[2] - normal_b[f, 2]) ** 2)
-            moved[i] = _moved(A, off, A_b[f], off_b[f], centre_b[f], spread[f])
+        elif not d.pair_list.scan[f]:
+            turn = math.sqrt((n_W[0] - d.pair_list.normal_W[f, 0]) ** 2 + (n_W[1] - d.pair_list.normal_W[f, 1]) ** 2
+                             + (n_W[2] - d.pair_list.normal_W[f, 2]) ** 2)
+            moved[i] = _moved(A, off, d.pair_list.A[f], d.pair_list.off[f], m.faces.master_centre_J[f],
+                              m.faces.master_radius[f])
             if not facing or turn > LIST_NORMAL_TOL or moved[i] >= LIST_SKIN - GAP_SLACK:
                 valid = False
     if not valid:
-        pair_list = build_pair_list(m, d, near)
-        d.pair_list = pair_list
+        d.pair_list = build_pair_list(m, d, d.near)
         moved[:] = 0.0
-    lm, ls, centre, node, gap = pair_list.master, pair_list.slave, pair_list.centre_J, pair_list.node, pair_list.gap
-    start, stop, scan = pair_list.start, pair_list.stop, pair_list.scan
-    R = r1 + radius
+    radius, cutoff = m.law.r2, m.law.cutoff
+    R = m.law.r1 + radius
     n_out = 0
     for i in range(k):
-        n_out += stop[near[i]] - start[near[i]]
+        n_out += d.pair_list.stop[d.near[i]] - d.pair_list.start[d.near[i]]
     out = np.empty((2, n_out), dtype=np.int64)
     out_m, out_s = out[0], out[1]
     n = n_searched = 0
     for i in range(k):
-        f = near[i]
-        if scan[f]:
+        f = d.near[i]
+        if d.pair_list.scan[f]:
             n_searched += 1
             continue
         F = frames[i]
@@ -401,22 +389,22 @@ def listed_search(m, d):
         a00, a01, a02, a10, a11, a12 = F[0, 0], F[0, 1], F[0, 2], F[1, 0], F[1, 1], F[1, 2]
         a20, a21, a22, o0, o1, o2 = F[2, 0], F[2, 1], F[2, 2], F[3, 0], F[3, 1], F[3, 2]
         reach = moved[i] + GAP_SLACK
-        for idx in range(start[f], stop[f]):
-            if gap[idx] > reach:
+        for idx in range(d.pair_list.start[f], d.pair_list.stop[f]):
+            if d.pair_list.gap[idx] > reach:
                 break  # ordered by gap: no later candidate can touch either
-            c0, c1, c2 = centre[idx, 0], centre[idx, 1], centre[idx, 2]
+            c0, c1, c2 = d.pair_list.centre_J[idx, 0], d.pair_list.centre_J[idx, 1], d.pair_list.centre_J[idx, 2]
             lift = a20 * c0 + a21 * c1 + a22 * c2 + o2 - radius
-            du = a00 * c0 + a01 * c1 + a02 * c2 + o0 - node[idx, 0]
-            dv = a10 * c0 + a11 * c1 + a12 * c2 + o1 - node[idx, 1]
+            du = a00 * c0 + a01 * c1 + a02 * c2 + o0 - d.pair_list.node[idx, 0]
+            dv = a10 * c0 + a11 * c1 + a12 * c2 + o1 - d.pair_list.node[idx, 1]
             if _node_hit(du, dv, lift, lift * lift - R * R, nu, nv, nh, cutoff):
-                out_m[n], out_s[n] = lm[idx], ls[idx]
+                out_m[n], out_s[n] = d.pair_list.master[idx], d.pair_list.slave[idx]
                 n += 1
     out_m, out_s = out_m[:n], out_s[:n]
     if n_searched:  # face pairs outside the ball regime: searched anew
         searched = np.empty(n_searched, dtype=np.int64)
         n_searched = 0
-        for f in near:
-            if scan[f]:
+        for f in d.near:
+            if d.pair_list.scan[f]:
                 searched[n_searched] = f
                 n_searched += 1
         found = grid_search(m, d, searched)

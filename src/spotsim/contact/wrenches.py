@@ -49,10 +49,11 @@ def no_summary() -> Summary:
 
 
 @njit_inline
-def _add_wrench(F, T, ext_f, ext_t, j, partner, p, sign, f, p_W):
+def _add_wrench(F, T, ext_f, ext_t, j, partner, p, o, sign, f):
     """Add sign f (3-tuple), acting at p (3-tuple, world), to body j's force F[j] and moment
-    T[j] about its origin, and to the external wrench when the partner body is fixed."""
-    r0, r1, r2 = p[0] - p_W[j, 0], p[1] - p_W[j, 1], p[2] - p_W[j, 2]
+    T[j] about its origin o (3-tuple), and to the external wrench when the partner body is
+    fixed."""
+    r0, r1, r2 = p[0] - o[0], p[1] - o[1], p[2] - o[2]
     F[j, 0] += sign * f[0]
     F[j, 1] += sign * f[1]
     F[j, 2] += sign * f[2]
@@ -74,43 +75,38 @@ def body_wrenches(m, d):
     """Stage: d.loads, one wrench per body from d.contacts (Eq. 18-21), +f_i on the finger's
     body, -f_i on the module's, at the common contact point (or, with m.law.common_point
     False, each at its own sphere's centre: the negative control); and each finger's load."""
-    c = d.contacts
-    master, slave, force, point, c1, c2 = c.master, c.slave, c.force_W, c.point_W, c.c1_W, c.c2_W
-    joint1, joint2, finger1 = m.master.joint, m.slave.joint, m.master.finger
-    finger_parent, finger_axis_J = m.fingers.parent_joint, m.fingers.axis_J
-    R_W, p_W = d.R_W, d.p_W
-    common_point = m.law.common_point
-    njoints = R_W.shape[0]
+    njoints = d.R_W.shape[0]
     # F, T (moment about each joint's origin, world axes), T_O and the external wrench as
     # blocks of one array (njoints + 1 rows: at least the external wrench's two): an
     # allocation costs ~25 ns, a step makes dozens
     block = np.zeros((4, njoints + 1, 3))
     F, T, T_O, ext_f, ext_t = block[0][:njoints], block[1][:njoints], block[2][:njoints], block[3][0], block[3][1]
-    load = np.zeros(finger_parent.shape[0])
-    for i in range(master.shape[0]):
-        j1, j2 = joint1[master[i]], joint2[slave[i]]
-        f = (force[i, 0], force[i, 1], force[i, 2])
+    load = np.zeros(m.fingers.parent_joint.shape[0])
+    common_point = m.law.common_point
+    for i in range(d.contacts.master.shape[0]):
+        mi = d.contacts.master[i]
+        j1, j2 = m.master.joint[mi], m.slave.joint[d.contacts.slave[i]]
+        f = (d.contacts.force_W[i, 0], d.contacts.force_W[i, 1], d.contacts.force_W[i, 2])
         if common_point:
-            p1 = p2 = (point[i, 0], point[i, 1], point[i, 2])
+            p1 = p2 = (d.contacts.point_W[i, 0], d.contacts.point_W[i, 1], d.contacts.point_W[i, 2])
         else:
-            p1 = (c1[i, 0], c1[i, 1], c1[i, 2])
-            p2 = (c2[i, 0], c2[i, 1], c2[i, 2])
-        _add_wrench(F, T, ext_f, ext_t, j1, j2, p1, 1.0, f, p_W)
-        _add_wrench(F, T, ext_f, ext_t, j2, j1, p2, -1.0, f, p_W)
-        fg = finger1[master[i]]
-        j = finger_parent[fg]
+            p1 = (d.contacts.c1_W[i, 0], d.contacts.c1_W[i, 1], d.contacts.c1_W[i, 2])
+            p2 = (d.contacts.c2_W[i, 0], d.contacts.c2_W[i, 1], d.contacts.c2_W[i, 2])
+        _add_wrench(F, T, ext_f, ext_t, j1, j2, p1, (d.p_W[j1, 0], d.p_W[j1, 1], d.p_W[j1, 2]), 1.0, f)
+        _add_wrench(F, T, ext_f, ext_t, j2, j1, p2, (d.p_W[j2, 0], d.p_W[j2, 1], d.p_W[j2, 2]), -1.0, f)
+        fg = m.master.finger[mi]
+        j = m.fingers.parent_joint[fg]
         for a in range(3):
-            load[fg] += f[a] * (R_W[j, a, 0] * finger_axis_J[fg, 0] + R_W[j, a, 1] * finger_axis_J[fg, 1]
-                                + R_W[j, a, 2] * finger_axis_J[fg, 2])
+            load[fg] += f[a] * (d.R_W[j, a, 0] * m.fingers.axis_J[fg, 0] + d.R_W[j, a, 1] * m.fingers.axis_J[fg, 1]
+                                + d.R_W[j, a, 2] * m.fingers.axis_J[fg, 2])
     local = np.empty((njoints, 6))
     for j in range(njoints):
-        R, p = R_W[j], p_W[j]
         for a in range(3):
-            local[j, a] = R[0, a] * F[j, 0] + R[1, a] * F[j, 1] + R[2, a] * F[j, 2]
-            local[j, 3 + a] = R[0, a] * T[j, 0] + R[1, a] * T[j, 1] + R[2, a] * T[j, 2]
-        T_O[j, 0] = T[j, 0] + p[1] * F[j, 2] - p[2] * F[j, 1]
-        T_O[j, 1] = T[j, 1] + p[2] * F[j, 0] - p[0] * F[j, 2]
-        T_O[j, 2] = T[j, 2] + p[0] * F[j, 1] - p[1] * F[j, 0]
+            local[j, a] = d.R_W[j, 0, a] * F[j, 0] + d.R_W[j, 1, a] * F[j, 1] + d.R_W[j, 2, a] * F[j, 2]
+            local[j, 3 + a] = d.R_W[j, 0, a] * T[j, 0] + d.R_W[j, 1, a] * T[j, 1] + d.R_W[j, 2, a] * T[j, 2]
+        T_O[j, 0] = T[j, 0] + d.p_W[j, 1] * F[j, 2] - d.p_W[j, 2] * F[j, 1]
+        T_O[j, 1] = T[j, 1] + d.p_W[j, 2] * F[j, 0] - d.p_W[j, 0] * F[j, 2]
+        T_O[j, 2] = T[j, 2] + d.p_W[j, 0] * F[j, 1] - d.p_W[j, 1] * F[j, 0]
     for k in range(load.shape[0]):
         load[k] = max(load[k], 0.0)
     d.loads = Loads(local, F, T_O, ext_f, ext_t, load)
@@ -121,27 +117,28 @@ def contact_summary(m, d):
     """Stage: d.summary, the wrench on the active grasp's module from d.loads in its grasp
     frame O_a (its moment about the module's centroid), and the extremes over d.contacts."""
     g = d.active
-    R_W, p_W = d.R_W, d.p_W
-    grasps = m.grasps
-    module_joint = grasps.module_joint[g]
-    A, B = R_W[grasps.ee_joint[g]], grasps.R_ee[g]
-    r_G = add3(mv3(R_W[module_joint], grasps.module_lever[g]), p_W[module_joint])
-    loads = d.loads
-    f, T = loads.force_W[module_joint], loads.torque_O_W[module_joint]
+    module_joint, ee_joint = m.grasps.module_joint[g], m.grasps.ee_joint[g]
+    r_G = add3(mv3(d.R_W[module_joint], m.grasps.module_lever[g]), d.p_W[module_joint])
+    f = (d.loads.force_W[module_joint, 0], d.loads.force_W[module_joint, 1], d.loads.force_W[module_joint, 2])
+    T = (d.loads.torque_O_W[module_joint, 0], d.loads.torque_O_W[module_joint, 1],
+         d.loads.torque_O_W[module_joint, 2])
     tau = (T[0] - (r_G[1] * f[2] - r_G[2] * f[1]), T[1] - (r_G[2] * f[0] - r_G[0] * f[2]),
            T[2] - (r_G[0] * f[1] - r_G[1] * f[0]))
     out = np.zeros(6)
     for a in range(3):
-        # column a of R = A B, the grasp frame's axes in world
-        R0 = A[0, 0] * B[0, a] + A[0, 1] * B[1, a] + A[0, 2] * B[2, a]
-        R1 = A[1, 0] * B[0, a] + A[1, 1] * B[1, a] + A[1, 2] * B[2, a]
-        R2 = A[2, 0] * B[0, a] + A[2, 1] * B[1, a] + A[2, 2] * B[2, a]
+        # column a of R = A B, the grasp frame's axes in world (A: the end-effector joint's
+        # rotation, B: the grasp frame's in it)
+        R0 = d.R_W[ee_joint, 0, 0] * m.grasps.R_ee[g, 0, a] + d.R_W[ee_joint, 0, 1] * m.grasps.R_ee[g, 1, a] + \
+            d.R_W[ee_joint, 0, 2] * m.grasps.R_ee[g, 2, a]
+        R1 = d.R_W[ee_joint, 1, 0] * m.grasps.R_ee[g, 0, a] + d.R_W[ee_joint, 1, 1] * m.grasps.R_ee[g, 1, a] + \
+            d.R_W[ee_joint, 1, 2] * m.grasps.R_ee[g, 2, a]
+        R2 = d.R_W[ee_joint, 2, 0] * m.grasps.R_ee[g, 0, a] + d.R_W[ee_joint, 2, 1] * m.grasps.R_ee[g, 1, a] + \
+            d.R_W[ee_joint, 2, 2] * m.grasps.R_ee[g, 2, a]
         out[a] = R0 * f[0] + R1 * f[1] + R2 * f[2]
         out[3 + a] = R0 * tau[0] + R1 * tau[1] + R2 * tau[2]
-    speed, phi = d.contacts.speed, d.contacts.phi
     fastest = deepest = 0.0
-    if speed.shape[0]:
-        fastest, deepest = speed.max(), phi.max()
+    if d.contacts.speed.shape[0]:
+        fastest, deepest = d.contacts.speed.max(), d.contacts.phi.max()
     d.summary = Summary((out[0], out[1], out[2]), (out[3], out[4], out[5]), fastest, deepest)
 
 

@@ -346,9 +346,10 @@ def coarse_mesh(vertices: np.ndarray, triangles: np.ndarray, cell: float):
 
 def visual_model(model) -> tuple[pin.Model, pin.GeometryModel]:
     """The unreduced scene with its visual geometry: arm meshes coarsened, the adapter see-through."""
+    import io
+
     import coal
     import yourdfpy
-    import io
 
     full = pin.buildModelFromXML(model.urdf)
     visual = pin.buildGeomFromUrdfString(full, model.urdf, pin.GeometryType.VISUAL)

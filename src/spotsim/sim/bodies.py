@@ -16,7 +16,19 @@ import pinocchio as pin
 
 from ..errors import ModelError
 from ..jit import njit, njit_inline
-from ..linalg import add3, cross3, mm9, mtv3, mtv9, mv3, mv9, put3, put9, quat_rotation9, sub3
+from ..linalg import (
+    add3,
+    cross3,
+    mm9,
+    mtv3,
+    mtv9,
+    mv3,
+    mv9,
+    put3,
+    put9,
+    quat_rotation9,
+    sub3,
+)
 
 
 class FreeBodies(NamedTuple):
@@ -92,15 +104,12 @@ def kinematics(m, d):
     """Stage 1: each free body's rotation, origin, angular velocity and origin velocity in the
     world, into rows m.bodies.joint of d.R_W, d.p_W, d.w_W, d.vo_W (fixed bodies stay at the
     identity)."""
-    bodies, q, v = m.bodies, d.q, d.v
-    R_W, p_W, w_W, vo_W = d.R_W, d.p_W, d.w_W, d.vo_W
-    for b in range(bodies.joint.shape[0]):
-        j, iv = bodies.joint[b], bodies.idx_v[b]
-        R = R_W[j]
-        body_rotation_into(bodies, b, q, R)
-        put3(p_W[j], 0, body_origin3(bodies, b, q))
-        put3(vo_W[j], 0, mv3(R, v[iv:iv + 3]))
-        put3(w_W[j], 0, mv3(R, v[iv + 3:iv + 6]))
+    for b in range(m.bodies.joint.shape[0]):
+        j, iv = m.bodies.joint[b], m.bodies.idx_v[b]
+        body_rotation_into(m.bodies, b, d.q, d.R_W[j])
+        put3(d.p_W[j], 0, body_origin3(m.bodies, b, d.q))
+        put3(d.vo_W[j], 0, mv3(d.R_W[j], d.v[iv:iv + 3]))
+        put3(d.w_W[j], 0, mv3(d.R_W[j], d.v[iv + 3:iv + 6]))
 
 
 # ------------------------------------------------------------------------------- centroids

@@ -5,15 +5,15 @@ from __future__ import annotations
 
 import math
 
-from ..jit import njit, njit_inline
+from ..jit import njit
 from ..linalg import cross, mv
 
 
 @njit
 def raise_peaks(d):
     """Raise the active grasp's peaks to include the last step's contact wrench and pairs."""
-    g, s = d.active, d.summary
-    f, tau = s.force_A, s.torque_A
+    g = d.active
+    f, tau = d.summary.force_A, d.summary.torque_A
     for a in range(3):
         d.peak_force[g, a] = max(d.peak_force[g, a], abs(f[a]))
         d.peak_torque[g, a] = max(d.peak_torque[g, a], abs(tau[a]))
@@ -39,11 +39,9 @@ def bookkeeping(m, d, h):
         for i in range(3):
             d.impulse_W[i] += h * d.external_force_W[i]
             d.impulse_moment_O_W[i] += h * d.external_torque_O_W[i]
-    g_W = m.gravity_W
-    if g_W[0] != 0.0 or g_W[1] != 0.0 or g_W[2] != 0.0:
-        bodies = m.bodies
-        for b in range(bodies.joint.shape[0]):
-            j = bodies.joint[b]
-            r_G = d.p_W[j] + mv(d.R_W[j], bodies.lever[b])
-            d.impulse_W[:] += h * bodies.mass[b] * g_W
-            d.impulse_moment_O_W[:] += h * cross(r_G, bodies.mass[b] * g_W)
+    if m.gravity_W[0] != 0.0 or m.gravity_W[1] != 0.0 or m.gravity_W[2] != 0.0:
+        for b in range(m.bodies.joint.shape[0]):
+            j = m.bodies.joint[b]
+            r_G = d.p_W[j] + mv(d.R_W[j], m.bodies.lever[b])
+            d.impulse_W[:] += h * m.bodies.mass[b] * m.gravity_W
+            d.impulse_moment_O_W[:] += h * cross(r_G, m.bodies.mass[b] * m.gravity_W)

@@ -11,6 +11,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..errors import SimulationError
+from .loop import set_near
 
 
 class StateOverflow(SimulationError):
@@ -51,7 +52,9 @@ class BroadPhase:
         results = gd.collisionResults
         return np.array([i for i in range(len(results)) if results[i].isCollision()], dtype=np.int64)
 
-    def refresh(self, data) -> None:
+    def refresh(self, data) -> np.ndarray:
         """Run it anew at data's state: its face pairs start a fresh skin (the search's pair
-        list checks itself against the face pairs it was built for)."""
-        data.assign(near=self.near(data.q, data.opening), travel=0.0)
+        list checks itself against the face pairs it was built for). Returns them."""
+        near = self.near(data.q, data.opening)
+        set_near(data, near)
+        return near

@@ -9,7 +9,7 @@ chattering between closing and holding. Only the active grasp's drive moves; the
 
 from __future__ import annotations
 
-from ..jit import njit, njit_inline
+from ..jit import njit
 
 
 @njit
@@ -17,30 +17,27 @@ def finger_drive(m, d):
     """Stage: d.drive_power, the power the drives put in during the step just taken (its
     finger rates), then the active drive's finger rates for the coming step from the step's
     finger loads."""
-    load, rate = d.loads.finger_load, d.opening_rate
     power = 0.0  # a bound: each finger's load along its axis times its sliding speed
-    for i in range(load.shape[0]):
-        power += load[i] * abs(rate[i])
+    for i in range(d.opening_rate.shape[0]):
+        power += d.loads.finger_load[i] * abs(d.opening_rate[i])
     d.drive_power = power
     ee = m.grasps.ee[d.active]
-    fingers = m.fingers.drive
     force, n = 0.0, 0
-    for i in range(fingers.shape[0]):
-        if fingers[i] == ee:
-            force += load[i]
+    for i in range(m.fingers.drive.shape[0]):
+        if m.fingers.drive[i] == ee:
+            force += d.loads.finger_load[i]
             n += 1
     if n == 0:
         return
     force /= n
-    p = m.drive
-    if force >= p.grasp_load:
+    if force >= m.drive.grasp_load:
         d.stalled[ee] = True
-    elif force < p.resume_fraction * p.grasp_load:
+    elif force < m.drive.resume_fraction * m.drive.grasp_load:
         d.stalled[ee] = False
-    closing = 0.0 if d.stalled[ee] else -p.closing_speed
-    for i in range(fingers.shape[0]):
-        if fingers[i] == ee:
-            rate[i] = closing
+    closing = 0.0 if d.stalled[ee] else -m.drive.closing_speed
+    for i in range(m.fingers.drive.shape[0]):
+        if m.fingers.drive[i] == ee:
+            d.opening_rate[i] = closing
 
 
 @njit

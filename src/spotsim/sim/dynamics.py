@@ -37,8 +37,7 @@ def free_body_acceleration(bodies, b, R, v, f_local, g_W):
 def accelerations(m, d):
     """Stage: d.a (nv,), the free bodies' accelerations at (d.q, d.v) under d.loads.f_local and
     gravity, with the rotations of the last `kinematics`."""
-    bodies, a, f_local = m.bodies, d.a, d.loads.f_local
-    for b in range(bodies.joint.shape[0]):
-        a_O, alpha = free_body_acceleration(bodies, b, d.R_W[bodies.joint[b]], d.v, f_local, m.gravity_W)
-        put3(a, bodies.idx_v[b], a_O)
-        put3(a, bodies.idx_v[b] + 3, alpha)
+    for b in range(m.bodies.joint.shape[0]):
+        a_O, alpha = free_body_acceleration(m.bodies, b, d.R_W[m.bodies.joint[b]], d.v, d.loads.f_local, m.gravity_W)
+        put3(d.a, m.bodies.idx_v[b], a_O)
+        put3(d.a, m.bodies.idx_v[b] + 3, alpha)

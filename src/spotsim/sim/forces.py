@@ -9,7 +9,7 @@ from __future__ import annotations
 from ..contact.forces import pair_forces
 from ..contact.search import find_pairs
 from ..contact.wrenches import body_wrenches, contact_summary
-from ..jit import njit, njit_inline
+from ..jit import njit
 from .bodies import kinematics
 
 

@@ -22,7 +22,13 @@ import numpy as np
 from ..contact.forces import commit_memory
 from ..jit import njit, njit_inline
 from ..linalg import axpy3, put3, quat_times_exp4
-from .bodies import body_rotation, centroid_acceleration, centroid_state, centroid_state_at, set_centroid_state
+from .bodies import (
+    body_rotation,
+    centroid_acceleration,
+    centroid_state,
+    centroid_state_at,
+    set_centroid_state,
+)
 from .data import RK_STATE
 from .dynamics import accelerations
 from .forces import forces
@@ -70,13 +76,11 @@ def symplectic_euler(m, d, h):
     forces(m, d, h)
     commit_memory(d)
     accelerations(m, d)
-    bodies, a = m.bodies, d.a
-    for b in range(bodies.joint.shape[0]):
-        iv = bodies.idx_v[b]
-        _euler_body(bodies, b, d.R_W[bodies.joint[b]], d.q, d.v, a[iv:iv + 3], a[iv + 3:iv + 6], h)
-    loads = d.loads
-    d.external_force_W[:] = loads.external_force_W
-    d.external_torque_O_W[:] = loads.external_torque_O_W
+    for b in range(m.bodies.joint.shape[0]):
+        iv = m.bodies.idx_v[b]
+        _euler_body(m.bodies, b, d.R_W[m.bodies.joint[b]], d.q, d.v, d.a[iv:iv + 3], d.a[iv + 3:iv + 6], h)
+    d.external_force_W[:] = d.loads.external_force_W
+    d.external_torque_O_W[:] = d.loads.external_torque_O_W
     d.evaluations += 1
     d.accepted += 1
 

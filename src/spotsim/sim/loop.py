@@ -9,6 +9,10 @@ buffer is full, when the grasp phase completes or times out, or when the run div
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
+import numpy as np
+
 from ..jit import njit
 from .data import COMPLETE
 from .record import ENERGY as ENERGY_RECORD
@@ -24,6 +28,38 @@ from .step import free_flight, step
 RAN, REFRESH, STOPPED, TOO_DEEP, NONFINITE, ENERGY, ENERGY_WORK, UNDERFLOW = range(8)
 #: An adaptive integrator's interval is covered once less than this share of dt is left.
 INTERVAL_COVERED = 1e-9
+
+
+class Progress(NamedTuple):
+    """What a call of the loop tells Python: why it returned, where the run is, and what it
+    recorded (the first n_rows of rows, the first n_snapshots snapshots)."""
+
+    event: int
+    t: float  # s
+    travel: float  # the broad phase's travel since its last run, m
+    active: int  # the grasp under way
+    complete: bool  # it is complete
+    elapsed: float  # s since its drive started
+    rows: np.ndarray
+    n_rows: int
+    snapshots: object  # data.Snapshots
+    n_snapshots: int
+    n_snapshot_pairs: int
+
+
+@njit
+def progress_of(d, event):
+    """The Progress of d after the loop returned `event`."""
+    g = d.active
+    return Progress(event, d.t, d.travel, g, d.phase[g] == COMPLETE, d.t - d.t_start[g], d.rows, d.n_rows,
+                    d.snapshots, d.n_snapshots, d.n_snapshot_pairs)
+
+
+@njit
+def set_near(d, near):
+    """The broad phase's face pairs `near`, fresh: the travel since starts at zero."""
+    d.near = near
+    d.travel = 0.0
 
 
 @njit
@@ -68,13 +104,18 @@ def interval_steps(m, d):
 @njit
 def run_intervals(m, d, n_records):
     """Up to n_records record intervals of the active grasp (at most d.rows' length), their
-    rows and snapshots into d.rows and d.snapshots; returns why it stopped (RAN when all
+    rows and snapshots into d.rows and d.snapshots: their Progress (event RAN when all
     n_records rows are written).
 
     Enter with coal's face pairs fresh (d.travel within the skin) or within an interval: it
     then takes at least one step.
     """
     d.n_rows = d.n_snapshots = d.n_snapshot_pairs = 0
+    return progress_of(d, _intervals(m, d, n_records))
+
+
+@njit
+def _intervals(m, d, n_records):
     while True:
         if d.left == 0:
             if not m.literal and d.travel > m.limits.skin:

@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 
 from ..contact.wrenches import net_force
-from ..jit import njit, njit_inline
+from ..jit import njit
 from .data import APPROACH, COMPLETE, SELF_CENTRING
 
 #: The hold is complete within this of hold_s, s: the steps' times carry round-off.

@@ -18,8 +18,14 @@ from ..contact.friction import SLIPPING, STICKING
 from ..contact.search import grow
 from ..jit import njit, njit_inline
 from ..linalg import add3, mm_into, mtv3, mv3, sub3
+from .bodies import (
+    bodies_centroid3,
+    bodies_momentum,
+    body_origin3,
+    body_rotation_into,
+    kinetic_energy,
+)
 from .data import Snapshots
-from .bodies import bodies_centroid3, bodies_momentum, body_origin3, body_rotation_into, kinetic_energy
 from .stability import ENERGY_FLOOR_J, ENERGY_GROWTH, mechanical_energy
 
 #: What `close_interval` found: nothing wrong, a non-finite state (no row written), energy
@@ -106,17 +112,16 @@ def rpy(R):
 
 
 @njit_inline
-def _frame(m, q, i, R, work):
-    """Frame i of m.record in the world: its rotation, written into R (3, 3), and its origin
-    (3-tuple). work: (3, 3) scratch."""
-    frames = m.record
-    b = frames.row[i]
+def _frame(m, d, i, R, work):
+    """Frame i of m.record in the world at d.q: its rotation, written into R (3, 3), and its
+    origin (3-tuple). work: (3, 3) scratch."""
+    b = m.record.row[i]
     if b < 0:
-        R[:] = frames.R[i]
-        return frames.p[i, 0], frames.p[i, 1], frames.p[i, 2]
-    body_rotation_into(m.bodies, b, q, work)
-    mm_into(work, frames.R[i], R)
-    return add3(body_origin3(m.bodies, b, q), mv3(work, frames.p[i]))
+        R[:] = m.record.R[i]
+        return m.record.p[i, 0], m.record.p[i, 1], m.record.p[i, 2]
+    body_rotation_into(m.bodies, b, d.q, work)
+    mm_into(work, m.record.R[i], R)
+    return add3(body_origin3(m.bodies, b, d.q), mv3(work, m.record.p[i]))
 
 
 @njit_inline
@@ -140,17 +145,15 @@ def sample(m, d, row):
     """Write one row of the time series (`Layout`) into row: the active grasp's module, its
     offset in the grasp frame, the last step's contact wrench and pairs, the fingers, and for a
     free-flying robot its centroids and frames. Updates d.last_open."""
-    frames, bodies, q, v = m.record, m.bodies, d.q, d.v
     g = d.active
     ee, k = m.grasps.ee[g], m.grasps.module[g]
     n_pairs = d.contacts.key.shape[0]
-    s = d.summary
-    n_mod = frames.module_row.shape[0]
-    n_ee = frames.row.shape[0] - n_mod - 1
+    n_mod = m.record.module_row.shape[0]
+    n_ee = m.record.row.shape[0] - n_mod - 1
     R = np.empty((4, 3, 3))  # scratch: an allocation costs ~25 ns, a row needs a dozen rotations
     R_b, R_a, R_ab, work = R[0], R[1], R[2], R[3]
-    p_b = _frame(m, q, k, R_b, work)
-    p_a = _frame(m, q, n_mod + ee, R_a, work)
+    p_b = _frame(m, d, k, R_b, work)
+    p_a = _frame(m, d, n_mod + ee, R_a, work)
     row[0] = d.t
     at = 1
     at = _put_pose(row, at, p_b, R_b)
@@ -160,44 +163,44 @@ def sample(m, d, row):
             R_ab[i, j] = R_a[0, i] * R_b[0, j] + R_a[1, i] * R_b[1, j] + R_a[2, i] * R_b[2, j]
     at = _put(row, at, rpy(R_ab), 180.0 / math.pi)
     # the module's velocity and angular velocity, world
-    b = frames.module_row[k]
+    b = m.record.module_row[k]
     if b >= 0:
-        iv = bodies.idx_v[b]
-        body_rotation_into(bodies, b, q, work)
-        at = _put(row, at, mv3(work, v[iv:iv + 3]))
-        at = _put(row, at, mv3(work, v[iv + 3:iv + 6]))
+        iv = m.bodies.idx_v[b]
+        body_rotation_into(m.bodies, b, d.q, work)
+        at = _put(row, at, mv3(work, d.v[iv:iv + 3]))
+        at = _put(row, at, mv3(work, d.v[iv + 3:iv + 6]))
     else:
         row[at:at + 6] = 0.0
         at += 6
     # on the module, in O_a: force, and moment about its centroid
     for i in range(3):
-        row[at + i] = s.force_A[i] if n_pairs else 0.0
-        row[at + 3 + i] = s.torque_A[i] if n_pairs else 0.0
+        row[at + i] = d.summary.force_A[i] if n_pairs else 0.0
+        row[at + 3 + i] = d.summary.torque_A[i] if n_pairs else 0.0
     at += 6
-    last_open = d.last_open
-    for i in range(frames.finger_map.shape[0]):
-        last_open[frames.finger_map[i]] = d.opening[i]
-    at = _put(row, at, last_open, 1e3)
-    row[at:at + last_open.shape[0]] = 0.0  # the loads of fingers a weld left out
-    for i in range(frames.finger_map.shape[0]):
-        row[at + frames.finger_map[i]] = d.loads.finger_load[i]
-    at += last_open.shape[0]
+    n_first = d.last_open.shape[0]
+    for i in range(m.record.finger_map.shape[0]):
+        d.last_open[m.record.finger_map[i]] = d.opening[i]
+    at = _put(row, at, d.last_open, 1e3)
+    row[at:at + n_first] = 0.0  # the loads of fingers a weld left out
+    for i in range(m.record.finger_map.shape[0]):
+        row[at + m.record.finger_map[i]] = d.loads.finger_load[i]
+    at += n_first
     n_slip = n_stick = 0
     for i in range(n_pairs):
         n_slip += d.contacts.state[i] == SLIPPING
         n_stick += d.contacts.state[i] == STICKING
     at = _put(row, at, (float(n_slip), float(n_stick), float(d.phase[g]), float(g),
-                        s.max_penetration * 1e6 if n_pairs else 0.0))
-    if frames.free_robot:
-        at = _put(row, at, bodies_centroid3(bodies, frames.robot_rows, q))
-        p = _frame(m, q, frames.row.shape[0] - 1, R_b, work)
+                        d.summary.max_penetration * 1e6 if n_pairs else 0.0))
+    if m.record.free_robot:
+        at = _put(row, at, bodies_centroid3(m.bodies, m.record.robot_rows, d.q))
+        p = _frame(m, d, m.record.row.shape[0] - 1, R_b, work)
         at = _put_pose(row, at, p, R_b)
-        at = _put(row, at, bodies_centroid3(bodies, frames.system_rows, q))
+        at = _put(row, at, bodies_centroid3(m.bodies, m.record.system_rows, d.q))
         for i in range(n_mod):
-            p = _frame(m, q, i, R_b, work)
+            p = _frame(m, d, i, R_b, work)
             at = _put_pose(row, at, p, R_b)
         for i in range(n_ee):
-            p = _frame(m, q, n_mod + i, R_b, work)
+            p = _frame(m, d, n_mod + i, R_b, work)
             at = _put(row, at, p)
 
 
@@ -205,24 +208,21 @@ def sample(m, d, row):
 def _snapshot(m, d):
     """Add the replay's snapshot of the row just written: the pairs in contact and their
     states, each module's combined contact force (world)."""
-    snaps = d.snapshots
-    c = d.contacts
-    n = c.master.shape[0]
+    n = d.contacts.master.shape[0]
     i, at = d.n_snapshots, d.n_snapshot_pairs
-    master, slave, state = snaps.master, snaps.slave, snaps.state
-    while at + n > master.shape[0]:
-        master, slave, state = grow(master), grow(slave), grow(state)
-    if master.shape[0] != snaps.master.shape[0]:
-        snaps = Snapshots(snaps.row, snaps.pairs, snaps.force_W, master, slave, state)
-        d.snapshots = snaps
-    snaps.row[i], snaps.pairs[i] = d.row_index, n
-    master[at:at + n] = c.master
-    slave[at:at + n] = c.slave
-    state[at:at + n] = c.state
+    if at + n > d.snapshots.master.shape[0]:
+        master, slave, state = d.snapshots.master, d.snapshots.slave, d.snapshots.state
+        while at + n > master.shape[0]:
+            master, slave, state = grow(master), grow(slave), grow(state)
+        d.snapshots = Snapshots(d.snapshots.row, d.snapshots.pairs, d.snapshots.force_W, master, slave, state)
+    d.snapshots.row[i], d.snapshots.pairs[i] = d.row_index, n
+    d.snapshots.master[at:at + n] = d.contacts.master
+    d.snapshots.slave[at:at + n] = d.contacts.slave
+    d.snapshots.state[at:at + n] = d.contacts.state
     for k in range(m.record.module_row.shape[0]):
         b = m.record.module_row[k]
         for a in range(3):  # a welded module takes no contact
-            snaps.force_W[i, k, a] = d.loads.force_W[m.bodies.joint[b], a] if b >= 0 else 0.0
+            d.snapshots.force_W[i, k, a] = d.loads.force_W[m.bodies.joint[b], a] if b >= 0 else 0.0
     d.n_snapshots = i + 1
     d.n_snapshot_pairs = at + n
 
@@ -266,11 +266,10 @@ def close_interval(m, d):
     of the free bodies' momentum from its start less the external impulse, and the largest
     single-body momenta.
     """
-    q, v = d.q, d.v
-    if not math.isfinite(np.sum(q) + np.sum(v)):
+    if not math.isfinite(np.sum(d.q) + np.sum(d.v)):
         return NONFINITE
     code = OK
-    E = mechanical_energy(m.bodies, q, v, d.contacts.phi, d.memory.s, m.law.K, m.law.bristle.k_b)
+    E = mechanical_energy(m.bodies, d.q, d.v, d.contacts.phi, d.memory.s, m.law.K, m.law.bristle.k_b)
     d.energy_now = E
     if d.held:
         if math.isnan(d.energy_passive):
@@ -282,11 +281,13 @@ def close_interval(m, d):
     if code == OK and m.record.energy_bound and E > ENERGY_GROWTH * (d.energy_start + d.drive_work) + ENERGY_FLOOR_J:
         code = ENERGY_WORK
     record_row(m, d)
-    P, L, p_b, l_b, _ = bodies_momentum(m.bodies, m.record.all_rows, q, v)
+    P, L, p_b, l_b, _ = bodies_momentum(m.bodies, m.record.all_rows, d.q, d.v)
     d.momentum_max, d.angular_momentum_max = max(d.momentum_max, p_b), max(d.angular_momentum_max, l_b)
-    P0, L0, J, JL = d.momentum_start, d.angular_momentum_start, d.impulse_W, d.impulse_moment_O_W
-    dP = (P[0] - P0[0] - J[0], P[1] - P0[1] - J[1], P[2] - P0[2] - J[2])
-    dL = (L[0] - L0[0] - JL[0], L[1] - L0[1] - JL[1], L[2] - L0[2] - JL[2])
+    dP = (P[0] - d.momentum_start[0] - d.impulse_W[0], P[1] - d.momentum_start[1] - d.impulse_W[1],
+          P[2] - d.momentum_start[2] - d.impulse_W[2])
+    dL = (L[0] - d.angular_momentum_start[0] - d.impulse_moment_O_W[0],
+          L[1] - d.angular_momentum_start[1] - d.impulse_moment_O_W[1],
+          L[2] - d.angular_momentum_start[2] - d.impulse_moment_O_W[2])
     d.momentum_drift = max(d.momentum_drift, math.sqrt(dP[0] ** 2 + dP[1] ** 2 + dP[2] ** 2))
     d.angular_momentum_drift = max(d.angular_momentum_drift, math.sqrt(dL[0] ** 2 + dL[1] ** 2 + dL[2] ** 2))
     return code

@@ -24,18 +24,17 @@ class Recorder:
             "row", "pairs", "master", "slave", "state", "faces_in_range", "force_W")}
         self._ids = (None, None)  # (model, its SphereIds in the first model)
 
-    def collect(self, model, data) -> int:
-        """Keep the rows and snapshots the last call of the loop wrote into data; returns the
-        number of rows."""
-        v = data.view()
-        if v.n_rows:
-            self.chunks.append(v.rows[:v.n_rows].copy())
-        n, k = v.n_snapshots, v.n_snapshot_pairs
+    def collect(self, model, progress, near: np.ndarray) -> int:
+        """Keep the rows and snapshots a call of the loop wrote (its `loop.Progress`), near:
+        the broad phase's face pairs during the call. Returns the number of rows."""
+        n_rows, n, k = progress.n_rows, progress.n_snapshots, progress.n_snapshot_pairs
+        if n_rows:
+            self.chunks.append(progress.rows[:n_rows].copy())
         if n:
-            s = v.snapshots
-            self.add_snapshots(model, v.near, s.row[:n], s.pairs[:n], s.force_W[:n], s.master[:k], s.slave[:k],
+            s = progress.snapshots
+            self.add_snapshots(model, near, s.row[:n], s.pairs[:n], s.force_W[:n], s.master[:k], s.slave[:k],
                                s.state[:k])
-        return v.n_rows
+        return n_rows
 
     def add_snapshots(self, model, near: np.ndarray, rows: np.ndarray, pairs: np.ndarray, force_W: np.ndarray,
                       master: np.ndarray, slave: np.ndarray, state: np.ndarray) -> None:

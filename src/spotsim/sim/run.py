@@ -19,8 +19,18 @@ from ..errors import ScenarioError
 from ..scenario import modules_of, tolerance_warnings
 from .bodies import kinematics
 from .broadphase import BroadPhase, StateOverflow
-from .data import COMPLETE, ROWS_PER_CALL, SELF_CENTRING, make_data
-from .loop import ENERGY, ENERGY_WORK, NONFINITE, REFRESH, TOO_DEEP, UNDERFLOW, run_intervals
+from .data import ROWS_PER_CALL, SELF_CENTRING, make_data
+from .loop import (
+    ENERGY,
+    ENERGY_WORK,
+    NONFINITE,
+    RAN,
+    REFRESH,
+    TOO_DEEP,
+    UNDERFLOW,
+    progress_of,
+    run_intervals,
+)
 from .phase import completion_criteria
 from .record import begin_record
 from .recorder import Recorder
@@ -62,48 +72,50 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
     n_records = int(round(scenario.simulation.duration_s / scenario.simulation.dt_s))
     data = make_data(model)
     broad = None if model.sim.literal else BroadPhase(model)
+    near = np.zeros(0, dtype=np.int64)  # the broad phase's face pairs
     rec = Recorder(model)
     begin_record(model.sim, data)
-    rec.collect(model, data)
+    out = progress_of(data, RAN)
+    rec.collect(model, out, near)
     status, message, welds = INCOMPLETE, "", []
     bar = progress_bar(n_records, progress)
     wall0 = time.perf_counter()
     done = 0  # record intervals taken
     try:
         while done < n_records:
-            if broad is not None and data.travel > model.params.skin:
+            if broad is not None and out.travel > model.params.skin:
                 try:
-                    broad.refresh(data)  # the Verlet skin is used up
+                    near = broad.refresh(data)  # the Verlet skin is used up
                 except StateOverflow as e:
-                    status, message = DIVERGED, f"{e} at t = {data.t:.4f} s"
+                    status, message = DIVERGED, f"{e} at t = {out.t:.4f} s"
                     break
-            event = run_intervals(model.sim, data, min(n_records - done, ROWS_PER_CALL))
-            rows = rec.collect(model, data)
+            out = run_intervals(model.sim, data, min(n_records - done, ROWS_PER_CALL))
+            rows = rec.collect(model, out, near)
             done += rows
             bar.update(rows)
-            if event == REFRESH:
+            if out.event == REFRESH:
                 continue
-            v = data.view()
-            message = _divergence(model, v, event)
+            message = _divergence(model, data, out.event)
             if message:
                 status = DIVERGED
                 break
-            g = v.active
-            if v.phase[g] == COMPLETE:
-                if g + 1 == len(model.grasps):
+            if out.complete:
+                if out.active + 1 == len(model.grasps):
                     status = COMPLETED
-                    message = f"{'all grasps' if len(model.grasps) > 1 else 'grasp'} complete at t = {v.t:.4f} s"
+                    message = f"{'all grasps' if len(model.grasps) > 1 else 'grasp'} complete at t = {out.t:.4f} s"
                     break
                 model, data = weld(model, data, source)
                 broad = None if model.sim.literal else BroadPhase(model)
-                welds.append(v.t)
-            elif v.t - v.t_start[g] > model.sim.completion.phase_timeout:
+                near = np.zeros(0, dtype=np.int64)
+                out = progress_of(data, RAN)
+                welds.append(out.t)
+            elif out.elapsed > model.sim.completion.phase_timeout:
                 message = _why_incomplete(model, data, "the phase time-out")
                 break
         else:
             message = _why_incomplete(model, data, "the time-out")
     except KeyboardInterrupt:
-        status, message = INTERRUPTED, f"interrupted by the user at t = {data.t:.4f} s"
+        status, message = INTERRUPTED, f"interrupted by the user at t = {out.t:.4f} s"
     finally:
         bar.close()
     wall = time.perf_counter() - wall0
@@ -112,8 +124,11 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
     return Result(scenario, model, summary, series, rec.replay_arrays())
 
 
-def _divergence(model: Model, v, event: int) -> str:
-    """Why the run has diverged, from the loop's event and d's fields v, or ''."""
+def _divergence(model: Model, data, event: int) -> str:
+    """Why the run has diverged, from the loop's event and data, or ''."""
+    if event not in (TOO_DEEP, NONFINITE, ENERGY_WORK, ENERGY, UNDERFLOW):
+        return ""
+    v = data.view()
     if event == TOO_DEEP:
         return (f"penetration {v.summary.max_penetration * 1e3:.3f} mm exceeds the sphere radius "
                 f"{model.sim.limits.max_penetration * 1e3:.3f} mm at t = {v.t:.4f} s")

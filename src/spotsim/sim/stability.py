@@ -26,8 +26,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .bodies import kinetic_energy
 from ..jit import njit_inline
+from .bodies import kinetic_energy
 
 #: Pairs sharing the load in the estimate: the shipped runs peak at 20-100 pairs in contact
 #: (Case I ~ 20 at its impacts, the dual-arm second grasp 62).

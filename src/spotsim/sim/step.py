@@ -46,13 +46,12 @@ def travel_rate(m, d):
     """A bound on how fast any two contact spheres approach each other, m/s: the sum over the
     free contact bodies of |v_O| + |omega| reach, plus the fastest finger slide."""
     rate = 0.0
-    for x in d.opening_rate:
-        rate = max(rate, abs(x))
-    idx_v, v = m.bodies.idx_v, d.v
-    for b, r in zip(m.limits.reach_rows, m.limits.reach):
-        iv = idx_v[b]  # a free-flyer's v = (v_O, omega) in its frame; norms are frame-free
-        rate += math.sqrt(v[iv] ** 2 + v[iv + 1] ** 2 + v[iv + 2] ** 2) + \
-            math.sqrt(v[iv + 3] ** 2 + v[iv + 4] ** 2 + v[iv + 5] ** 2) * r
+    for i in range(d.opening_rate.shape[0]):
+        rate = max(rate, abs(d.opening_rate[i]))
+    for i in range(m.limits.reach_rows.shape[0]):
+        iv = m.bodies.idx_v[m.limits.reach_rows[i]]  # a free-flyer's v = (v_O, omega) in its frame; norms are frame-free
+        rate += math.sqrt(d.v[iv] ** 2 + d.v[iv + 1] ** 2 + d.v[iv + 2] ** 2) + \
+            math.sqrt(d.v[iv + 3] ** 2 + d.v[iv + 4] ** 2 + d.v[iv + 5] ** 2) * m.limits.reach[i]
     return rate
 
 
@@ -62,7 +61,6 @@ def free_flight(m, d):
     one step of it (no contact forces, zero gravity) is exact for the centroids: coal's face
     pairs are all beyond its margin and the travel bound over the interval keeps within the
     skin. Never with the literal search or gravity."""
-    g = m.gravity_W
-    if m.literal or g[0] != 0.0 or g[1] != 0.0 or g[2] != 0.0:
+    if m.literal or m.gravity_W[0] != 0.0 or m.gravity_W[1] != 0.0 or m.gravity_W[2] != 0.0:
         return False
     return d.near.shape[0] == 0 and d.travel + FREE_FLIGHT_SAFETY * m.dt * travel_rate(m, d) <= m.limits.skin
