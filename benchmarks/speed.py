@@ -1,44 +1,45 @@
-"""Speed of spotsim's default setting against the paper's literal all-pairs search.
+"""Speed of spotsim: its default runs, the paper's literal search, the integrators, and a
+comparison with another revision alternating in one process.
 
-    python benchmarks/speed.py [--cases I II III dual] [--repeat N] [--window STEPS] [--full-literal]
+    python benchmarks/speed.py [--cases I II III dual] [--repeat N] [--window STEPS]
+                               [--against REV [--rounds N]]
 
-For each scenario, in one run of this script:
+In one run of this script, for each scenario:
 
-1. the whole run at its default setting (coal broad phase + grid search, compiled loop), the
-   fastest of REPEAT runs: wall time of the simulation loop, steps per second, nanoseconds
-   per active pair per step (loop wall time over the sphere pairs in contact summed over the
-   steps) and the real-time factor (simulated over wall time; above 1 is faster than real
-   time);
-2. the paper's literal search on the same states: from first contact, WINDOW dynamics steps
-   of the default run, each evaluated once more with every master sphere against every
-   slave sphere (the reference path, `contact.broad_phase: none`). The ratio literal/fast is
-   that of the contact stage (kinematics -> pairs -> forces -> wrenches) per step, and of a
-   whole step (adding the stages both share), on identical states, both on the step-by-step
-   path; and the literal step against the default run's own mean step (the compiled loop's);
-3. with --full-literal, the whole run again with `contact.broad_phase=none` (Case I takes
-   ~12 min, the dual-arm run hours), and the whole-run ratio.
+1. the whole run at its default setting (culled search, symplectic Euler), the fastest of
+   REPEAT runs: wall time of the run, steps per second, the real-time factor (simulated over
+   wall time; above 1 is faster than real time);
+2. the contact stage (kinematics -> pairs -> forces -> wrenches, `sim.forces.forces`) with the
+   culled and with the paper's literal all-pairs search, on the same WINDOW states from first
+   contact, each timed in a compiled loop, and the literal stage against the default run's
+   mean step;
+3. (Case I) the force evaluations of RK4 and Dormand-Prince against a symplectic-Euler step:
+   each integrator's whole run at 0.1 ms (dopri5 at rtol 1e-5), wall time over evaluations;
+4. with --against REV: the whole default runs of this checkout and of revision REV (its
+   src/spotsim imported as `spotsim_base`), alternating, ROUNDS pairs: the median of the
+   paired ratios REV / this (above 1: this checkout is faster) and their quartiles.
 
-Timings are wall-clock on an otherwise idle machine; the script prints the CPU it ran on.
+Wall times are those of a machine that may be busy: the ratios of item 4 are what holds.
 """
 
 from __future__ import annotations
 
 import argparse
-import copy
 import os
 import platform
+import statistics
+import subprocess
+import sys
+import tempfile
 import time
 from pathlib import Path
 
-# one BLAS thread: the literal search's block products ran 5x slower with two threads on this
-# 2-core machine when the other core was busy (0.29 s against 0.06 s a step for Case I)
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+import pinocchio as pin
+from numba import njit
 
-import pinocchio as pin  # noqa: E402
-
-import spotsim  # noqa: E402
-from spotsim.integrators import make_integrator  # noqa: E402
-from spotsim.step import contact_stage, make_data, step  # noqa: E402
+import spotsim
+from spotsim.sim.forces import forces
+from spotsim.sim.run import Stepper
 
 ROOT = Path(__file__).resolve().parents[1]
 CASES = {"I": "single_arm_case_I.yaml", "II": "single_arm_case_II.yaml", "III": "single_arm_case_III.yaml",
@@ -52,97 +53,152 @@ def cpu_name() -> str:
     return platform.processor() or "unknown"
 
 
-def snapshot(data):
-    """A copy of `data` that a contact evaluation may change without touching `data`."""
-    snap = copy.copy(data)
-    for name in ("q", "v", "R_W", "p_W", "w_W", "vo_W", "opening", "opening_rate", "finger_load"):
-        setattr(snap, name, getattr(data, name).copy())
-    snap.f_ext = [f.copy() for f in data.f_ext]
-    snap.f_views = [f.vector for f in snap.f_ext]
-    return snap
+@njit
+def repeat_forces(m, d, h, n):
+    """The contact stage n times on one state (the pair memory is not committed: each call
+    sees the same state)."""
+    for _ in range(n):
+        forces(m, d, h)
 
 
-def contact_window(scenario, steps: int):
-    """Per-step wall time of the contact stage, culled and literal, and of a whole step, on
-    `steps` consecutive dynamics steps from first contact of the default run."""
-    fast = spotsim.build_model(scenario)
+def fastest(scenario, model, repeat: int) -> dict:
+    """The summary of the fastest of `repeat` runs, with the wall times of all."""
+    spotsim.simulate(scenario, model=model)  # every kernel loaded from numba's cache
+    runs = [spotsim.simulate(scenario, model=model).summary for _ in range(max(repeat, 1))]
+    best = min(runs, key=lambda s: s["wall_time_s"])
+    return {**best, "walls": sorted(s["wall_time_s"] for s in runs)}
+
+
+def contact_window(scenario, steps: int, calls: int = 200) -> dict:
+    """The contact stage's time per call, culled and literal, on `steps` consecutive states
+    from first contact of the default run (every tenth of them, timed over `calls` calls)."""
+    culled = spotsim.build_model(scenario)
     literal = spotsim.build_model(spotsim.replace(scenario, contact={"broad_phase": "none"}))
-    data = make_data(fast)
-    integrator = make_integrator(scenario.simulation.integrator, fast.pin_model)
+    stepper = Stepper(culled)
     h = scenario.simulation.dt_s / scenario.simulation.substeps
-    while data.t < scenario.simulation.duration_s and not len(step(fast, data, h, integrator).key):
-        pass
-    t_fast = t_literal = t_step = 0.0
-    pairs = 0
-    states = []
-    for _ in range(steps):  # the default path alone first, so that the literal search's memory
-        states.append(snapshot(data))  # traffic does not slow it down
+    while stepper.data.t < scenario.simulation.duration_s and not len(stepper.data.contacts.key):
+        stepper.step(h)
+    t_culled = t_literal = 0.0
+    pairs = n = 0
+    for k in range(steps):
+        stepper.step(h)
+        if k % 10:
+            continue
+        state = stepper.data.copy()
+        repeat_forces(culled.sim, state, h, 1)
         t0 = time.perf_counter()
-        contact_stage(fast, snapshot(data), h)
-        t_fast += time.perf_counter() - t0
+        repeat_forces(culled.sim, state, h, calls)
+        t_culled += (time.perf_counter() - t0) / calls
+        state = stepper.data.copy()
+        repeat_forces(literal.sim, state, h, 1)
         t0 = time.perf_counter()
-        step(fast, data, h, integrator)
-        t_step += time.perf_counter() - t0
-    for state in states:
-        t0 = time.perf_counter()
-        c = contact_stage(literal, state, h)
-        t_literal += time.perf_counter() - t0
-        pairs += len(c.key)
-    return t_fast / steps, t_literal / steps, t_step / steps, pairs / steps
+        repeat_forces(literal.sim, state, h, 2)
+        t_literal += (time.perf_counter() - t0) / 2
+        pairs += len(state.contacts.key)
+        n += 1
+    return {"culled_us": t_culled / n * 1e6, "literal_us": t_literal / n * 1e6, "pairs": pairs / n}
+
+
+def integrators(scenario) -> list[dict]:
+    """Each integrator's whole run at 0.1 ms (dopri5: rtol 1e-5): wall time per force evaluation."""
+    out = []
+    for method, integrator in (("symplectic_euler", {}), ("rk4", {}), ("dopri5", {"rtol": 1e-5, "atol": 1e-8})):
+        s = spotsim.replace(scenario, simulation={"substeps": 10, "integrator": {"method": method, **integrator}})
+        best = fastest(s, spotsim.build_model(s), 3)
+        evaluations = best["integrator"]["force_evaluations"]
+        out.append({"method": method, "status": best["status"], "wall_s": best["wall_time_s"], "steps": best["steps"],
+                    "evaluations": evaluations, "us_per_evaluation": best["wall_time_s"] / evaluations * 1e6})
+    return out
+
+
+def import_revision(rev: str):
+    """Revision `rev` of this repository's src/spotsim, imported as the package spotsim_base."""
+    where = Path(tempfile.mkdtemp(prefix="spotsim_base_"))
+    archive = subprocess.run(["git", "-C", str(ROOT), "archive", rev, "src/spotsim"], check=True,
+                             capture_output=True).stdout
+    subprocess.run(["tar", "-x", "-C", str(where)], input=archive, check=True)
+    (where / "src" / "spotsim").rename(where / "spotsim_base")
+    os.environ.setdefault("SPOTSIM_ROOT", str(ROOT))  # its urdf/ and config/: this checkout's
+    sys.path.insert(0, str(where))
+    import spotsim_base
+
+    return spotsim_base
+
+
+def alternate(base, config: Path, rounds: int) -> dict:
+    """Whole default runs of `base` and of this checkout, alternating: the ratios base / this."""
+    sb, sn = base.load_scenario(config), spotsim.load_scenario(config)
+    mb, mn = base.build_model(sb), spotsim.build_model(sn)
+    for _ in range(2):
+        base.simulate(sb, model=mb), spotsim.simulate(sn, model=mn)
+    ratios, walls_b, walls_n = [], [], []
+    for _ in range(rounds):
+        b = base.simulate(sb, model=mb).summary["wall_time_s"]
+        n = spotsim.simulate(sn, model=mn).summary["wall_time_s"]
+        walls_b.append(b)
+        walls_n.append(n)
+        ratios.append(b / n)
+    q = statistics.quantiles(ratios, n=4)
+    return {"median": statistics.median(ratios), "q1": q[0], "q3": q[2], "base_s": min(walls_b), "this_s": min(walls_n)}
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES))
-    parser.add_argument("--window", type=int, default=200, help="lockstep steps from first contact")
-    parser.add_argument("--repeat", type=int, default=3, metavar="N",
-                        help="time the default run N times and report the fastest (this machine is shared: "
-                             "one run varies by ~15 percent)")
-    parser.add_argument("--full-literal", action="store_true", help="also run each case whole with the literal search")
+    parser.add_argument("--window", type=int, default=200, help="steps from first contact for the contact stage")
+    parser.add_argument("--repeat", type=int, default=7, metavar="N", help="time each default run N times")
+    parser.add_argument("--against", metavar="REV", help="also alternate whole runs with this git revision")
+    parser.add_argument("--rounds", type=int, default=15, metavar="N", help="pairs of alternating runs")
     args = parser.parse_args()
 
-    print(f"machine: {cpu_name()}, {len(__import__('os').sched_getaffinity(0))} cores; "
-          f"Python {platform.python_version()}, Pinocchio {pin.__version__}")
+    head = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True, text=True)
+    print(f"machine: {cpu_name()}, {len(os.sched_getaffinity(0))} cores; Python {platform.python_version()}, "
+          f"Pinocchio {pin.__version__}, numba {__import__('numba').__version__}; spotsim at {head.stdout.strip()}")
     rows = []
     for name in args.cases:
         scenario = spotsim.load_scenario(ROOT / "config" / CASES[name])
-        spotsim.simulate(scenario)  # a whole run first: every kernel loaded from numba's cache
-        runs = [spotsim.simulate(scenario).summary for _ in range(max(args.repeat, 1))]
-        s = min(runs, key=lambda x: x["wall_time_s"])
-        walls = sorted(x["wall_time_s"] for x in runs)
-        wall, steps = s["wall_time_s"], s["steps"]
-        fast_c, literal_c, whole, pairs = contact_window(scenario, args.window)
-        row = dict(case=name, status=s["status"], sim_s=s["sim_time_s"], wall_s=wall, steps=steps,
-                   steps_per_s=steps / wall, ns_per_pair_step=wall / max(s["pair_steps"], 1) * 1e9,
-                   realtime=s["sim_time_s"] / wall, contact_fast_us=fast_c * 1e6,
-                   contact_literal_us=literal_c * 1e6, step_us=whole * 1e6, window_pairs=pairs,
-                   stage_ratio=literal_c / fast_c, step_ratio=(whole - fast_c + literal_c) / whole,
-                   # the literal step against the default run's own mean step (the compiled loop)
-                   run_step_ratio=(whole - fast_c + literal_c) / (wall / steps))
-        if args.full_literal:
-            lit = spotsim.simulate(spotsim.replace(scenario, contact={"broad_phase": "none"}))
-            row["literal_wall_s"] = lit.summary["wall_time_s"]
-            row["run_ratio"] = lit.summary["wall_time_s"] / wall
-        rows.append(row)
-        print(f"\n{name}: {s['status']} at {s['sim_time_s']:.3f} s simulated")
-        print(f"  default: wall {wall:.3f} s (fastest of {len(walls)}: "
-              f"{', '.join(f'{w:.3f}' for w in walls)}), {steps} steps ({s['free_flight_steps']} free-flight), "
-              f"{row['steps_per_s']:.0f} steps/s, {row['ns_per_pair_step']:.0f} ns per active pair per step, "
-              f"real-time factor {row['realtime']:.2f}")
-        print(f"  {args.window} steps from first contact ({pairs:.1f} pairs on average): contact stage "
-              f"{row['contact_fast_us']:.1f} us culled vs {row['contact_literal_us']:.0f} us literal "
-              f"({row['stage_ratio']:.0f}x); whole step {row['step_us']:.1f} us vs "
-              f"{row['step_us'] - row['contact_fast_us'] + row['contact_literal_us']:.0f} us ({row['step_ratio']:.0f}x); "
-              f"the default run's mean step {wall / steps * 1e6:.1f} us ({row['run_step_ratio']:.0f}x)")
-        if args.full_literal:
-            print(f"  literal whole run: wall {row['literal_wall_s']:.1f} s ({row['run_ratio']:.0f}x)")
-    print("\n| case | simulated s | wall s | steps/s | ns / pair / step | real-time factor | literal/fast, contact stage "
-          "| literal/fast, step | literal step / default run's mean step |")
+        best = fastest(scenario, spotsim.build_model(scenario), args.repeat)
+        window = contact_window(scenario, args.window)
+        step_us = best["wall_time_s"] / best["steps"] * 1e6
+        rows.append(dict(case=name, sim_s=best["sim_time_s"], wall_s=best["wall_time_s"], walls=best["walls"],
+                         steps=best["steps"], steps_per_s=best["steps"] / best["wall_time_s"],
+                         realtime=best["sim_time_s"] / best["wall_time_s"], step_us=step_us, **window))
+        r = rows[-1]
+        print(f"\n{name}: {best['status']} at {best['sim_time_s']:.3f} s simulated; default run {r['wall_s']:.3f} s "
+              f"(fastest of {len(r['walls'])}: {', '.join(f'{w:.3f}' for w in r['walls'])}), {best['steps']} steps "
+              f"({best['free_flight_steps']} free-flight), {r['steps_per_s']:.0f} steps/s, real-time factor "
+              f"{r['realtime']:.2f}")
+        print(f"  contact stage from first contact ({r['pairs']:.1f} pairs on average): culled "
+              f"{r['culled_us']:.2f} us, literal {r['literal_us']:.0f} us ({r['literal_us'] / r['culled_us']:.0f}x); the literal stage against "
+              f"the default run's mean step of {step_us:.2f} us: {r['literal_us'] / step_us:.0f}x")
+    print("\n| case | simulated s | wall s, fastest | steps/s | real-time factor | contact stage, culled us | "
+          "literal us | literal / culled | literal stage / default mean step |")
     print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
     for r in rows:
-        print(f"| {r['case']} | {r['sim_s']:.3f} | {r['wall_s']:.3f} | {r['steps_per_s']:.0f} | "
-              f"{r['ns_per_pair_step']:.0f} | {r['realtime']:.2f} | {r['stage_ratio']:.0f} | {r['step_ratio']:.0f} | "
-              f"{r['run_step_ratio']:.0f} |")
+        print(f"| {r['case']} | {r['sim_s']:.3f} | {r['wall_s']:.3f} | {r['steps_per_s']:.0f} | {r['realtime']:.2f} | "
+              f"{r['culled_us']:.2f} | {r['literal_us']:.0f} | {r['literal_us'] / r['culled_us']:.0f} | "
+              f"{r['literal_us'] / r['step_us']:.0f} |")
+
+    if "I" in args.cases:
+        table = integrators(spotsim.load_scenario(ROOT / "config" / CASES["I"]))
+        se = table[0]["us_per_evaluation"]
+        print("\nCase I at 0.1 ms by integrator (fastest of 3):\n")
+        print("| integrator | status | wall s | steps | force evaluations | us per evaluation | per evaluation / "
+              "symplectic-Euler step |")
+        print("| --- | --- | --- | --- | --- | --- | --- |")
+        for r in table:
+            print(f"| {r['method']} | {r['status']} | {r['wall_s']:.3f} | {r['steps']} | {r['evaluations']} | "
+                  f"{r['us_per_evaluation']:.2f} | {r['us_per_evaluation'] / se:.2f} |")
+
+    if args.against:
+        base = import_revision(args.against)
+        print(f"\nagainst {args.against}: whole default runs alternating in one process, {args.rounds} pairs\n")
+        print("| case | median ratio (base / this) | quartiles | base fastest s | this fastest s |")
+        print("| --- | --- | --- | --- | --- |")
+        for name in args.cases:
+            a = alternate(base, ROOT / "config" / CASES[name], args.rounds)
+            print(f"| {name} | {a['median']:.3f} | {a['q1']:.3f}-{a['q3']:.3f} | {a['base_s']:.4f} | "
+                  f"{a['this_s']:.4f} |")
 
 
 if __name__ == "__main__":

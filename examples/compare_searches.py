@@ -2,7 +2,7 @@
 
     python examples/compare_searches.py [--until SECONDS] [--every N]
 
-Runs Case I with the culled search (coal broad phase + grid-local search) and, every N
+Steps Case I with the culled search (coal broad phase + grid-local search) and, every N
 dynamics steps once the fingers touch, evaluates the literal all-pairs search on the same
 state. Prints whether both found the same sphere pairs and forces, and the time each took.
 """
@@ -14,27 +14,26 @@ from pathlib import Path
 import numpy as np
 
 import spotsim
-from spotsim.integrators import make_integrator
-from spotsim.step import Contacts, contact_forces, kinematics, literal_pairs, make_data, sphere_pairs, step
+from spotsim.contact.forces import pair_forces
+from spotsim.contact.search import grid_search, literal_search
+from spotsim.sim.bodies import kinematics
+from spotsim.sim.run import Stepper
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def evaluate(model, data, search):
-    """Contacts and forces on a copy of the pair memory, so both searches see the same state."""
-    memory = (data.mem_key, data.mem_s, data.mem_vminus)
+def evaluate(model, state, search):
+    """The contacts and forces on a copy of `state` (its pair memory kept), and the time taken."""
+    data = state.copy()
+    kinematics(model.sim, data)
     t0 = time.perf_counter()
-    if search == "all":
-        m, s = literal_pairs(model, data)
-        key = m * len(model.slave.centres_J) + s
-        order = np.argsort(key)
-        c = Contacts(m[order], s[order], key[order])
+    if search == "literal":
+        candidates = literal_search(model.sim, data)
     else:
-        c = sphere_pairs(model, data)
-    c = contact_forces(model, data, c, 1e-4)
-    elapsed = time.perf_counter() - t0
-    data.mem_key, data.mem_s, data.mem_vminus = memory
-    return c, elapsed
+        candidates = grid_search(model.sim, data, data.near)
+    data.assign(candidates=candidates)
+    pair_forces(model.sim, data, 1e-4)
+    return data.contacts, time.perf_counter() - t0
 
 
 def main() -> None:
@@ -44,19 +43,19 @@ def main() -> None:
     args = parser.parse_args()
 
     model = spotsim.build_model(spotsim.load_scenario(ROOT / "config" / "single_arm_case_I.yaml"))
-    data = make_data(model)
-    integrator = make_integrator("symplectic_euler", model.pin_model)
+    stepper = Stepper(model)
     h = model.scenario.simulation.dt_s / model.scenario.simulation.substeps
-    checked = same = pairs = 0
-    worst, t_culled, t_all, k = 0.0, 0.0, 0.0, 0
-    while data.t < args.until:
-        c = step(model, data, h, integrator)
+    checked = same = pairs = k = 0
+    worst, t_culled, t_all = 0.0, 0.0, 0.0
+    while stepper.data.t < args.until:
+        stepper.step(h)
         k += 1
-        if len(c.key) == 0 or k % args.every:
+        if k % args.every or not len(stepper.data.contacts.key):
             continue
-        kinematics(model, data)
-        culled, tc = evaluate(model, data, "culled")
-        literal, ta = evaluate(model, data, "all")
+        if not checked:  # compile both searches before timing them
+            evaluate(model, stepper.data, "culled"), evaluate(model, stepper.data, "literal")
+        culled, tc = evaluate(model, stepper.data, "culled")
+        literal, ta = evaluate(model, stepper.data, "literal")
         checked += 1
         t_culled, t_all = t_culled + tc, t_all + ta
         pairs += len(literal.key)
@@ -64,7 +63,7 @@ def main() -> None:
             same += 1
             scale = max(np.abs(literal.force_W).max(), 1e-300)
             worst = max(worst, float(np.abs(culled.force_W - literal.force_W).max() / scale))
-    print(f"states compared: {checked} (t up to {data.t:.3f} s), {pairs} pairs in contact in all")
+    print(f"states compared: {checked} (t up to {stepper.data.t:.3f} s), {pairs} pairs in contact in all")
     print(f"same pairs in {same} of {checked}; largest force difference {worst:.2e} (relative)")
     if checked:
         print(f"pairs + forces per step: culled {t_culled / checked * 1e3:.3f} ms, "

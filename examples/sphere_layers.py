@@ -10,9 +10,10 @@ above the face, which must equal the radius.
 
 import numpy as np
 
-from spotsim.assets import URDF_DIR, compile_xacro
+from spotsim.build.assets import URDF_DIR, compile_xacro
+from spotsim.build.faces import contact_faces, face_basis, sphere_layer
+from spotsim.build.scene import geometry_args
 from spotsim.scenario import Contact, Geometry
-from spotsim.spheres import contact_faces, face_basis, sphere_layer
 
 
 def describe(face, radius: float) -> None:
@@ -21,18 +22,16 @@ def describe(face, radius: float) -> None:
     height = (layer.centres - face.vertices_L[0]) @ n
     along = np.diff(np.unique(((layer.centres - face.vertices_L[0]) @ t1).round(12)))
     across = np.diff(np.unique(((layer.centres - face.vertices_L[0]) @ t2).round(12)))
-    size = np.linalg.norm(face.vertices_L[1] - face.vertices_L[0]), np.linalg.norm(face.vertices_L[3] - face.vertices_L[0])
+    corners = face.vertices_L
+    size = np.linalg.norm(corners[1] - corners[0]), np.linalg.norm(corners[3] - corners[0])
     print(f"{face.name:30s} {size[0] * 1e3:5.1f} x {size[1] * 1e3:5.2f} mm: {len(layer.centres):5d} spheres "
           f"of r = {radius * 1e3:.1f} mm, spacing {along.mean() * 1e3:.3f} / {across.mean() * 1e3:.3f} mm, "
           f"centres {height.min() * 1e3:.3f}-{height.max() * 1e3:.3f} mm above the face")
 
 
 def main() -> None:
-    from dataclasses import fields
-
-    geometry, contact = Geometry(), Contact()
-    urdf = compile_xacro(URDF_DIR / "single_arm_scene.urdf.xacro",
-                         {f.name: getattr(geometry, f.name) for f in fields(geometry)})
+    contact = Contact()
+    urdf = compile_xacro(URDF_DIR / "single_arm_scene.urdf.xacro", geometry_args(Geometry()))
     faces = {f.name: f for f in contact_faces(urdf)}
     describe(faces["ee_finger_upper_flank_pos"], contact.sphere_radius_finger_mm * 1e-3)
     describe(faces["tm_groove_upper_flank_pos"], contact.sphere_radius_groove_mm * 1e-3)

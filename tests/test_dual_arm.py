@@ -2,9 +2,9 @@
 
 import numpy as np
 import pytest
+from conftest import ROOT
 
 import spotsim
-from conftest import ROOT
 
 DUAL = ROOT / "config" / "dual_arm_sequential.yaml"
 #: The issue's bound on total linear momentum drift, relative to the largest body momentum.

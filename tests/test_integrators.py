@@ -1,69 +1,109 @@
-"""The integrator advances free bodies' centroids in the world frame."""
+"""The integrators advance free bodies' centroids in the world frame, at their orders."""
 
 import numpy as np
 import pinocchio as pin
 import pytest
+from scipy.integrate import solve_ivp
 
-from spotsim.integrators import centroid_acceleration, centroid_state, make_integrator
+import spotsim
+from spotsim.contact.detection import penetration
+from spotsim.contact.friction import BristleParams, bristle
+from spotsim.contact.normal import hertz_stiffness, indentation, normal_force
+from spotsim.sim.bodies import bodies_momentum, centroid_acceleration, centroid_state, free_bodies, kinematics
+from spotsim.sim.integrators import tableau
+from spotsim.sim.run import Stepper
+from spotsim.sim.weld import world_momentum
 
 #: Round-off on O(1) numbers over a few thousand steps.
 ROUND_OFF = 1e-12
+#: A tumbling module far from the fingers: smooth, contact-free, gyroscopic.
+TUMBLE_S = 0.02
+TUMBLE_V = (0.004, -0.003, 0.002, 3.0, -2.0, 4.0)  # the module's twist (v_O, omega), body frame
 
 
-def tumbling_body(lever=(0.05, -0.02, 0.01)):
-    """A free body with an off-centre centroid and a full, unequal inertia."""
-    m = pin.Model()
-    j = m.addJoint(0, pin.JointModelFreeFlyer(), pin.SE3.Identity(), "body")
-    I = np.array([[0.4, 0.01, 0.02], [0.01, 0.3, 0.015], [0.02, 0.015, 0.2]])
-    m.appendBodyToJoint(j, pin.Inertia(3.0, np.array(lever), I), pin.SE3.Identity())
-    m.gravity = pin.Motion.Zero()
-    return m
+def tumbling(case_I, method, **integrator):
+    """Case I with the module spinning, integrated by `method`: a Stepper."""
+    s = spotsim.replace(case_I, simulation={"integrator": {"method": method, **integrator}})
+    model = spotsim.build_model(s)
+    stepper = Stepper(model)
+    iv = model.pin_model.idx_vs[model.module_joint]
+    v = stepper.data.v
+    v[iv:iv + 6] = TUMBLE_V
+    return model, stepper
 
 
-def test_force_free_tumbling_body_keeps_its_momentum_and_straight_path():
-    """With no force, a tumbling body's centroid moves on a straight line at constant velocity."""
-    model = tumbling_body()
-    data = model.createData()
-    q = pin.neutral(model)
-    v = np.array([0.1, -0.2, 0.05, 2.0, -1.0, 3.0])
-    integrator = make_integrator("symplectic_euler", model)
-    p0, vG0, _, _ = centroid_state(model, 1, q, v)
-    h = 1e-3
-    for k in range(1, 2001):
-        a = pin.aba(model, data, q, v, np.zeros(6))
-        q, v = integrator.step(model, q, v, a, h)
-    p, vG, _, _ = centroid_state(model, 1, q, v)
-    assert np.linalg.norm(vG - vG0) <= ROUND_OFF
-    assert np.linalg.norm(p - (p0 + 2000 * h * vG0)) <= ROUND_OFF
+def tumble(case_I, method, h, **integrator):
+    """The module's (q, v) after TUMBLE_S of free tumbling, integrated with steps of h."""
+    _, stepper = tumbling(case_I, method, **integrator)
+    for _ in range(round(TUMBLE_S / h)):
+        stepper.step(h)
+        assert len(stepper.data.contacts.key) == 0  # no contact: a smooth motion
+    return np.concatenate([stepper.data.q, stepper.data.v])
 
 
-def test_centroid_acceleration_is_force_over_mass():
-    """ABA's spatial acceleration, turned into the centroid's world acceleration, is F / m."""
-    model = tumbling_body()
-    data = model.createData()
+def test_force_free_tumbling_body_keeps_its_momentum_and_straight_path(case_I):
+    """With no force, a tumbling body's centroid moves on a straight line at constant velocity
+    (symplectic Euler, 2000 steps)."""
+    model, stepper = tumbling(case_I, "symplectic_euler")
+    bodies = model.sim.bodies
+    b = list(bodies.joint).index(model.module_joint)
+    p0, vG0, _, _ = centroid_state(bodies, b, stepper.data.q, stepper.data.v)
+    h = 1e-5
+    for _ in range(2000):
+        stepper.step(h)
+    p, vG, _, _ = centroid_state(bodies, b, stepper.data.q, stepper.data.v)
+    assert np.linalg.norm(np.subtract(vG, vG0)) <= ROUND_OFF
+    assert np.linalg.norm(np.subtract(p, np.add(p0, 2000 * h * np.array(vG0)))) <= ROUND_OFF
+
+
+def test_centroid_acceleration_is_force_over_mass(model_I):
+    """The compiled accelerations, turned into the centroid's world acceleration, are F / m."""
+    from spotsim.contact.wrenches import Loads
+    from spotsim.sim.data import make_data
+    from spotsim.sim.dynamics import accelerations
+
+    data = make_data(model_I)
+    m, j = model_I.pin_model, model_I.module_joint
+    bodies = model_I.sim.bodies
+    b = list(bodies.joint).index(j)
     rng = np.random.default_rng(5)
-    q = pin.integrate(model, pin.neutral(model), rng.normal(size=6))
-    v = rng.normal(size=6)
-    f_local = pin.Force(rng.normal(size=3), rng.normal(size=3))  # at the joint origin, body axes
-    a = pin.aba(model, data, q, v, np.zeros(6), [pin.Force.Zero(), f_local])
-    R = pin.XYZQUATToSE3(q).rotation
-    assert np.allclose(centroid_acceleration(model, 1, q, v, a), R @ f_local.linear / 3.0,
-                       rtol=0, atol=ROUND_OFF)
+    for _ in range(20):
+        q = pin.randomConfiguration(m, -np.ones(m.nq), np.ones(m.nq))
+        v = rng.normal(size=m.nv)
+        f_local = np.zeros((m.njoints, 6))
+        f_local[j] = rng.normal(size=6)  # force and moment about the joint origin, joint axes
+        data.assign(q=q, v=v, loads=Loads(f_local, *data.loads[1:]))
+        kinematics(model_I.sim, data)
+        accelerations(model_I.sim, data)
+        iv = m.idx_vs[j]
+        R = data.R_W[j]
+        a_G = centroid_acceleration(R, bodies.lever[b], v[iv:iv + 3], v[iv + 3:iv + 6], data.a[iv:iv + 3],
+                                    data.a[iv + 3:iv + 6])
+        assert np.allclose(a_G, R @ f_local[j, :3] / bodies.mass[b], rtol=0, atol=ROUND_OFF)
 
 
-def test_unknown_integrator_lists_the_valid_ones():
-    with pytest.raises(ValueError, match="symplectic_euler"):
-        make_integrator("leapfrog", tumbling_body())
+def test_an_unknown_integrator_lists_the_valid_ones():
+    with pytest.raises(ValueError, match="symplectic_euler, rk4, dopri5"):
+        tableau("leapfrog")
+
+
+def test_tableaus_are_consistent():
+    """Each Runge-Kutta tableau's rows sum to its nodes, its weights to one; the embedded
+    estimate's weights (a difference of two weight sets) to zero."""
+    for method in ("rk4", "dopri5"):
+        A, b, c, e = tableau(method)
+        assert np.allclose(A.sum(axis=1), c, atol=1e-15) and b.sum() == pytest.approx(1.0, abs=1e-15)
+        assert np.all(np.triu(A) == 0.0)  # explicit
+        if len(e):
+            assert e.sum() == pytest.approx(0.0, abs=1e-15)
 
 
 def test_bodies_momentum_matches_pinocchio():
     """The compiled momentum of free bodies equals Pinocchio's spatial momentum in world."""
-    from spotsim.bodies import bodies_momentum, free_bodies
-    from spotsim.weld import world_momentum
-
-    model = tumbling_body()
-    j = model.addJoint(0, pin.JointModelFreeFlyer(), pin.SE3(pin.rpy.rpyToMatrix(0.3, -0.2, 1.0), np.ones(3)), "second")
-    model.appendBodyToJoint(j, pin.Inertia.Random(), pin.SE3.Identity())
+    model = pin.Model()
+    for k, M in enumerate((pin.SE3.Identity(), pin.SE3(pin.rpy.rpyToMatrix(0.3, -0.2, 1.0), np.ones(3)))):
+        j = model.addJoint(0, pin.JointModelFreeFlyer(), M, f"body{k}")
+        model.appendBodyToJoint(j, pin.Inertia.Random(), pin.SE3.Identity())
     data = model.createData()
     rng = np.random.default_rng(7)
     q = pin.integrate(model, pin.neutral(model), rng.normal(size=model.nv))
@@ -79,98 +119,76 @@ def test_bodies_momentum_matches_pinocchio():
     assert np.allclose(c, np.average(centroids, axis=0, weights=masses), rtol=0, atol=ROUND_OFF)
 
 
-# ------------------------------------------------------------------ orders and oracles
-
-#: A tumbling module over 20 ms, far from the fingers: smooth, contact-free, gyroscopic.
-TUMBLE_S = 0.02
-
-
-def tumble(model, method, h, **spec):
-    """The module's (q, v) after TUMBLE_S of free tumbling, integrated with steps of h."""
-    from spotsim.scenario import Integrator
-    from spotsim.step import make_data, step
-
-    data = make_data(model)
-    j = model.module_joint
-    iv = model.pin_model.idx_vs[j]
-    data.v[iv:iv + 6] = [0.004, -0.003, 0.002, 3.0, -2.0, 4.0]
-    integrator = make_integrator(Integrator(method=method, **spec), model.pin_model)
-    for _ in range(round(TUMBLE_S / h)):
-        assert len(step(model, data, h, integrator).key) == 0  # no contact: a smooth motion
-    return np.concatenate([data.q, data.v])
-
-
-def test_each_integrator_converges_at_its_order_on_a_smooth_free_motion(model_I):
+def test_each_integrator_converges_at_its_order_on_a_smooth_free_motion(case_I):
     """Halving the step cuts the error by ~2 (symplectic Euler), >= 10 (RK4), >= 20 (DP5)."""
-    reference = tumble(model_I, "rk4", TUMBLE_S / 160)
+    reference = tumble(case_I, "rk4", TUMBLE_S / 160)
     # (least ratio, the coarser step): dopri5 needs the largest steps to stay above round-off
     expected = {"symplectic_euler": (1.8, TUMBLE_S / 5), "rk4": (10.0, TUMBLE_S / 5), "dopri5": (20.0, TUMBLE_S)}
     for method, (least, h) in expected.items():
         # dopri5 as a fixed-step method: tolerances it always meets, its step capped at h
-        errors = [np.abs(tumble(model_I, method, step, **({"rtol": 1e3, "atol": 1.0, "h_max_s": step}
-                                                          if method == "dopri5" else {})) - reference).max()
+        errors = [np.abs(tumble(case_I, method, step, **({"rtol": 1e3, "atol": 1.0, "h_max_s": step}
+                                                         if method == "dopri5" else {})) - reference).max()
                   for step in (h, h / 2)]
         assert errors[0] / errors[1] >= least, (method, errors)
 
 
-#: The issue's agreement for the closed-form Hertz impact; the crossings are resolved to 2e-4.
+def test_dopri5_controls_its_error_by_rejecting_steps(case_I):
+    """Asked for a step far longer than its tolerance allows on a tumbling body, dopri5 rejects
+    it, takes shorter steps, and lands on a state within its tolerance of RK4's converged one."""
+    reference = tumble(case_I, "rk4", TUMBLE_S / 160)
+    _, stepper = tumbling(case_I, "dopri5", rtol=1e-10, atol=1e-12, h_max_s=TUMBLE_S)
+    while stepper.data.t < TUMBLE_S - 1e-12:
+        assert stepper.step(TUMBLE_S - stepper.data.t) > 0.0
+    v = stepper.data.view()
+    assert v.rejected > 0 and v.accepted > 1
+    state = np.concatenate([v.q, v.v])
+    assert np.abs(state - reference).max() < 1e-8
+
+
+#: The agreement asked of the closed-form Hertz impact; the crossings are resolved to 1e-6.
 ORACLE_RTOL = 1e-3
 
 
-def test_undamped_hertz_impact_matches_its_closed_form_with_the_adaptive_integrator():
-    """One sphere pair, c_r = 1: peak approach, peak force and contact time to 1e-3.
-
-    With delta = phi/2 (spotsim's reading), F = K (phi/2)^1.5 = K_phi phi^1.5 in the bodies'
-    approach phi, and the closed forms hold for phi with K_phi = K / 2^1.5.
-    """
-    from spotsim.contact.detection import penetration
-    from spotsim.contact.normal import hertz_stiffness, indentation, normal_force
-    from spotsim.integrators import DormandPrince, adaptive_try
-
+def test_undamped_hertz_impact_matches_its_closed_form():
+    """One sphere pair, c_r = 1, integrated tightly (scipy's DOP853 with the contact's crossing
+    as events): peak approach, peak force and contact time to 1e-3, and it leaves as fast as
+    it came. With delta = phi/2 (spotsim's reading), F = K (phi/2)^1.5 = K_phi phi^1.5 in the
+    bodies' approach phi, and the closed forms hold for phi with K_phi = K / 2^1.5."""
     r1, r2, m, v0 = 0.7e-3, 0.8e-3, 1.0, 0.01
     K = hertz_stiffness(7e10, 0.25, 7e10, 0.25, r1, r2)
     K_phi = K / 2**1.5
     d_max = (5 * m * v0**2 / (4 * K_phi)) ** 0.4
     F_max, T_c = K_phi * d_max**1.5, 2.9433 * d_max / v0
-    down, up, origin = np.array([[0.0, 0.0, -1.0]]), np.array([[0.0, 0.0, 1.0]]), np.zeros((1, 3))
+    down, up, origin = np.array([0.0, 0.0, -1.0]), np.array([0.0, 0.0, 1.0]), np.zeros(3)
 
-    def contact(y):
-        """phi and the force on the falling sphere A (along +z) at y = (z, v_z)."""
-        _, phi, hit = penetration(np.array([[0.0, 0.0, y[0]]]), down, r1, origin, up, r2)
-        if not hit[0]:
-            return phi[0], 0.0
-        F = normal_force(indentation(phi), np.array([-0.5 * y[1]]), np.ones(1), K, 0.0)  # c_r = 1
-        return phi[0], F[0]
+    def contact(z, v_z):
+        """phi and the force on the falling sphere A (along +z) at height z, speed v_z."""
+        _, phi, hit = penetration(np.array([0.0, 0.0, z]), down, r1, origin, up, r2)
+        return phi, normal_force(indentation(phi), -0.5 * v_z, 1.0, K, 0.0) if hit else 0.0  # c_r = 1
 
-    def f(y, dt):
-        return np.array([y[1], contact(y)[1] / m])
+    def rhs(t, y):
+        return [y[1], contact(y[0], y[1])[1] / m]
 
-    y, t, h = np.array([r1 + r2 + 1e-6, -v0]), 0.0, 1e-6
-    h_max = T_c / 5000  # resolves the crossings to 2e-4 of the contact time
-    k1 = f(y, 0.0)
-    times, phis, forces = [0.0], [contact(y)[0]], [0.0]
-    while t < 1e-6 / v0 + 2 * T_c:
-        y, h_taken, h, _ = adaptive_try(DormandPrince, f, y, k1, h, 1e-10, 1e-15, 1e-12, h_max)
-        t += h_taken
-        k1 = f(y, 0.0)
-        phi, F = contact(y)
-        times.append(t)
-        phis.append(phi)
-        forces.append(F)
-    times, phis = np.array(times), np.array(phis)
-    inside = np.flatnonzero(phis > 0)
-    a, b = inside[0], inside[-1]
-    # the crossings of phi = 0, linearly between the steps around them
-    t_in = times[a - 1] + (times[a] - times[a - 1]) * -phis[a - 1] / (phis[a] - phis[a - 1])
-    t_out = times[b] + (times[b + 1] - times[b]) * phis[b] / (phis[b] - phis[b + 1])
+    def leave(t, y):  # phi falling through zero: the spheres part
+        return contact(y[0], y[1])[0]
+
+    leave.terminal, leave.direction = True, -1
+    touch = 1e-6 / v0  # it starts 1 um above contact
+    out = solve_ivp(rhs, (0.0, touch + 2 * T_c), [r1 + r2 + 1e-6, -v0], method="DOP853", rtol=1e-11, atol=1e-15,
+                    max_step=T_c / 2000, events=leave, dense_output=True)
+    t_out = out.t_events[0][0]
+    t = np.linspace(touch, t_out, 20001)
+    z, v = out.sol(t)
+    phis = np.array([contact(a, b)[0] for a, b in zip(z, v)])
+    forces = np.array([contact(a, b)[1] for a, b in zip(z, v)])
     assert phis.max() == pytest.approx(d_max, rel=ORACLE_RTOL)
-    assert max(forces) == pytest.approx(F_max, rel=ORACLE_RTOL)
-    assert t_out - t_in == pytest.approx(T_c, rel=ORACLE_RTOL)
-    assert y[1] == pytest.approx(v0, rel=ORACLE_RTOL)  # c_r = 1: it leaves at the speed it came
+    assert forces.max() == pytest.approx(F_max, rel=ORACLE_RTOL)
+    assert t_out - touch == pytest.approx(T_c, rel=ORACLE_RTOL)
+    assert out.y_events[0][0][1] == pytest.approx(v0, rel=ORACLE_RTOL)  # c_r = 1: it leaves as fast as it came
 
 
 BLOCK_LOAD_HELD, BLOCK_LOAD_SLIDING = 2.5, 3.5  # N, either side of mu_s F_n = 3 N
-#: The issue's bound on a held block's drift over 10 s, m.
+#: The bound on a held block's drift over 10 s, m.
 HOLD_DRIFT_M = 1e-6
 #: A sliding bristle lies at s_max, so the friction is exactly mu_k F_n: the acceleration is
 #: constant up to round-off in differencing the velocity.
@@ -180,14 +198,12 @@ SLIDE_ACCEL_RTOL = 1e-9
 def pressed_block(load, seconds, dt=1e-4, mass=0.1, F_n=10.0):
     """A block pressed on a plane with F_n and pulled along it by `load`, its friction the
     bristle law: positions (m) and velocities each step."""
-    from spotsim.contact.friction import BristleParams, bristle_step
-
-    bristle = BristleParams(mu_k=0.26, mu_s=0.30, k_b=3e4, c_b=80.0, v_d=1e-3)
-    normal, s, x, v = np.array([[0.0, 0.0, 1.0]]), np.zeros((1, 3)), 0.0, 0.0
+    params = BristleParams(mu_k=0.26, mu_s=0.30, k_b=3e4, c_b=80.0, v_d=1e-3)
+    normal, s, x, v = np.array([0.0, 0.0, 1.0]), (0.0, 0.0, 0.0), 0.0, 0.0
     xs, vs = [], []
     for _ in range(round(seconds / dt)):
-        s, F_f, _ = bristle_step(s, np.array([[v, 0.0, 0.0]]), normal, np.array([F_n]), dt, bristle)
-        v += dt * (load + F_f[0, 0]) / mass
+        s, F_f, _ = bristle(s, (v, 0.0, 0.0), normal, F_n, dt, params)
+        v += dt * (load + F_f[0]) / mass
         x += dt * v
         xs.append(x)
         vs.append(v)

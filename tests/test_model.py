@@ -4,8 +4,8 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from spotsim.build.scene import check_inertias
 from spotsim.errors import ModelError
-from spotsim.model import check_inertias
 
 
 def test_locked_arm_and_driven_fingers_are_reduced_away(model_I):
@@ -17,7 +17,9 @@ def test_locked_arm_and_driven_fingers_are_reduced_away(model_I):
 
 def test_fingers_open_along_the_closing_axis(model_I):
     """The upper finger opens along +z_a and the lower one along -z_a (in the world: O_a is fixed)."""
-    R = model_I.oMa.rotation
+    ee = model_I.end_effectors[0]
+    assert ee.joint == 0  # the grasp frame hangs on the fixed base: its placement is in world
+    R = ee.placement.rotation
     axes = {f.name: f.axis_J for f in model_I.fingers}  # parent joint: the fixed world
     assert np.allclose(axes["ee_finger_upper"], R @ [0, 0, 1], atol=1e-12)
     assert np.allclose(axes["ee_finger_lower"], R @ [0, 0, -1], atol=1e-12)

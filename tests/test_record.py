@@ -3,11 +3,12 @@
 import numpy as np
 import pinocchio as pin
 import pytest
+from conftest import ROOT
 
 import spotsim
-from conftest import ROOT
-from spotsim.model import grasp_frame, groove_frame
-from spotsim.record import NONFINITE, N_RECORD_STATE, Layout, close_interval, quat_xyzw, record_args, rpy, sample
+from spotsim.build.model import grasp_frame, groove_frame
+from spotsim.sim.data import make_data
+from spotsim.sim.record import NONFINITE, close_interval, quat_xyzw, rpy, sample
 
 #: The compiled kinematics compose the same products as Pinocchio's in another order.
 FRAME_TOL = 1e-12
@@ -41,17 +42,18 @@ def test_recorded_frames_are_pinocchios(dual):
     and end-effector frames are those of Pinocchio's forward kinematics."""
     m = dual.pin_model
     d = m.createData()
-    layout = Layout(dual)
-    args = record_args(dual, layout)
+    layout = dual.layout
+    data = make_data(dual)
+    data.assign(active=1)
     col = lambda row, name: row[layout.columns[name][0]:sum(layout.columns[name])]
     rng = np.random.default_rng(8)
     for _ in range(50):
         q = pin.randomConfiguration(m, -np.ones(m.nq), np.ones(m.nq))
         v = rng.normal(size=m.nv)
+        data.assign(q=q, v=v)
         pin.forwardKinematics(m, d, q, v)
         row = np.full(layout.width, np.nan)
-        sample(row, 0.0, q, v, np.zeros(8), 0, np.zeros(0, dtype=np.int64), np.zeros(len(dual.fingers)),
-               np.zeros(len(dual.fingers)), np.zeros(len(dual.fingers)), 0, 1, 1, 1, args)
+        sample(dual.sim, data, row)
         assert np.isfinite(row).all()
         oMb, oMa = groove_frame(dual, d, 1), grasp_frame(dual, d, 1)
         assert np.abs(col(row, "module_pos_m") - oMb.translation).max() <= FRAME_TOL
@@ -68,12 +70,7 @@ def test_recorded_frames_are_pinocchios(dual):
 
 def test_a_non_finite_state_is_caught_and_not_recorded(dual):
     """close_interval reports a NaN in v as NONFINITE and writes no row."""
-    layout = Layout(dual)
-    row = np.zeros(layout.width)
-    v = dual.v0.copy()
-    v[3] = np.nan
-    n_f = len(dual.fingers)
-    code = close_interval(row, np.zeros(N_RECORD_STATE), np.zeros(3), np.zeros(3), False, 0.0, dual.q0, v,
-                          np.zeros(0), np.zeros((0, 3)), np.zeros(8), 0, np.zeros(0, dtype=np.int64), np.zeros(n_f),
-                          np.zeros(n_f), np.zeros(n_f), 0, 0, 0, 0, record_args(dual, layout))
-    assert code == NONFINITE and not row.any()
+    data = make_data(dual)
+    data.v[3] = np.nan
+    assert close_interval(dual.sim, data) == NONFINITE
+    assert data.n_rows == 0 and not data.rows.any()

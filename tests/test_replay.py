@@ -11,9 +11,9 @@ import sys
 import numpy as np
 import pinocchio as pin
 import pytest
+from conftest import CASE_I, ROOT
 
 import spotsim
-from conftest import CASE_I, ROOT
 from spotsim.cli import main
 from spotsim.contact.friction import SLIPPING, STICKING
 
@@ -143,17 +143,17 @@ def server_commands(zmq_url):
 def test_welded_model_spheres_map_to_the_same_first_model_spheres():
     """After a weld, each remaining sphere keeps its place: mapped by face name to the first
     model, it has the same centre and normal in the same joint's frame."""
-    from spotsim.model import build_model
-    from spotsim.run import SphereIds, face_names
+    from spotsim.build.model import build_model
+    from spotsim.sim.recorder import SphereIds
 
     s = spotsim.load_scenario(DUAL)
     first = build_model(s)
     welded = build_model(s, welded={0: ((0.0, 0.001, 0.0), (0.0, 0.0, 0.0))})
-    ids = SphereIds(welded, first, face_names(first))
-    assert len(welded.master.centres_J) < len(first.master.centres_J)
+    ids = SphereIds(welded, first)
+    assert len(welded.master.centre_J) < len(first.master.centre_J)
     for layers, f_layers, idx in ((welded.master, first.master, ids.master), (welded.slave, first.slave, ids.slave)):
-        assert np.array_equal(f_layers.centres_J[idx], layers.centres_J)
-        assert np.array_equal(f_layers.normals_J[idx], layers.normals_J)
+        assert np.array_equal(f_layers.centre_J[idx], layers.centre_J)
+        assert np.array_equal(f_layers.normal_J[idx], layers.normal_J)
         names = [first.pin_model.names[int(j)] for j in f_layers.joint[idx]]
         assert names == [welded.pin_model.names[int(j)] for j in layers.joint]
 
@@ -213,7 +213,7 @@ def check_sphere_colours(run_dir, cmds, frame_t):
     model = run.model
     n_mf = len(snaps["master_faces"])
     seen = 0
-    bodies = [(f.name, model.master, snaps["master"][lo:hi], model.master_finger == i)
+    bodies = [(f.name, model.master, snaps["master"][lo:hi], model.master.finger == i)
               for i, f in enumerate(model.fingers)]
     bodies += [(m.name, model.slave, snaps["slave"][lo:hi], model.slave.joint == m.joint)
                for m in model.modules]
@@ -240,12 +240,12 @@ def check_sphere_colours(run_dir, cmds, frame_t):
         (cloud,) = clouds
         pos = geometry(objs[path], kids[cloud], "position")
         col = geometry(objs[path], kids[cloud], "color") / 255.0
-        centres = layers.centres_J[sorted(expected)]
+        centres = layers.centre_J[sorted(expected)]
         order = np.lexsort(pos.T[::-1])
         assert np.allclose(pos[order], centres[np.lexsort(centres.T[::-1])], atol=F32)
         by_pos = {tuple(np.round(p, 6)): c for p, c in zip(pos, col)}
         for i, x in expected.items():
-            c = by_pos[tuple(np.round(layers.centres_J[i].astype(np.float32), 6))]
+            c = by_pos[tuple(np.round(layers.centre_J[i].astype(np.float32), 6))]
             assert np.allclose(c, replay.STATE_COLOURS[x], atol=1 / 255), (name, i, x)
         seen += len(expected)
     return seen
@@ -470,10 +470,10 @@ def test_missing_meshcat_is_a_clear_error(single, monkeypatch, capsys):
 
 def test_no_server_at_the_url_and_a_bad_rate_are_clear_errors(single, monkeypatch, capsys):
     """An unanswered --zmq-url and a display rate above the recorded one exit 2."""
-    import spotsim.replay as replay
+    import spotsim.replay.page as page
 
     run_dir, _, _ = single
-    monkeypatch.setattr(replay, "ZMQ_TIMEOUT_S", 0.3)
+    monkeypatch.setattr(page, "ZMQ_TIMEOUT_S", 0.3)
     assert main(["replay", str(run_dir), "--zmq-url", "tcp://127.0.0.1:5"]) == 2
     assert "no Meshcat server answers at tcp://127.0.0.1:5" in capsys.readouterr().err
     assert main(["replay", str(run_dir), "--rate", "500", "--html", str(run_dir / "x.html")]) == 2

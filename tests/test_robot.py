@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from spotsim import assets
-from spotsim.robot import DUAL_ARM_XACRO, TABLE5, TABLE6, fit_base, locked_robot
+from spotsim.build import assets
+from spotsim.build.robot import DUAL_ARM_XACRO, TABLE5, TABLE6, fit_base, locked_robot
 
 #: The issue's bound on the composite's mass and inertia against Table 5 body 3.
 TABLE5_RTOL = 0.01

@@ -5,9 +5,9 @@ import sys
 
 import pytest
 import yaml
+from conftest import CASE_I, CONFIGS
 
 import spotsim
-from conftest import CASE_I, CONFIGS
 from spotsim.cli import main
 from spotsim.scenario import Geometry, from_dict, to_dict, xacro_defaults_agree
 

@@ -3,33 +3,38 @@
 import numpy as np
 import pinocchio as pin
 
-from conftest import restore
-from spotsim.step import (broad_phase, candidate_pairs, contact_forces, kinematics, literal_pairs,
-                          sphere_pairs, wrenches)
+from spotsim.contact.forces import pair_forces
+from spotsim.contact.search import grid_search, literal_search
+from spotsim.contact.wrenches import body_wrenches
+from spotsim.sim.bodies import kinematics
+from spotsim.sim.broadphase import BroadPhase
+from spotsim.sim.data import make_data
 
 #: Both searches feed the same kernel; forces may differ only by the order of summation.
 FORCE_RTOL = 1e-12
+#: Action equals reaction: the wrenches sum to zero up to round-off on their own scale.
+BALANCE_RTOL = 1e-12
 
 
-def contacts_by(model, snap, search):
-    data = restore(snap)
-    kinematics(model, data)
-    if search == "all":
-        m, s = literal_pairs(model, data)
+def contacts_by(model, state, search):
+    """The contacts of a copy of `state` (its pair memory untouched) found by `search`."""
+    data = state.copy()
+    kinematics(model.sim, data)
+    if search == "literal":
+        candidates = literal_search(model.sim, data)
     else:
-        m, s, _ = candidate_pairs(model, data, broad_phase(model, data))
-    from spotsim.step import Contacts
-
-    key = m * len(model.slave.centres_J) + s
-    order = np.argsort(key)
-    return contact_forces(model, data, Contacts(m[order], s[order], key[order]), 1e-4)
+        candidates = grid_search(model.sim, data, BroadPhase(model).near(data.q, data.opening))
+    data.assign(candidates=candidates)
+    pair_forces(model.sim, data, 1e-4)
+    return data
 
 
 def test_culled_search_finds_exactly_the_all_pairs_contacts(model_I, recorded_states):
     """On states recorded from Case I, both searches find the same pairs and the same forces."""
     total = 0
-    for snap in recorded_states:
-        culled, literal = contacts_by(model_I, snap, "culled"), contacts_by(model_I, snap, "all")
+    for state in recorded_states:
+        culled = contacts_by(model_I, state, "culled").contacts
+        literal = contacts_by(model_I, state, "literal").contacts
         assert np.array_equal(culled.key, literal.key)
         scale = np.abs(literal.force_W).max()
         assert np.abs(culled.force_W - literal.force_W).max() <= FORCE_RTOL * scale
@@ -39,35 +44,32 @@ def test_culled_search_finds_exactly_the_all_pairs_contacts(model_I, recorded_st
 
 def test_broad_phase_culls_far_face_pairs(model_I, recorded_states):
     """Coal keeps only face pairs within the security margin: far fewer than all 16."""
-    data = restore(recorded_states[-1])
-    kinematics(model_I, data)
-    kept = broad_phase(model_I, data)
-    assert 0 < len(kept) < len(model_I.face_pairs)
+    data = recorded_states[-1]
+    kept = BroadPhase(model_I).near(data.q, data.opening)
+    assert 0 < len(kept) < len(model_I.sim.faces.master_start)
 
 
 def test_broad_phase_keeps_nothing_while_the_fingers_are_open(model_I):
     """At the start the fingers are 9 mm from the groove: coal culls every face pair."""
-    from spotsim.step import make_data
-
     data = make_data(model_I)
-    kinematics(model_I, data)
-    assert len(broad_phase(model_I, data)) == 0
+    assert len(BroadPhase(model_I).near(data.q, data.opening)) == 0
 
 
 def test_action_equals_reaction_about_any_point(model_I, recorded_states):
-    """The wrenches on the finger bodies and on the module sum to zero about any point."""
+    """The wrenches on the finger bodies and on the module sum to zero about any point, and
+    each body's wrench in its joint's frame is its world wrench."""
     rng = np.random.default_rng(3)
-    for snap in recorded_states[::3]:
-        data = restore(snap)
-        kinematics(model_I, data)
-        c = contact_forces(model_I, data, sphere_pairs(model_I, data), 1e-4)
-        f_ext = wrenches(model_I, data, c)
-        scale = np.abs(c.force_W).sum()
+    for state in recorded_states[::3]:
+        data = contacts_by(model_I, state, "culled")
+        body_wrenches(model_I.sim, data)
+        loads = data.loads
+        scale = np.abs(data.contacts.force_W).sum()
         for point in rng.normal(scale=0.5, size=(3, 3)):
-            F, T = np.zeros(3), np.zeros(3)
-            for j in model_I.contact_joints:
-                f_W = pin.SE3(data.R_W[j], data.p_W[j]).act(f_ext[j])  # about the world origin
-                F += f_W.linear
-                T += f_W.angular - np.cross(point, f_W.linear)
-            assert np.linalg.norm(F) <= 1e-12 * scale
-            assert np.linalg.norm(T) <= 1e-12 * scale
+            F = loads.force_W.sum(axis=0)
+            T = loads.torque_O_W.sum(axis=0) - np.cross(point, F)
+            assert np.linalg.norm(F) <= BALANCE_RTOL * scale
+            assert np.linalg.norm(T) <= BALANCE_RTOL * scale
+        for j in model_I.contact_joints:
+            world = pin.SE3(data.R_W[j], data.p_W[j]).act(pin.Force(loads.f_local[j]))
+            assert np.allclose(world.linear, loads.force_W[j], rtol=0, atol=BALANCE_RTOL * scale)
+            assert np.allclose(world.angular, loads.torque_O_W[j], rtol=0, atol=BALANCE_RTOL * scale)

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
+from spotsim.build.faces import face_basis, sphere_layer, to_body_frame
 from spotsim.errors import ModelError
-from spotsim.spheres import face_basis, sphere_layer, to_body_frame
 
 #: Geometry here is exact up to double round-off on millimetre numbers.
 TOL = 1e-12
@@ -63,13 +63,15 @@ def test_collinear_vertices_are_rejected():
 def test_shipped_faces_have_unit_normals_pointing_at_their_partner(model_I):
     """Every finger face's normal points out of the finger, every groove face's into the cavity."""
     M, S = model_I.master, model_I.slave
-    assert np.allclose(np.linalg.norm(M.normals_J, axis=1), 1) and np.allclose(np.linalg.norm(S.normals_J, axis=1), 1)
+    assert np.allclose(np.linalg.norm(M.normal_J, axis=1), 1) and np.allclose(np.linalg.norm(S.normal_J, axis=1), 1)
     # each finger face has a groove face whose normal is exactly opposite once seated
-    from spotsim.step import kinematics, make_data
+    from spotsim.contact.search import world_spheres
+    from spotsim.sim.bodies import kinematics
+    from spotsim.sim.data import make_data
 
     data = make_data(model_I)
-    kinematics(model_I, data)
-    N1, N2 = M.to_world(data.R_W, data.p_W)[1], S.to_world(data.R_W, data.p_W)[1]
+    kinematics(model_I.sim, data)
+    _, N1, _, N2 = world_spheres(model_I.sim, data)
     for f in np.unique(M.face):
         n = N1[M.face == f][0]
         assert np.min(N2 @ n) == pytest.approx(-1.0, abs=1e-9)

@@ -5,11 +5,13 @@ import csv
 import math
 
 import pytest
+from conftest import CASE_I
 
 import spotsim
-from conftest import CASE_I
-from spotsim import study
 from spotsim.cli import main
+from spotsim.studies import accuracy as acc
+from spotsim.studies import runs
+from spotsim.studies import stability as stab
 
 #: Columns a row may leave as nan, because the quantity does not exist for it: the step of the
 #: adaptive method and the tolerances of the fixed-step ones, the completion time of a run that
@@ -51,7 +53,7 @@ def test_accuracy_study_fills_every_column(accuracy):
         for column, value in r.items():
             assert value != "", (r["setting"], column)
             if value == "nan":
-                comparable = r["status"] in study.COMPARABLE
+                comparable = r["status"] in runs.COMPARABLE
                 assert column in NOT_FOR_EVERY_SETTING or (not comparable and column.endswith(ERRORS)), \
                     (r["setting"], column)
     assert (out / "accuracy.md").exists() and (out / "work_precision.png").exists()
@@ -66,7 +68,7 @@ def test_accuracy_errors_are_measured_against_the_reference(accuracy):
     assert change > 0
     text = (out / "accuracy.md").read_text()
     assert f"{100 * change:.3g} %" in text
-    assert ("reference confirmed" in text) == (change < study.CONFIRM_REL)
+    assert ("reference confirmed" in text) == (change < acc.CONFIRM_REL)
 
 
 def test_paper_setting_is_reported_diverged_with_partial_results(accuracy):
@@ -81,12 +83,23 @@ def test_paper_setting_is_reported_diverged_with_partial_results(accuracy):
     assert "diverged" in (out / "accuracy.md").read_text()
 
 
+#: Stability CSV columns that hold a number for every case, and for every case that ran.
+PREDICTED = ("dynamics_step_ms", "predicted_stable_step_ms", "omega_h", "damping_h")
+RAN = ("sim_time_s", "wall_time_s")
+
+
 def test_stability_study_fills_every_column(stability):
-    """Every cell of the stability CSV holds a value, and every case has a verdict."""
+    """Every cell of the stability CSV holds a value of its kind: the steps, the predicted
+    stable step and the products omega h and damping h positive numbers, yes/no flags, and a
+    verdict from the study's list for every case."""
     _, out, rows = stability
-    assert [r["case"] for r in rows if ", gap" not in r["case"]] == list(study.QUICK_CASES)
+    assert [r["case"] for r in rows if ", gap" not in r["case"]] == list(stab.QUICK_CASES)
     for r in rows:
         assert all(v != "" for v in r.values()), r
+        for column in PREDICTED + (RAN if r["status"] != runs.REJECTED else ()):
+            assert float(r[column]) >= 0.0 and math.isfinite(float(r[column])), (r["case"], column)
+        assert float(r["dynamics_step_ms"]) > 0 and float(r["predicted_stable_step_ms"]) > 0
+        assert r["predicted_stable"] in ("yes", "no") and r["finite"] in ("yes", "no", "n/a")  # n/a: never ran
         assert r["verdict"] in ("converged", "converged, off centre", "not captured", "diverged (detected)",
                                 "rejected at start", "FAILED: exception", "FAILED: silent NaN")
     assert (out / "stability.md").exists()
@@ -98,7 +111,7 @@ def test_stability_verdicts(stability):
     predicted stable step shrinks with E."""
     _, _, rows = stability
     by = {r["case"]: r for r in rows}
-    assert by["baseline"]["verdict"] == "converged" and float(by["baseline"]["residual_offset_mm"]) < study.CENTRED_MM
+    assert by["baseline"]["verdict"] == "converged" and float(by["baseline"]["residual_offset_mm"]) < stab.CENTRED_MM
     assert by["y_a +10 mm"]["verdict"] == "rejected at start"
     assert "interpenetrate" in by["y_a +10 mm"]["message"]
     assert by["y_a +10 mm, gap 12 mm"]["verdict"] != "rejected at start"
@@ -107,14 +120,22 @@ def test_stability_verdicts(stability):
         assert (r["finer_verdict"] != "not run") == (r["status"] == "diverged"), r["case"]
 
 
-def test_stability_study_reports_an_exception_instead_of_dying(stability):
-    """Whatever a case ends in, the study writes its row: an exception out of simulate is a
-    verdict (FAILED), and the exit code says a case failed."""
-    code, _, rows = stability
-    failed = [r for r in rows if r["verdict"].startswith("FAILED")]
-    assert code == (1 if failed else 0)
-    for r in failed:
-        assert "raised by simulate" in r["message"]
+def test_an_exception_out_of_simulate_is_a_failed_row_not_a_crash(case_I, tmp_path, monkeypatch, capsys):
+    """An exception out of simulate (what the simulator must never raise) becomes the case's
+    row, verdict FAILED with the exception and where it was raised; the study goes on to the
+    next case, and its command exits 1."""
+    import spotsim.sim.run as run
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("broken on purpose")
+
+    monkeypatch.setattr(run, "simulate", broken)
+    code = main(["study", "stability", str(CASE_I), "--cases", "baseline,E x10", "--duration", "0.05",
+                 "--out", str(tmp_path), "--quiet"])
+    rows = read_csv(tmp_path / "stability.csv")
+    assert [r["verdict"] for r in rows] == ["FAILED: exception", "FAILED: exception"]
+    assert all("RuntimeError raised by simulate: broken on purpose" in r["message"] for r in rows)
+    assert code == 1
 
 
 def test_no_stability_case_ends_in_an_exception_or_a_silent_nan(stability):
@@ -127,15 +148,15 @@ def test_a_run_past_its_wall_limit_is_stopped(case_I):
     """A run that outlives its wall-time budget is stopped: no verdict, no hang, its predicted
     step still reported."""
     slow = spotsim.replace(case_I, simulation={"substeps": 1000})  # 1 us steps: minutes of work
-    o = study.run_once(slow, wall_limit_s=1.0)
-    assert o.status == study.WALL_LIMIT and "wall limit of 1 s" in o.message
-    assert study.verdict(o) == "no verdict: wall limit" and o.prediction.step_s == pytest.approx(1e-6)
+    o = runs.run_once(slow, wall_limit_s=1.0)
+    assert o.status == runs.WALL_LIMIT and "wall limit of 1 s" in o.message
+    assert stab.verdict(o) == "no verdict: wall limit" and o.prediction.step_s == pytest.approx(1e-6)
 
 
 def test_a_run_within_its_wall_limit_is_the_same_run(case_I):
     """In its child process, a run gives what it gives in the study's own process."""
     short = spotsim.replace(case_I, simulation={"duration_s": 0.5})
-    here, there = study.run_once(short), study.run_once(short, wall_limit_s=60)
+    here, there = runs.run_once(short), runs.run_once(short, wall_limit_s=60)
     assert there.status == here.status == "incomplete" and there.steps == here.steps
     assert (there.offsets[0] == here.offsets[0]).all() and there.peaks == here.peaks
 
@@ -143,7 +164,7 @@ def test_a_run_within_its_wall_limit_is_the_same_run(case_I):
 def test_ctrl_c_keeps_the_rows_written(case_I, tmp_path, monkeypatch):
     """Ctrl-C during a study stops it; the rows of the runs that finished stay in the CSV."""
     calls = []
-    real = study.run_once
+    real = runs.run_once
 
     def interrupt_third(*args, **kwargs):
         calls.append(1)
@@ -151,10 +172,10 @@ def test_ctrl_c_keeps_the_rows_written(case_I, tmp_path, monkeypatch):
             raise KeyboardInterrupt
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(study, "run_once", interrupt_third)
-    monkeypatch.setattr(study, "warm_up", lambda *a, **k: None)
+    monkeypatch.setattr(stab, "run_once", interrupt_third)
+    monkeypatch.setattr(stab, "warm_up", lambda *a, **k: None)
     short = spotsim.replace(case_I, simulation={"duration_s": 0.05})
-    report = study.stability_study(short, study.select_cases(["baseline", "Ex10", "Ex100"]), tmp_path)
+    report = stab.stability_study(short, stab.select_cases(["baseline", "Ex10", "Ex100"]), tmp_path)
     assert report.interrupted and len(read_csv(tmp_path / "stability.csv")) == 2
     assert "interrupted" in (tmp_path / "stability.md").read_text()
 
@@ -168,8 +189,8 @@ def test_ctrl_c_inside_a_compiled_callback_still_stops_the_study():
         except KeyboardInterrupt as ki:
             raise SystemError("returned a result with an exception set") from ki
     except SystemError as e:
-        assert study._caused_by_ctrl_c(e)
-    assert not study._caused_by_ctrl_c(ValueError("coal"))
+        assert runs._caused_by_ctrl_c(e)
+    assert not runs._caused_by_ctrl_c(ValueError("coal"))
 
 
 @pytest.mark.parametrize("argv, message", [
@@ -189,11 +210,11 @@ def test_bad_study_input_is_exit_2(argv, message, capsys, tmp_path):
 
 def test_settings_refine_and_parse():
     """A reference's refinement halves the step or divides the tolerance by ten."""
-    assert study.Setting("rk4", 40).refined() == study.Setting("rk4", 80)
-    assert study.Setting("dopri5", rtol=1e-6).refined().rtol == pytest.approx(1e-7)
-    assert study.parse_setting("dopri5:1e-7") == study.Setting("dopri5", rtol=1e-7)
-    assert study.parse_setting("symplectic_euler:80") == study.Setting("symplectic_euler", 80)
-    s = study.Setting("dopri5", rtol=1e-5).apply(spotsim.load_scenario(CASE_I))
+    assert acc.Setting("rk4", 40).refined() == acc.Setting("rk4", 80)
+    assert acc.Setting("dopri5", rtol=1e-6).refined().rtol == pytest.approx(1e-7)
+    assert acc.parse_setting("dopri5:1e-7") == acc.Setting("dopri5", rtol=1e-7)
+    assert acc.parse_setting("symplectic_euler:80") == acc.Setting("symplectic_euler", 80)
+    s = acc.Setting("dopri5", rtol=1e-5).apply(spotsim.load_scenario(CASE_I))
     assert s.simulation.integrator.method == "dopri5" and s.simulation.integrator.atol == pytest.approx(1e-8)
 
 
@@ -203,24 +224,24 @@ def test_verdicts_name_what_a_run_ended_as():
     import numpy as np
 
     def outcome(status, e_mm=0.05, finite=True):
-        return study.Outcome(status, "", offsets=[np.array([0.0, e_mm, 0.0])], finite=finite)
+        return runs.Outcome(status, "", offsets=[np.array([0.0, e_mm, 0.0])], finite=finite)
 
-    assert study.verdict(outcome("completed")) == "converged"
-    assert study.verdict(outcome("completed", e_mm=2.0)) == "converged, off centre"
-    assert study.verdict(outcome("incomplete")) == "not captured"
-    assert study.verdict(outcome("diverged", finite=False)) == "diverged (detected)"
-    assert study.verdict(outcome("completed", finite=False)) == "FAILED: silent NaN"
-    assert study.verdict(study.Outcome(study.REJECTED, "")) == "rejected at start"
+    assert stab.verdict(outcome("completed")) == "converged"
+    assert stab.verdict(outcome("completed", e_mm=2.0)) == "converged, off centre"
+    assert stab.verdict(outcome("incomplete")) == "not captured"
+    assert stab.verdict(outcome("diverged", finite=False)) == "diverged (detected)"
+    assert stab.verdict(outcome("completed", finite=False)) == "FAILED: silent NaN"
+    assert stab.verdict(runs.Outcome(runs.REJECTED, "")) == "rejected at start"
 
 
 def test_errors_are_vector_differences():
     """The offset error is the norm of the vector difference, relative to the reference's norm."""
     import numpy as np
 
-    ref = study.Outcome("completed", "", offsets=[np.array([0.0, 3.0, 0.0])], peaks=[50.0], centroids=[None])
-    o = study.Outcome("completed", "", offsets=[np.array([0.0, 0.0, 4.0])], peaks=[55.0], centroids=[None])
-    e = study.errors(o, ref, [""], centroid=False)
+    ref = runs.Outcome("completed", "", offsets=[np.array([0.0, 3.0, 0.0])], peaks=[50.0], centroids=[None])
+    o = runs.Outcome("completed", "", offsets=[np.array([0.0, 0.0, 4.0])], peaks=[55.0], centroids=[None])
+    e = runs.errors(o, ref, [""], centroid=False)
     assert e["offset_err_mm"] == pytest.approx(5.0) and e["offset_err_rel"] == pytest.approx(5 / 3)
     assert e["peak_force_err_rel"] == pytest.approx(0.1) and e["max_err_rel"] == pytest.approx(5 / 3)
-    diverged = study.Outcome("diverged", "", offsets=[np.zeros(3)], peaks=[1e9], centroids=[None])
-    assert math.isnan(study.errors(diverged, ref, [""], centroid=False)["max_err_rel"])
+    diverged = runs.Outcome("diverged", "", offsets=[np.zeros(3)], peaks=[1e9], centroids=[None])
+    assert math.isnan(runs.errors(diverged, ref, [""], centroid=False)["max_err_rel"])

@@ -4,9 +4,9 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from spotsim import assets
-from spotsim.robot import DUAL_ARM_XACRO, TABLE5, TABLE6, locked_robot
-from spotsim.weld import merged_twist, world_momentum
+from spotsim.build import assets
+from spotsim.build.robot import DUAL_ARM_XACRO, TABLE5, TABLE6, locked_robot
+from spotsim.sim.weld import twist_for_momentum, world_momentum
 
 #: Momentum is summed and solved once: round-off on O(1) numbers.
 ROUND_OFF = 1e-12
@@ -25,8 +25,9 @@ def test_weld_keeps_linear_and_angular_momentum():
         I_A, I_B = random_body(rng), random_body(rng)
         v_A, v_B = pin.Motion(rng.normal(size=6)), pin.Motion(rng.normal(size=6))
         before = world_momentum(M_A, I_A, v_A) + world_momentum(M_B, I_B, v_B)
-        I_C, v_C = merged_twist(M_A, I_A, v_A, M_B, I_B, v_B)
-        after = world_momentum(M_A, I_C, v_C)
+        # one body, in A's frame: inertia Y_A + Y_B, twist Y^-1 (h_A + h_B)
+        I_C = M_A.actInv(M_A.act(I_A) + M_B.act(I_B))
+        after = world_momentum(M_A, I_C, twist_for_momentum(M_A, I_C, before))
         assert np.linalg.norm(after.vector - before.vector) <= ROUND_OFF * np.linalg.norm(before.vector)
         assert I_C.mass == pytest.approx(I_A.mass + I_B.mass, rel=1e-15)
 
@@ -51,9 +52,9 @@ def test_weld_by_editing_the_compiled_urdf_builds_the_model_the_xacro_builds():
     the contact faces it parsed, instead of compiling the XACRO again with TM-1's joint fixed:
     both give the same model, to the bit."""
     import spotsim
-    from spotsim.model import build_model
+    from spotsim.build.model import build_model
 
-    s = spotsim.load_scenario(spotsim.assets.ROOT / "config" / "dual_arm_sequential.yaml")
+    s = spotsim.load_scenario(assets.ROOT / "config" / "dual_arm_sequential.yaml")
     first = build_model(s)
     welded = {0: ((0.0012345678901234, -0.0023, 1e-5), (0.001, -0.002, 0.3))}
     by_xacro = build_model(s, welded=welded)
@@ -68,16 +69,16 @@ def test_weld_by_editing_the_compiled_urdf_builds_the_model_the_xacro_builds():
         assert f.name == g.name and f.parentJoint == g.parentJoint
         assert np.array_equal(f.placement.homogeneous, g.placement.homogeneous)
     for x, y in ((by_xacro.master, by_edit.master), (by_xacro.slave, by_edit.slave)):
-        assert np.array_equal(x.centres_J, y.centres_J) and np.array_equal(x.joint, y.joint)
+        assert np.array_equal(x.centre_J, y.centre_J) and np.array_equal(x.joint, y.joint)
     assert np.array_equal(by_xacro.q0, by_edit.q0)
 
 
 def test_weld_of_a_scene_without_the_modules_joint_is_a_clear_error():
     import spotsim
+    from spotsim.build.scene import scene_spec, weld_urdf
     from spotsim.errors import ModelError
-    from spotsim.model import scene_spec, weld_urdf
 
-    s = spotsim.load_scenario(spotsim.assets.ROOT / "config" / "dual_arm_sequential.yaml")
+    s = spotsim.load_scenario(assets.ROOT / "config" / "dual_arm_sequential.yaml")
     spec = scene_spec(s, {0: ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))})
     with pytest.raises(ModelError, match="tm1_free_flyer"):
         weld_urdf('<robot name="empty"><link name="world"/></robot>', spec)

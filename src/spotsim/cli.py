@@ -51,7 +51,8 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def _study_parser(sub) -> None:
-    from .study import GRIDS, STABILITY_WALL_LIMIT_S
+    from .studies.accuracy import GRIDS
+    from .studies.stability import STABILITY_WALL_LIMIT_S
 
     study = sub.add_parser("study", help="accuracy against run time, or stability, over many runs")
     verbs = study.add_subparsers(dest="study", required=True)
@@ -98,7 +99,7 @@ def _numbers(text: str | None, kind, what: str):
 def _study(args) -> int:
     """`spotsim study accuracy|stability`: exit 2 on bad input, 130 if interrupted, 1 if a
     stability case failed, else 0."""
-    from . import study
+    from .studies import accuracy, stability
 
     overrides = list(args.set)
     duration = args.duration
@@ -106,7 +107,7 @@ def _study(args) -> int:
         if duration is not None and not duration > 0:
             raise ValueError(f"--duration {duration}: must be > 0")
         if args.study == "accuracy":
-            grid = study.GRIDS["quick" if args.quick else args.grid]
+            grid = accuracy.GRIDS["quick" if args.quick else args.grid]
             methods = args.methods.split(",") if args.methods else None
             bad = [m for m in methods or () if m not in ("symplectic_euler", "rk4", "dopri5")]
             if bad:
@@ -115,7 +116,7 @@ def _study(args) -> int:
             substeps = _numbers(args.substeps, int, "--substeps")
             rtols = _numbers(args.rtols, float, "--rtols")
             scales = _numbers(args.sphere_scales, float, "--sphere-scales")
-            reference = study.parse_setting(args.reference) if args.reference else grid.reference
+            reference = accuracy.parse_setting(args.reference) if args.reference else grid.reference
             if args.wall_limit is not None and not args.wall_limit > 0:
                 raise ValueError(f"--wall-limit {args.wall_limit}: must be > 0")
             fixed = {m: substeps or n for m, n in grid.substeps.items()}
@@ -123,15 +124,15 @@ def _study(args) -> int:
                 fixed.update({m: substeps for m in methods or () if m != "dopri5"})
             if methods:
                 fixed = {m: n for m, n in fixed.items() if m in methods}
-            chosen = study.Grid(fixed, (rtols or grid.rtols) if not methods or "dopri5" in methods else (),
+            chosen = accuracy.Grid(fixed, (rtols or grid.rtols) if not methods or "dopri5" in methods else (),
                                 reference, scales or grid.sphere_scales)
             duration = duration or grid.duration_s
         else:
             if args.wall_limit is not None and not args.wall_limit > 0:
                 raise ValueError(f"--wall-limit {args.wall_limit}: must be > 0")
-            names = args.cases.split(",") if args.cases else list(study.QUICK_CASES) if args.quick else None
-            cases = study.select_cases(names) if names else study.stability_cases()
-            duration = duration or (study.QUICK_DURATION_S if args.quick else None)
+            names = args.cases.split(",") if args.cases else list(stability.QUICK_CASES) if args.quick else None
+            cases = stability.select_cases(names) if names else stability.stability_cases()
+            duration = duration or (stability.QUICK_DURATION_S if args.quick else None)
     except ValueError as e:
         print(e, file=sys.stderr)
         return 2
@@ -151,13 +152,13 @@ def _study(args) -> int:
     progress = not args.quiet
     try:
         if args.study == "accuracy":
-            report = study.accuracy_study(scenario, chosen.settings(), chosen.reference, out, source=str(path),
+            report = accuracy.accuracy_study(scenario, chosen.settings(), chosen.reference, out, source=str(path),
                                           progress=progress, wall_limit_s=args.wall_limit, plot=not args.no_plot)
             print(f"{scenario.name}: accuracy, {len(report.rows)} runs")
             for line in (report.confirmation_text(), report.sensitivity_text(), report.fastest_text()):
                 print(f"  {line}")
         else:
-            report = study.stability_study(scenario, cases, out, source=str(path), progress=progress,
+            report = stability.stability_study(scenario, cases, out, source=str(path), progress=progress,
                                            wall_limit_s=args.wall_limit)
             print(f"{scenario.name}: stability, {len(report.rows)} cases")
             for r in report.rows:

@@ -180,7 +180,7 @@ def _combine(y0, h, weights, k, n_k):
 @njit
 def runge_kutta(m, d, h):
     """One accepted step of an explicit Runge-Kutta method (the model's tableau), of h or, if
-    adaptive, of at most min(h, d.h_next) with error control (d.h before its first step): returns the step taken, or 0.0
+    adaptive, of at most min(h, d.h_next) with error control: returns the step taken, or 0.0
     if it fell below h_min.
 
     Each stage evaluates the forces at its state with the pair memory of the step's start
@@ -201,8 +201,8 @@ def runge_kutta(m, d, h):
         external[0] = d.fsal_external
     else:
         k[0] = _stage(m, d, y0, 0.0, opening0, False, external[0])
-    if p.adaptive:  # its last step's estimate, or before any, the interval's step
-        h = min(h, d.h_next if d.h_next > 0.0 else d.h)
+    if p.adaptive and d.h_next > 0.0:  # its last step's estimate (before any, h as asked)
+        h = min(h, d.h_next)
     while True:
         for i in range(1, s):
             k[i] = _stage(m, d, _combine(y0, h, p.A[i], k, i), p.c[i] * h, opening0, False, external[i])

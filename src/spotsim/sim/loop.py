@@ -56,6 +56,12 @@ def progress_of(d, event):
 
 
 @njit
+def skin_used(m, d):
+    """Whether coal's face pairs must be refreshed before the next step (culled search only)."""
+    return not m.literal and d.travel > m.limits.skin
+
+
+@njit
 def set_near(d, near):
     """The broad phase's face pairs `near`, fresh: the travel since starts at zero."""
     d.near = near
@@ -84,7 +90,8 @@ def interval_steps(m, d):
     it stopped early (REFRESH, STOPPED, TOO_DEEP, UNDERFLOW)."""
     adaptive = m.integrator.adaptive and not d.flight
     while d.left > 0:
-        h = step(m, d, d.t_end - d.t if adaptive else d.h)
+        # an adaptive step: its last estimate (before any, the interval's step), up to the interval's end
+        h = step(m, d, min(d.h_next if d.h_next > 0.0 else d.h, d.t_end - d.t) if adaptive else d.h)
         if h == 0.0:
             return UNDERFLOW
         if adaptive:

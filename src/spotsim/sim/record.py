@@ -53,7 +53,8 @@ class Layout:
         spec = [("t", 1), ("module_pos_m", 3), ("module_quat_xyzw", 4), ("offset_mm", 3), ("rpy_deg", 3),
                 ("module_vel_m_s", 3), ("module_omega_rad_s", 3), ("force_N", 3), ("torque_Nm", 3),
                 ("finger_opening_mm", n_f), ("finger_load_N", n_f), ("pairs_slipping", 1),
-                ("pairs_sticking", 1), ("phase", 1), ("grasp", 1), ("max_penetration_um", 1)]
+                ("pairs_sticking", 1), ("phase", 1), ("grasp", 1), ("max_penetration_um", 1),
+                ("energy_J", 1), ("drive_work_J", 1)]
         self.free_robot = free_robot
         if free_robot:
             spec += [("robot_centroid_m", 3), ("base_pos_m", 3), ("base_quat_xyzw", 4), ("system_centroid_m", 3)]
@@ -190,7 +191,7 @@ def sample(m, d, row):
         n_slip += d.contacts.state[i] == SLIPPING
         n_stick += d.contacts.state[i] == STICKING
     at = _put(row, at, (float(n_slip), float(n_stick), float(d.phase[g]), float(g),
-                        d.summary.max_penetration * 1e6 if n_pairs else 0.0))
+                        d.summary.max_penetration * 1e6 if n_pairs else 0.0, d.energy_now, d.drive_work))
     if m.record.free_robot:
         at = _put(row, at, bodies_centroid3(m.bodies, m.record.robot_rows, d.q))
         p = _frame(m, d, m.record.row.shape[0] - 1, R_b, work)
@@ -246,7 +247,7 @@ def begin_record(m, d):
     d.momentum_max, d.angular_momentum_max = p_max, l_max
     d.momentum_start[:] = P
     d.angular_momentum_start[:] = L
-    d.energy_start = kinetic_energy(m.bodies, d.q, d.v)  # no pair in contact at the start
+    d.energy_start = d.energy_now = kinetic_energy(m.bodies, d.q, d.v)  # no pair in contact at the start
     d.n_rows = d.n_snapshots = d.n_snapshot_pairs = 0
     record_row(m, d)
 

@@ -30,11 +30,13 @@ from .loop import (
     UNDERFLOW,
     progress_of,
     run_intervals,
+    skin_used,
 )
 from .phase import completion_criteria
 from .record import begin_record
 from .recorder import Recorder
 from .stability import ENERGY_GROWTH, stability_warnings
+from .step import step
 from .weld import weld
 
 COMPLETED, INCOMPLETE, DIVERGED, INTERRUPTED = "completed", "incomplete", "diverged", "interrupted"
@@ -122,6 +124,26 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
     series = rec.arrays()
     summary = _summary(scenario, model, data.view(), rec, series, status, message, wall, welds)
     return Result(scenario, model, summary, series, rec.replay_arrays())
+
+
+class Stepper:
+    """Step a scene from Python, one compiled step at a time (for inspection and tests).
+
+    Between steps it does what the loop leaves to Python: it refreshes coal's face pairs when
+    the skin is used up. Free flight, records and welds are the loop's (`simulate`).
+    """
+
+    def __init__(self, model: Model, data=None):
+        self.model = model
+        self.data = make_data(model) if data is None else data
+        self.broad = None if model.sim.literal else BroadPhase(model)
+
+    def step(self, h: float) -> float:
+        """One step of at most h (s); returns the step taken (0.0: the adaptive step fell
+        below its least size)."""
+        if skin_used(self.model.sim, self.data):
+            self.broad.refresh(self.data)
+        return step(self.model.sim, self.data, h)
 
 
 def _divergence(model: Model, data, event: int) -> str:

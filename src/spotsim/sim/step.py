@@ -49,7 +49,8 @@ def travel_rate(m, d):
     for i in range(d.opening_rate.shape[0]):
         rate = max(rate, abs(d.opening_rate[i]))
     for i in range(m.limits.reach_rows.shape[0]):
-        iv = m.bodies.idx_v[m.limits.reach_rows[i]]  # a free-flyer's v = (v_O, omega) in its frame; norms are frame-free
+        # a free-flyer's v = (v_O, omega) in its frame; norms are frame-free
+        iv = m.bodies.idx_v[m.limits.reach_rows[i]]
         rate += math.sqrt(d.v[iv] ** 2 + d.v[iv + 1] ** 2 + d.v[iv + 2] ** 2) + \
             math.sqrt(d.v[iv + 3] ** 2 + d.v[iv + 4] ** 2 + d.v[iv + 5] ** 2) * m.limits.reach[i]
     return rate

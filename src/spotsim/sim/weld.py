@@ -23,16 +23,6 @@ def twist_for_momentum(M_WA: pin.SE3, inertia_A: pin.Inertia, h_W: pin.Force) ->
     return pin.Motion(np.linalg.solve(inertia_A.matrix(), M_WA.actInv(h_W).vector))
 
 
-def merged_twist(M_WA: pin.SE3, inertia_A: pin.Inertia, v_A: pin.Motion,
-                 M_WB: pin.SE3, inertia_B: pin.Inertia, v_B: pin.Motion) -> tuple[pin.Inertia, pin.Motion]:
-    """Composite inertia (in A's frame) and the twist of A's frame that keep A's and B's momentum.
-
-    Y = Y_A + Y_B; the composite twist is Y^-1 (h_A + h_B). Returned in A's frame, the frame
-    the composite keeps.
-    """
-    Y_A = M_WA.actInv(M_WA.act(inertia_A) + M_WB.act(inertia_B))
-    h_W = world_momentum(M_WA, inertia_A, v_A) + world_momentum(M_WB, inertia_B, v_B)
-    return Y_A, twist_for_momentum(M_WA, Y_A, h_W)
 
 
 def weld(model, data, source: str = "<scenario>"):

@@ -1,33 +1,17 @@
-"""`spotsim replay`: a run in Meshcat, live in the browser or as one self-contained HTML file.
-
-The scene is built from the run's own scenario.yaml, unwelded: Pinocchio's MeshcatVisualizer
-loads its visual geometry (the arm meshes coarsened, see COARSE_MESH_CELL_M), and each display
-frame places every body from the recorded poses (timeseries.npz): the modules, the free-flying
-base, the finger openings. A welded module is placed from its own recorded pose, so one model
-serves the whole run. From replay.npz come the paper's Fig. 9 on screen: the sphere layers of
-the faces in contact range (blue), the spheres of the pairs in contact coloured by state
-(slipping red, sticking light blue), and the combined contact force on each module as an
-arrow. A head-up line shows the simulated time and the grasp phase.
-
-Everything is one meshcat animation (play, pause, time slider, speed, loop) whose time is the
-simulated time. The commands are built once, then either sent to a Meshcat server or written
-into meshcat's static page with the animation embedded.
-"""
+"""The meshcat commands that draw and animate a run: the robot, the contact layers and pairs,
+the force arrows, the head-up text and the cameras."""
 
 from __future__ import annotations
 
-import base64
-import json
-import uuid
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 
-from .contact.friction import NONE, SLIPPING, STICKING
-from .errors import ScenarioError, SpotsimError
-from .grasp import APPROACH, COMPLETE, SELF_CENTRING
+from ..contact.friction import NONE, SLIPPING, STICKING
+from ..sim.data import PHASE_NAMES as PHASE_KEYS
+from .run import Kinematics, Run, display_frames, recorded_state
+from .three import Clip, ObjectTree, colour, matrix_of, moves, new_uuid, node
 
 #: Pair state colours of the paper's Fig. 9 (RGB in [0, 1]).
 STATE_COLOURS = {NONE: (0.10, 0.30, 1.00), SLIPPING: (1.00, 0.12, 0.12), STICKING: (0.55, 0.85, 1.00)}
@@ -49,8 +33,6 @@ LEFT_OUT = ("gripperStator", "gripperMover")
 PLATE_OPACITY = 0.35
 #: Longest force arrow for a typical load (95th percentile of the run's nonzero forces), m.
 ARROW_LENGTH_M = 0.08
-#: How long `replay --zmq-url` waits for a Meshcat server to answer, s.
-ZMQ_TIMEOUT_S = 5.0
 #: Light grey background (Pinocchio's "gray" preset): the blue and light blue spheres need it.
 BACKGROUND = ([0.98, 0.98, 0.98], [0.8, 0.8, 0.8])
 #: Perspective camera of meshcat's viewer: vertical field of view, deg.
@@ -67,264 +49,9 @@ HUD = CAMERA + "/spotsim_hud"
 ANIMATION_NODE = "/spotsim_animation"
 CLEAR = (ROOT, HUD, ANIMATION_NODE)
 
-PHASE_NAMES = {APPROACH: "approach", SELF_CENTRING: "self-centring", COMPLETE: "complete"}
+#: How the head-up text names each phase of the summary.
+PHASE_NAMES = dict(zip(PHASE_KEYS, ("approach", "self-centring", "complete"), strict=True))
 
-
-# ------------------------------------------------------------------------------ the run
-
-
-@dataclass
-class Run:
-    """A results directory as the replay reads it."""
-
-    path: Path
-    summary: dict
-    ts: dict[str, np.ndarray]
-    snapshots: dict[str, np.ndarray] | None  # replay.npz, None for runs recorded before it
-    model: object  # the first (unwelded) Model of the run's scenario
-
-
-def load_run(result_dir: str | Path) -> Run:
-    """Read a results directory (raises SpotsimError with what is missing or wrong)."""
-    from .model import build_model
-    from .results import REPLAY, SUMMARY
-    from .run import face_names
-    from .scenario import load_scenario
-
-    d = Path(result_dir)
-    try:
-        summary = json.loads((d / SUMMARY).read_text())
-        with np.load(d / "timeseries.npz") as f:
-            ts = {k: f[k] for k in f.files}
-        scenario = load_scenario(d / "scenario.yaml")
-    except (OSError, ValueError, KeyError, ScenarioError) as e:
-        raise SpotsimError(f"{d}: not a spotsim results directory (needs {SUMMARY}, timeseries.npz "
-                           f"and scenario.yaml): {e}") from e
-    if len(ts.get("t", ())) < 2:
-        raise SpotsimError(f"{d}: the run recorded fewer than two samples; nothing to replay")
-    model = build_model(scenario, str(d / "scenario.yaml"))
-    snapshots = None
-    if (d / REPLAY).exists():
-        try:
-            with np.load(d / REPLAY) as f:
-                snapshots = {k: f[k] for k in f.files}
-        except (OSError, ValueError) as e:
-            raise SpotsimError(f"{d / REPLAY}: unreadable: {e}") from e
-        names = face_names(model)
-        if [list(snapshots["master_faces"]), list(snapshots["slave_faces"])] != [names[0], names[1]]:
-            raise SpotsimError(f"{d / REPLAY}: its contact faces are not those of the scene of "
-                               f"{d / 'scenario.yaml'}; was it written by another spotsim version?")
-    return Run(d, summary, ts, snapshots, model)
-
-
-@dataclass
-class Frames:
-    """The display frames: timeseries rows, their simulated times and contact snapshots."""
-
-    rate_hz: float
-    rows: np.ndarray
-    t: np.ndarray
-    snapshot: np.ndarray  # index into replay.npz's snapshots, -1 before the first
-    keys: np.ndarray  # animation key times, in frames: 0, 1, 2, ... (the last may fall between)
-
-
-def display_frames(run: Run, rate_hz: float) -> Frames:
-    """Every timeseries row at `rate_hz` of simulated time, and the last row."""
-    dt = float(run.summary["dt_s"])
-    top = float(run.snapshots["rate_hz"]) if run.snapshots is not None else 1.0 / dt
-    if not 0 < rate_hz <= top * (1 + 1e-9):
-        raise SpotsimError(f"--rate {rate_hz:g}: must be in (0, {top:g}] Hz, the rate at which the run "
-                           f"recorded {'contacts' if run.snapshots is not None else 'poses'}")
-    stride = max(1, int(round(1.0 / (rate_hz * dt))))
-    n = len(run.ts["t"])
-    rows = np.arange(0, n, stride)
-    if rows[-1] != n - 1:
-        rows = np.append(rows, n - 1)
-    snap = np.full(len(rows), -1)
-    if run.snapshots is not None and len(run.snapshots["row"]):
-        snap = np.searchsorted(run.snapshots["row"], rows, side="right") - 1
-    return Frames(1.0 / (stride * dt), rows, run.ts["t"][rows], snap, rows / stride)
-
-
-# ------------------------------------------------------------------------------ poses
-
-
-def _se3(pos, quat_xyzw) -> pin.SE3:
-    return pin.XYZQUATToSE3(np.concatenate([pos, quat_xyzw]))
-
-
-def module_pose_keys(run: Run) -> list[tuple[str, str]]:
-    """The timeseries keys of each module's groove frame O_b (position, quaternion x y z w)."""
-    mods = run.model.modules
-    if len(mods) == 1:
-        return [("module_pos_m", "module_quat_xyzw")]
-    return [(f"{m.name}_pos_m", f"{m.name}_quat_xyzw") for m in mods]
-
-
-class Kinematics:
-    """Places a scene's joints from recorded poses: the free-flyers (robot base, modules) from
-    their world poses, the fingers at their openings, the locked arm joints at their angles."""
-
-    def __init__(self, run: Run, pin_model: pin.Model):
-        m, model = pin_model, run.model
-        self.pin_model, self.data = m, m.createData()
-        self.q_ref = pin.neutral(m)
-        for name, angle in model.spec.locked.items():
-            if m.existJointName(name):
-                self.q_ref[m.idx_qs[m.getJointId(name)]] = angle
-        self.fingers = [(m.idx_qs[m.getJointId(f)], i) for i, f in enumerate(run.summary["fingers"])
-                        if m.existJointName(f)]
-        self.free = []  # (joint, placement^-1 of the recorded frame in it, ("module", k) or ("base", 0))
-        for k, (_, prefix, _, _) in enumerate(model.spec.modules):
-            f = m.frames[m.getFrameId(f"{prefix}module", pin.BODY)]
-            self.free.append((f.parentJoint, f.placement.inverse(), ("module", k)))
-        if model.spec.robot_joint:
-            self.free.append((m.getJointId(model.spec.robot_joint), pin.SE3.Identity(), ("base", 0)))
-        for j, _, _ in self.free:
-            if m.parents[j] != 0 or m.nqs[j] != 7:
-                raise SpotsimError(f"joint {m.names[j]} is not a free-flyer on the world")
-
-    def q(self, modules_W, base_W, opening_m) -> np.ndarray:
-        m, q = self.pin_model, self.q_ref.copy()
-        for j, frame_inv, (kind, k) in self.free:
-            oMi = (modules_W[k] if kind == "module" else base_W) * frame_inv
-            q[m.idx_qs[j]:m.idx_qs[j] + 7] = pin.SE3ToXYZQUAT(m.jointPlacements[j].inverse() * oMi)
-        for iq, i in self.fingers:
-            q[iq] = opening_m[i]
-        return q
-
-    def place(self, modules_W, base_W, opening_m) -> pin.Data:
-        pin.forwardKinematics(self.pin_model, self.data, self.q(modules_W, base_W, opening_m))
-        return self.data
-
-
-def recorded_state(run: Run, row: int):
-    """World poses of the modules' groove frames and of the robot base, and finger openings (m)."""
-    ts = run.ts
-    modules = [_se3(ts[p][row], ts[q][row]) for p, q in module_pose_keys(run)]
-    base = _se3(ts["base_pos_m"][row], ts["base_quat_xyzw"][row]) if "base_pos_m" in ts else None
-    return modules, base, ts["finger_opening_mm"][row] * 1e-3
-
-
-# ------------------------------------------------------------------------------ three.js JSON
-
-
-def _uuid() -> str:
-    return str(uuid.uuid4())
-
-
-def _array(a: np.ndarray, dtype=np.float32) -> dict:
-    """A typed array as meshcat packs one: msgpack ext types the viewer decodes."""
-    import umsgpack
-
-    codes = {np.dtype(np.float32): (0x17, "Float32Array"), np.dtype(np.uint8): (0x12, "Uint8Array")}
-    a = np.ascontiguousarray(a, dtype=dtype)
-    code, name = codes[a.dtype]
-    return {"itemSize": a.shape[1] if a.ndim == 2 else 1, "type": name,
-            "array": umsgpack.Ext(code, a.tobytes()), "normalized": a.dtype == np.uint8}
-
-
-def _ext_f32(a) -> object:
-    import umsgpack
-
-    return umsgpack.Ext(0x17, np.ascontiguousarray(a, dtype=np.float32).tobytes())
-
-
-def _matrix(M: pin.SE3 | None = None, scale=None) -> list[float]:
-    """Column-major 4x4 (three.js `matrix`)."""
-    T = np.eye(4) if M is None else M.homogeneous.copy()
-    if scale is not None:
-        T[:3, :3] = T[:3, :3] @ np.diag(scale)
-    return [float(x) for x in T.T.ravel()]
-
-
-def _colour(rgb) -> int:
-    r, g, b = (int(round(255 * c)) for c in rgb)
-    return (r << 16) + (g << 8) + b
-
-
-class ObjectTree:
-    """One three.js object tree in the JSON of meshcat's set_object, geometries, materials and
-    textures shared by key."""
-
-    def __init__(self):
-        self.lists = {"geometries": [], "materials": [], "textures": []}
-        self.keys: dict = {}
-
-    def add(self, kind: str, data: dict, key=None) -> str:
-        if key is not None and (kind, key) in self.keys:
-            return self.keys[kind, key]
-        data = {"uuid": _uuid(), **data}
-        self.lists[kind].append(data)
-        if key is not None:
-            self.keys[kind, key] = data["uuid"]
-        return data["uuid"]
-
-    def points(self, name: str, positions: np.ndarray, colours: np.ndarray | None, size: float,
-               rgb=(1, 1, 1), visible=True, render_order=0) -> dict:
-        """A point cloud, `positions` (n, 3) m; per-point `colours` (n, 3) or one `rgb`."""
-        attrs = {"position": _array(positions)}
-        if colours is not None:  # bytes, read as [0, 1] (normalized)
-            attrs["color"] = _array(np.round(np.asarray(colours) * 255), np.uint8)
-        g = self.add("geometries", {"type": "BufferGeometry", "data": {"attributes": attrs}})
-        m = self.add("materials", {"type": "PointsMaterial", "size": size, "sizeAttenuation": True,
-                                   "vertexColors": colours is not None, "color": _colour(rgb)},
-                     key=("points", size, colours is not None, tuple(rgb)))
-        return node("Points", name, g, m, visible=visible, renderOrder=render_order, frustumCulled=False)
-
-    def command(self, path: str, root: dict) -> dict:
-        obj = {"metadata": {"version": 4.5, "type": "Object"}, **self.lists, "images": [], "object": root}
-        return {"type": "set_object", "path": path, "object": obj}
-
-
-def node(kind: str, name: str, geometry: str | None = None, material: str | None = None,
-         matrix=None, children=(), **extra) -> dict:
-    n = {"uuid": _uuid(), "type": kind, "name": name, "matrix": matrix or _matrix()}
-    if geometry is not None:
-        n["geometry"], n["material"] = geometry, material
-    if children:
-        n["children"] = list(children)
-    n.update(extra)
-    return n
-
-
-class Clip:
-    """One node's animation clip; keys are in frames of the display rate, values float32."""
-
-    def __init__(self, path: str):
-        self.path, self.tracks = path, []
-
-    def pose(self, target: str, poses: list[pin.SE3], times: np.ndarray) -> None:
-        xyzq = np.array([pin.SE3ToXYZQUAT(M) for M in poses])
-        self.vector(target, "position", times, xyzq[:, :3])
-        self.tracks.append({"name": f"{target}.quaternion", "type": "quaternion", "times": _ext_f32(times),
-                            "values": _ext_f32(_continuous(xyzq[:, 3:]).ravel())})
-
-    def vector(self, target: str, prop: str, times, values) -> None:
-        self.tracks.append({"name": f"{target}.{prop}", "type": "vector3", "times": _ext_f32(times),
-                            "values": _ext_f32(np.asarray(values).ravel())})
-
-    def visible(self, target: str, shown: np.ndarray, times: np.ndarray) -> None:
-        """`shown` (n_frames,) bool: keys only where it changes (discrete track)."""
-        keep = np.flatnonzero(np.r_[True, shown[1:] != shown[:-1]])
-        self.tracks.append({"name": f"{target}.visible", "type": "boolean",
-                            "times": _ext_f32(times[keep]), "values": [bool(v) for v in shown[keep]]})
-
-    def lower(self, fps: float) -> dict:
-        return {"path": self.path, "clip": {"fps": fps, "name": "default", "uuid": _uuid(), "tracks": self.tracks}}
-
-
-def _continuous(q: np.ndarray) -> np.ndarray:
-    """Quaternions (n, 4) with signs flipped so that consecutive ones are on the same side."""
-    q = q.copy()
-    for i in range(1, len(q)):
-        if q[i] @ q[i - 1] < 0:
-            q[i] = -q[i]
-    return q
-
-
-def _moves(poses: list[pin.SE3]) -> bool:
-    return any(not M.isApprox(poses[0], 1e-9) for M in poses[1:])
 
 
 # ------------------------------------------------------------------------------ the scene
@@ -433,7 +160,7 @@ def build(run: Run, rate_hz: float = 100.0, spheres: bool = True, force_mm_per_N
         for g, M in enumerate(vdata.oMg):
             placements[g].append(M.copy())
     for g, obj in enumerate(visual.geometryObjects):
-        if _moves(placements[g]):
+        if moves(placements[g]):
             clip = Clip(f"{ROOT}/visuals/{obj.name}")
             clip.pose("", placements[g], keys)
             clips.append(clip)
@@ -466,7 +193,7 @@ def _body_of_faces(model):
     bodies = []
     n_master_faces = int(model.master.face.max()) + 1 if len(model.master.face) else 0
     for i, f in enumerate(model.fingers):
-        faces = np.unique(model.master.face[model.master_finger == i])
+        faces = np.unique(model.master.face[model.master.finger == i])
         bodies.append((f.name, "finger", i, faces, np.zeros(0, int)))
     for k, mod in enumerate(model.modules):
         faces = np.unique(model.slave.face[model.slave.joint == mod.joint])
@@ -494,7 +221,7 @@ def _contact_bodies(run, frames, keys, states, datas, spheres, commands) -> list
     face_layers = []  # per face (first-model numbering): (positions in its body frame, radius)
     for layers, r in ((model.master, p.r1), (model.slave, p.r2)):
         for f in range(int(layers.face.max()) + 1):
-            face_layers.append((layers.centres_J[layers.face == f], r))
+            face_layers.append((layers.centre_J[layers.face == f], r))
     plates = _plates(model)
     clips = []
     for name, kind, i, mfaces, sfaces in bodies:
@@ -502,11 +229,11 @@ def _contact_bodies(run, frames, keys, states, datas, spheres, commands) -> list
         children = []
         plate_mat = tree.add("materials", {"type": "MeshLambertMaterial", "side": 2, "transparent": True,
                                            "opacity": PLATE_OPACITY, "depthWrite": False,
-                                           "color": _colour((0.3, 0.45, 0.9) if kind == "finger" else (0.5, 0.5, 0.52))})
+                                           "color": colour((0.3, 0.45, 0.9) if kind == "finger" else (0.5, 0.5, 0.52))})
         for f in [*mfaces, *sfaces]:
             size, M = plates[f]
             g = tree.add("geometries", {"type": "BoxGeometry", "width": size[0], "height": size[1], "depth": size[2]})
-            children.append(node("Mesh", f"plate{f}", g, plate_mat, matrix=_matrix(M)))
+            children.append(node("Mesh", f"plate{f}", g, plate_mat, matrix=matrix_of(M)))
         clip = Clip(f"{ROOT}/contact/{name}")
         clip.pose("", [_body_frame(model, kind, i, oMi, s[2]) for oMi, s in zip(datas, states)], keys)
         if spheres and snaps is not None:
@@ -544,7 +271,7 @@ def _pair_clouds(model, snaps, snap, kind, i, tree, focal):
     clouds: dict[bytes, tuple[dict, np.ndarray]] = {}
     order = []
     if kind == "finger":
-        layers, r, idx_key, on_body = model.master, model.params.r1, "master", model.master_finger == i
+        layers, r, idx_key, on_body = model.master, model.params.r1, "master", model.master.finger == i
     else:
         layers, r, idx_key = model.slave, model.params.r2, "slave"
         on_body = layers.joint == model.modules[i].joint
@@ -565,7 +292,7 @@ def _pair_clouds(model, snaps, snap, kind, i, tree, focal):
         key = idx.tobytes() + st.tobytes()
         if key not in clouds:
             colours = np.array([STATE_COLOURS[int(x)] for x in st])
-            cloud = tree.points(f"s{len(order)}", layers.centres_J[idx], colours, PAIR_SPHERE_SIZE * r * focal,
+            cloud = tree.points(f"s{len(order)}", layers.centre_J[idx], colours, PAIR_SPHERE_SIZE * r * focal,
                                 visible=False, render_order=1)
             clouds[key] = (cloud, np.zeros(len(snap), dtype=bool))
             order.append(key)
@@ -652,8 +379,8 @@ class _Text:
                                          "font_face": "monospace"}, key=ch)
         mat = self.tree.add("materials", {"type": "MeshBasicMaterial", "map": tex, "transparent": True,
                                           "depthTest": False, "depthWrite": False}, key=ch)
-        return node("Mesh", name or f"g{_uuid()[:8]}", self.plane, mat, matrix=_matrix(pin.SE3(np.eye(3), np.array([x, y, 0.0]))),
-                    renderOrder=1001, frustumCulled=False)
+        return node("Mesh", name or f"g{new_uuid()[:8]}", self.plane, mat,
+                    matrix=matrix_of(pin.SE3(np.eye(3), np.array([x, y, 0.0]))), renderOrder=1001, frustumCulled=False)
 
     def line(self, text: str, x0: float, y: float, name: str, visible=True) -> dict:
         """Glyph i of `text` centred at x0 + (i + 1/2) advances."""
@@ -662,10 +389,10 @@ class _Text:
 
     def box(self, rgb, x: float, y: float, w: float, h: float, opacity=1.0, order=1001) -> dict:
         g = self.tree.add("geometries", {"type": "PlaneGeometry", "width": w, "height": h}, key=("box", w, h))
-        m = self.tree.add("materials", {"type": "MeshBasicMaterial", "color": _colour(rgb), "transparent": True,
+        m = self.tree.add("materials", {"type": "MeshBasicMaterial", "color": colour(rgb), "transparent": True,
                                         "opacity": opacity, "depthTest": False, "depthWrite": False},
                           key=("box", tuple(rgb), opacity))
-        return node("Mesh", f"b{_uuid()[:8]}", g, m, matrix=_matrix(pin.SE3(np.eye(3), np.array([x, y, 0.0]))),
+        return node("Mesh", f"b{new_uuid()[:8]}", g, m, matrix=matrix_of(pin.SE3(np.eye(3), np.array([x, y, 0.0]))),
                     renderOrder=order, frustumCulled=False)
 
 
@@ -680,7 +407,7 @@ def phase_labels(summary: dict) -> list[tuple[float, str]]:
         who = f"{grasp['end_effector']} on {grasp['module']}"
         if len(grasps) > 1:
             who = f"grasp {g + 1}/{len(grasps)} {who}"
-        for phase in (APPROACH, SELF_CENTRING, COMPLETE):
+        for phase in PHASE_KEYS:
             if times.get(phase) is not None:
                 out.append((float(times[phase]), f"{who}: {PHASE_NAMES[phase]}"))
     return sorted(out, key=lambda x: x[0])
@@ -749,7 +476,7 @@ def _hud(run, frames, keys, scale, spheres, commands) -> Clip:
         x = -w / 2 + (legend.index(word) - 1) * HUD_ADVANCE_M
         children.append(text.box(rgb, x, bottom + 0.012, bw, bh))
     commands.append(tree.command(HUD, node("Group", "hud", children=children,
-                                           matrix=_matrix(pin.SE3(np.eye(3), np.array([0, 0, -HUD_DISTANCE_M]))))))
+                                           matrix=matrix_of(pin.SE3(np.eye(3), np.array([0, 0, -HUD_DISTANCE_M]))))))
     return clip
 
 
@@ -780,158 +507,3 @@ def _views(run, state0, oMi0) -> tuple[np.ndarray, dict]:
         target = g.translation - focus
         views[ee.name] = {"camera": _three(target + 0.08 * d), "target": _three(target)}
     return focus, views
-
-
-# ------------------------------------------------------------------------------ delivery
-
-
-def packed(commands: list[dict]) -> list[bytes]:
-    import umsgpack
-
-    return [umsgpack.packb(c) for c in commands]
-
-
-PAGE = """<!DOCTYPE html>
-<html>
-<head><meta charset="utf-8"><title>{title}</title></head>
-<body>
-<div id="meshcat-pane"></div>
-<script>{main_js}</script>
-<script type="application/json" id="spotsim-commands">{commands}</script>
-<script type="application/json" id="spotsim-views">{views}</script>
-<script>
-var viewer = new MeshCat.Viewer(document.getElementById("meshcat-pane"));
-(function () {{
-  // the commands in order, decoded at once: the animation binds to objects already made
-  const blobs = JSON.parse(document.getElementById("spotsim-commands").textContent);
-  for (const b of blobs) {{
-    viewer.handle_command_bytearray(Uint8Array.from(atob(b), (c) => c.charCodeAt(0)));
-  }}
-  // ?t=<simulated s> shows that instant, paused; ?view=scene|<end-effector>; ?speed=<x>
-  const q = new URLSearchParams(window.location.search || window.location.hash.slice(1));
-  const views = JSON.parse(document.getElementById("spotsim-views").textContent);
-  const view = views[q.get("view") || "scene"];
-  if (view) {{
-    viewer.camera.position.set(...view.camera);
-    viewer.controls.target.set(...view.target);
-    viewer.controls.update();
-  }}
-  const a = viewer.animator;
-  if (q.has("speed")) a.mixer.timeScale = parseFloat(q.get("speed"));
-  if (q.has("t")) {{
-    a.pause();
-    const t = parseFloat(q.get("t"));
-    a.seek(t * (1 + 1e-6) + 1e-6);  // past float32 key times equal to t
-    a.display_progress(t);
-  }}
-  viewer.set_dirty();
-}})();
-</script>
-<style>body {{margin: 0;}} #meshcat-pane {{width: 100vw; height: 100vh; overflow: hidden;}}</style>
-</body>
-</html>
-"""
-
-
-def static_html(commands: list[dict], info: ReplayInfo, title: str) -> str:
-    """Meshcat's static page: its viewer inline and the commands embedded (no server, no
-    network); URL parameters t, view and speed pick the instant, the camera and the speed."""
-    import html
-
-    import meshcat
-
-    main_js = (Path(meshcat.__file__).parent / "viewer" / "dist" / "main.min.js").read_text()
-    blobs = [base64.b64encode(b).decode("ascii") for b in packed(commands)]
-    return PAGE.format(title=html.escape(title), main_js=main_js, commands=json.dumps(blobs),
-                       views=json.dumps(info.views))
-
-
-def write_html(path: Path, text: str) -> None:
-    """Write the page atomically: an interrupted write leaves no half page."""
-    import os
-    import tempfile
-
-    fd, tmp = tempfile.mkstemp(dir=Path(path).parent, prefix=f".{Path(path).name}.")
-    try:
-        with os.fdopen(fd, "w") as f:
-            f.write(text)
-        os.chmod(tmp, 0o644)  # a page to share (mkstemp makes it private)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
-def commands_of_html(text: str) -> list[dict]:
-    """The meshcat commands a page written by `static_html` embeds, decoded."""
-    import re
-
-    import umsgpack
-
-    m = re.search(r'<script type="application/json" id="spotsim-commands">(.*?)</script>', text, re.S)
-    if m is None:
-        raise SpotsimError("not a page written by spotsim replay --html")
-    return [umsgpack.unpackb(base64.b64decode(b)) for b in json.loads(m.group(1))]
-
-
-class Server:
-    """A Meshcat server over ZeroMQ: the one at `zmq_url`, or a new local one (ours to stop)."""
-
-    def __init__(self, zmq_url: str | None = None):
-        import zmq
-
-        self.proc = None
-        if zmq_url is None:
-            from meshcat.servers.zmqserver import start_zmq_server_as_subprocess
-
-            try:
-                self.proc, zmq_url, _ = start_zmq_server_as_subprocess()
-            except Exception as e:  # meshcat raises RuntimeError, or whatever its server did
-                raise SpotsimError(f"cannot start a Meshcat server: {e}") from e
-        self.zmq_url = zmq_url
-        self.context = zmq.Context.instance()
-        self.socket = self._connect()
-        self.web_url = self._request([b"url"]).decode()
-
-    def _connect(self):
-        import zmq
-
-        s = self.context.socket(zmq.REQ)
-        s.setsockopt(zmq.LINGER, 0)
-        s.setsockopt(zmq.RCVTIMEO, int(ZMQ_TIMEOUT_S * 1000))
-        s.setsockopt(zmq.SNDTIMEO, int(ZMQ_TIMEOUT_S * 1000))
-        try:
-            s.connect(self.zmq_url)
-        except zmq.ZMQError as e:
-            s.close()
-            raise SpotsimError(f"--zmq-url {self.zmq_url}: {e}") from e
-        return s
-
-    def _request(self, frames: list[bytes]) -> bytes:
-        import zmq
-
-        try:
-            self.socket.send_multipart(frames)
-            return self.socket.recv()
-        except zmq.ZMQError as e:
-            self.close()
-            raise SpotsimError(f"no Meshcat server answers at {self.zmq_url} (waited {ZMQ_TIMEOUT_S:g} s); "
-                               f"start one with `meshcat-server`") from e
-
-    def send(self, commands: list[dict]) -> None:
-        for cmd, data in zip(commands, packed(commands), strict=True):
-            route = ANIMATION_NODE if cmd["type"] == "set_animation" else cmd["path"]
-            reply = self._request([cmd["type"].encode(), route.encode(), data])
-            if reply != b"ok":
-                raise SpotsimError(f"the Meshcat server at {self.zmq_url} refused {cmd['type']}: {reply!r}")
-
-    def scene_html(self) -> str:
-        """The server's scene as its static page (meshcat's `get_scene`)."""
-        return self._request([b"get_scene"]).decode()
-
-    def close(self) -> None:
-        self.socket.close()
-        if self.proc is not None:
-            self.proc.kill()
-            self.proc.wait()
-            self.proc = None

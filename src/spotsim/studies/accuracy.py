@@ -1,0 +1,527 @@
+"""The accuracy study: error against run time over integrators and steps.
+
+A reference run at a tight setting, confirmed by its next refinement (no reported quantity may
+change by more than CONFIRM_REL), then a sweep of integrator x step (x tolerance for dopri5, x
+sphere radius if asked). Each setting reports its error against the reference in the residual
+offset, the peak contact force and (dual arm) the robot's centroid displacement, its momentum
+drift, its wall time and its status; then a markdown table and a work-precision plot.
+"""
+
+from __future__ import annotations
+
+import math
+import textwrap
+from dataclasses import dataclass, field
+from dataclasses import replace as dc_replace
+from pathlib import Path
+
+import numpy as np
+
+from ..scenario import modules_of, replace, to_dict
+from .runs import (
+    COMPARABLE,
+    Outcome,
+    RowWriter,
+    errors,
+    free_floating,
+    grasp_names,
+    markdown_table,
+    percent,
+    run_once,
+    sig,
+    warm_up,
+    worst,
+)
+
+#: The refinement that confirms a reference may change no reported quantity by more than this
+#: share of it (the issue's 0.1 %).
+CONFIRM_REL = 1e-3
+#: "Within 1 % of the reference": every reported quantity within this share of the reference's.
+WITHIN_REL = 1e-2
+#: Looser bounds whose fastest settings the report names too, on every quantity and on each:
+#: 1 % may lie below what the reference can resolve.
+LADDER_REL = (0.05, 0.1, 0.2)
+#: How far the sensitivity run moves each module's start, mm (1 nm, along y_a): a change of
+#: the reported quantities under it is the floor below which no setting can agree.
+PERTURBATION_MM = 1e-6
+#: dopri5's absolute tolerance is its relative one times this: the state's positions are
+#: ~0.1-1 m from the origin and its speeds ~10 mm/s, so atol (m, m/s) must sit well below
+#: rtol x position for the speeds to be controlled at all (the scenario default is 1e-6 / 1e-9).
+ATOL_PER_RTOL = 1e-3
+
+# ----------------------------------------------------------------------------- settings
+
+
+@dataclass(frozen=True)
+class Setting:
+    """One integrator setting of a sweep.
+
+    method: symplectic_euler, rk4 or dopri5. substeps: dynamics steps per recorded step
+    (fixed-step methods; dopri5 keeps the scenario's, its first trial step). rtol: dopri5's
+    relative tolerance (atol = ATOL_PER_RTOL rtol). sphere_scale: both sphere radii times this.
+    """
+
+    method: str
+    substeps: int = 0
+    rtol: float | None = None
+    sphere_scale: float = 1.0
+
+    @property
+    def adaptive(self) -> bool:
+        return self.method == "dopri5"
+
+    @property
+    def atol(self) -> float | None:
+        return None if self.rtol is None else self.rtol * ATOL_PER_RTOL
+
+    def step_s(self, dt_s: float) -> float:
+        """The dynamics step, s (nan for the adaptive method)."""
+        return math.nan if self.adaptive else dt_s / self.substeps
+
+    def label(self, dt_s: float) -> str:
+        text = (f"dopri5 rtol {self.rtol:g}" if self.adaptive else
+                f"{self.method} h {self.step_s(dt_s) * 1e3:g} ms")
+        return text + (f", spheres x{self.sphere_scale:g}" if self.sphere_scale != 1.0 else "")
+
+    def refined(self) -> Setting:
+        """The next refinement: a tenth of the tolerance, or half the step."""
+        return dc_replace(self, rtol=self.rtol / 10) if self.adaptive else dc_replace(self, substeps=2 * self.substeps)
+
+    def coarsened(self) -> Setting | None:
+        """The setting one refinement coarser (None below one substep)."""
+        if self.adaptive:
+            return dc_replace(self, rtol=self.rtol * 10) if self.rtol < 0.1 else None
+        return dc_replace(self, substeps=self.substeps // 2) if self.substeps % 2 == 0 else None
+
+    def apply(self, s):
+        """The scenario `s` run at this setting (validated again)."""
+        integrator = {**to_dict(s.simulation.integrator), "method": self.method}
+        simulation = {"integrator": integrator}
+        if self.adaptive:
+            integrator.update(rtol=self.rtol, atol=self.atol)
+        else:
+            simulation["substeps"] = self.substeps
+        changes = {"simulation": simulation}
+        if self.sphere_scale != 1.0:
+            c = s.contact
+            changes["contact"] = {"sphere_radius_finger_mm": c.sphere_radius_finger_mm * self.sphere_scale,
+                                  "sphere_radius_groove_mm": c.sphere_radius_groove_mm * self.sphere_scale}
+        return replace(s, **changes)
+
+
+def setting_of(s) -> Setting:
+    """The setting a scenario runs at."""
+    i = s.simulation.integrator
+    if i.method == "dopri5":
+        return Setting("dopri5", rtol=i.rtol)
+    return Setting(i.method, s.simulation.substeps)
+
+
+def parse_setting(text: str) -> Setting:
+    """`METHOD:VALUE`: `symplectic_euler:80`, `rk4:40` (substeps) or `dopri5:1e-7` (rtol)."""
+    method, _, value = text.partition(":")
+    if method not in ("symplectic_euler", "rk4", "dopri5") or not value:
+        raise ValueError(f"{text}: must read METHOD:VALUE with METHOD one of symplectic_euler, rk4, "
+                         f"dopri5 and VALUE its substeps (fixed step) or rtol (dopri5), e.g. dopri5:1e-7")
+    try:
+        if method == "dopri5":
+            rtol = float(value)
+            if not 0 < rtol < 1:
+                raise ValueError
+            return Setting(method, rtol=rtol)
+        substeps = int(value)
+        if substeps < 1:
+            raise ValueError
+        return Setting(method, substeps)
+    except ValueError:
+        rule = "rtol must be a number in (0, 1)" if method == "dopri5" else "substeps must be an integer >= 1"
+        raise ValueError(f"{text}: {rule}") from None
+
+
+@dataclass(frozen=True)
+class Grid:
+    """A sweep: substeps per fixed-step method, dopri5's tolerances, the sphere scales, the reference."""
+
+    substeps: dict[str, tuple[int, ...]]
+    rtols: tuple[float, ...]
+    reference: Setting
+    sphere_scales: tuple[float, ...] = (1.0,)
+    duration_s: float | None = None  # None: the scenario's
+
+    def settings(self) -> list[Setting]:
+        out = []
+        for scale in self.sphere_scales:
+            for method, substeps in self.substeps.items():
+                out += [Setting(method, n, sphere_scale=scale) for n in substeps]
+            out += [Setting("dopri5", rtol=r, sphere_scale=scale) for r in self.rtols]
+        return out
+
+
+#: The grids. The references are fine fixed steps of symplectic Euler: on Case I, 12.5 us takes
+#: ~5 s and its confirmation at 6.25 us ~10 s, where dopri5 takes ~200 s at rtol 1e-6 and did
+#: not finish in 19 min at 1e-7 (every contact onset and stick-slip switch is a kink its error
+#: control steps through). Costs on Case I in the README.
+GRIDS = {
+    # the suite's: Case I's first 120 ms of contact, in which the paper's setting diverges (0.49 s)
+    "quick": Grid({"symplectic_euler": (1, 5, 10), "rk4": (10,)}, (1e-4,), Setting("symplectic_euler", 40),
+                  duration_s=0.55),
+    "reduced": Grid({"symplectic_euler": (1, 2, 5, 10, 20), "rk4": (10, 20)}, (1e-4, 1e-5),
+                    Setting("symplectic_euler", 40)),
+    "default": Grid({"symplectic_euler": (1, 2, 5, 10, 20, 40), "rk4": (5, 10, 20, 40)},
+                    (1e-3, 1e-4, 1e-5, 1e-6), Setting("symplectic_euler", 80)),
+    "full": Grid({"symplectic_euler": (1, 2, 5, 10, 20, 40, 80), "rk4": (2, 5, 10, 20, 40, 80)},
+                 (1e-3, 1e-4, 1e-5, 1e-6), Setting("symplectic_euler", 160), sphere_scales=(1.0, 0.75)),
+}
+
+
+# ----------------------------------------------------------------------------- accuracy
+
+
+@dataclass
+class AccuracyReport:
+    """What an accuracy study found; `rows` as written to its CSV."""
+
+    scenario: str
+    dt_s: float
+    reference: Setting
+    reference_outcome: Outcome
+    confirmation: Setting
+    confirmation_outcome: Outcome | None
+    change_rel: float  # the largest relative change of a reported quantity, reference to confirmation
+    change_what: str  # which quantity that is
+    rows: list[dict]
+    sensitivity_rel: float = math.nan  # the same, reference to the reference started PERTURBATION_MM off
+    sensitivity_what: str = ""
+    # when the confirmation ends with nothing to compare: the setting one refinement coarser
+    coarser: Setting | None = None
+    coarser_change_rel: float = math.nan
+    coarser_change_what: str = ""
+
+    @property
+    def uncertainty_rel(self) -> float:
+        """How far the reference may be from the converged answer, as far as the study can tell."""
+        return self.coarser_change_rel if math.isnan(self.change_rel) else self.change_rel
+    interrupted: bool = False
+    files: list[Path] = field(default_factory=list)
+
+    @property
+    def confirmed(self) -> bool:
+        return self.change_rel < CONFIRM_REL
+
+    def confirmation_text(self) -> str:
+        r, c = self.reference.label(self.dt_s), self.confirmation.label(self.dt_s)
+        if not self.reference_outcome.comparable:
+            return (f"reference not usable: {r} ended {self.reference_outcome.status} "
+                    f"({self.reference_outcome.message}); no errors computed")
+        if self.confirmation_outcome is None:
+            return f"reference not confirmed: the study stopped before its confirmation ({c}) ran"
+        if math.isnan(self.change_rel):
+            text = (f"reference not confirmed: its refinement {c} ended {self.confirmation_outcome.status} "
+                    f"({self.confirmation_outcome.message})")
+            if self.coarser is not None and not math.isnan(self.coarser_change_rel):
+                text += (f"; the setting one refinement coarser, {self.coarser.label(self.dt_s)}, differs from "
+                         f"it by up to {100 * self.coarser_change_rel:.3g} % ({self.coarser_change_what})")
+            return text
+        verdict = "confirmed" if self.confirmed else "not confirmed"
+        return (f"reference {verdict}: refining {r} to {c} changes the reported quantities by at most "
+                f"{100 * self.change_rel:.3g} % ({self.change_what}; the bound is {100 * CONFIRM_REL:g} %)")
+
+    def sensitivity_text(self) -> str:
+        if math.isnan(self.sensitivity_rel):
+            return "sensitivity not measured"
+        return (f"sensitivity: starting the reference {PERTURBATION_MM * 1e6:g} nm off in y changes the reported "
+                f"quantities by at most {100 * self.sensitivity_rel:.3g} % ({self.sensitivity_what}); no setting "
+                f"can be expected to agree with the reference more closely than that")
+
+    def fastest_within(self, rel: float = WITHIN_REL, key: str = "max_err_rel") -> dict | None:
+        """The row of the fastest setting whose error `key` (by default the largest of every
+        reported quantity) is within `rel` of the reference: a swept setting, not the reference,
+        its perturbed twin or its confirmation (a finer run, whose difference is the reference's
+        own uncertainty, reported as such)."""
+        ref = self.reference_outcome.status
+        ok = [r for r in self.rows if r["role"] not in ("reference", "perturbed", "confirmation") and r["status"] == ref
+              and not math.isnan(r[key]) and r[key] <= rel]
+        return min(ok, key=lambda r: r["wall_time_s"]) if ok else None
+
+    def ladder_table(self) -> str:
+        """The fastest setting within 1 % and each of LADDER_REL, on every quantity at once and
+        on each alone, next to how much refining and perturbing the reference changes each: a
+        markdown table."""
+        keys = ["max_err_rel"] + [k for k in self.rows[0] if k.endswith("_err_rel") and k != "max_err_rel"]
+        bounds = (WITHIN_REL, *LADDER_REL)
+        by_role = {r["role"]: r for r in self.rows}
+        checks = {"confirmation": "refining the reference changes it by",
+                  "coarser check": "the coarser check differs by",
+                  "perturbed": f"a {PERTURBATION_MM * 1e6:g} nm start changes it by"}
+        checks = {role: text for role, text in checks.items() if role in by_role}
+        rows = []
+        for key in keys:
+            cells = [percent(by_role[role][key]) for role in checks]
+            for rel in bounds:
+                best = self.fastest_within(rel, key)
+                cells.append("none" if best is None else
+                             f"{best['setting']} ({best['wall_time_s']:.3g} s, {100 * best[key]:.2g} %)")
+            name = "every quantity" if key == "max_err_rel" else key.removesuffix("_err_rel").replace("_", " ")
+            rows.append([name, *cells])
+        return markdown_table(["error of", *checks.values(), *(f"fastest within {100 * b:g} %" for b in bounds)],
+                              rows)
+
+    def fastest_text(self) -> str:
+        best = self.fastest_within()
+        if not self.reference_outcome.comparable:
+            return "fastest setting within 1 % of the reference: none (no usable reference)"
+        u = self.uncertainty_rel
+        resolution = "" if u <= WITHIN_REL else (
+            f"; the reference itself is uncertain by {100 * u:.3g} %, more than 1 %, so this is within 1 % "
+            f"of the reference, not of the converged answer" if not math.isnan(u) else
+            "; how far the reference is from the converged answer is not known")
+        if best is None:
+            return f"fastest setting within 1 % of the reference: none of the settings swept{resolution}"
+        return (f"fastest setting within 1 % of the reference: {best['setting']} ({best['role']}), "
+                f"{best['wall_time_s']:.3g} s of wall time, largest error {100 * best['max_err_rel']:.3g} %"
+                f"{resolution}")
+
+
+def accuracy_columns(scenario, sphere_sweep: bool) -> list[str]:
+    cols = ["role", "setting", "method", "substeps", "step_ms", "rtol", "atol"]
+    cols += ["sphere_scale"] if sphere_sweep else []
+    cols += ["status", "completed_s", "sim_time_s", "wall_time_s", "steps", "force_evaluations", "rejected_steps"]
+    for p in grasp_names(scenario):
+        cols += [f"{p}offset_x_mm", f"{p}offset_y_mm", f"{p}offset_z_mm", f"{p}offset_norm_mm",
+                 f"{p}offset_err_mm", f"{p}offset_err_rel", f"{p}peak_force_N", f"{p}peak_force_err_rel"]
+        if free_floating(scenario):
+            cols += [f"{p}centroid_norm_mm", f"{p}centroid_err_mm", f"{p}centroid_err_rel"]
+    return cols + ["max_err_rel", "within_1pct", "linear_drift_rel", "angular_drift_rel", "message"]
+
+
+def accuracy_row(scenario, setting: Setting, role: str, o: Outcome, ref: Outcome) -> dict:
+    dt = scenario.simulation.dt_s
+    names, centroid = grasp_names(scenario), free_floating(scenario)
+    row = {"role": role, "setting": setting.label(dt), "method": setting.method,
+           "substeps": math.nan if setting.adaptive else setting.substeps,
+           "step_ms": setting.step_s(dt) * 1e3, "rtol": setting.rtol or math.nan, "atol": setting.atol or math.nan,
+           "sphere_scale": setting.sphere_scale, "status": o.status, "completed_s": o.completed_s,
+           "sim_time_s": o.sim_time_s, "wall_time_s": o.wall_time_s, "steps": o.steps,
+           "force_evaluations": o.force_evaluations, "rejected_steps": o.rejected_steps,
+           "linear_drift_rel": o.linear_drift_rel, "angular_drift_rel": o.angular_drift_rel,
+           "message": o.message}
+    for g, p in enumerate(names):
+        off = o.offsets[g] if g < len(o.offsets) and o.offsets[g] is not None else np.full(3, math.nan)
+        row.update({f"{p}offset_x_mm": off[0], f"{p}offset_y_mm": off[1], f"{p}offset_z_mm": off[2],
+                    f"{p}offset_norm_mm": float(np.linalg.norm(off)),
+                    f"{p}peak_force_N": o.peaks[g] if g < len(o.peaks) else math.nan})
+        if centroid:
+            c = o.centroids[g] if g < len(o.centroids) and o.centroids[g] is not None else np.full(3, math.nan)
+            row[f"{p}centroid_norm_mm"] = float(np.linalg.norm(c))
+    if not o.offsets:  # rejected or failed before it ran: nothing to compare
+        o = dc_replace(o, offsets=[None] * len(names), peaks=[math.nan] * len(names),
+                       centroids=[None] * len(names))
+    row.update(errors(o, ref, names, centroid))
+    row["within_1pct"] = (role not in ("reference", "perturbed") and o.status == ref.status
+                          and not math.isnan(row["max_err_rel"]) and row["max_err_rel"] <= WITHIN_REL)
+    return row
+
+
+def perturbed(s, d_mm: float = PERTURBATION_MM):
+    """`s` with every module started `d_mm` further along y_a."""
+    return replace(s, **{k: {"initial_offset_mm": [m.initial_offset_mm[0], m.initial_offset_mm[1] + d_mm,
+                                                   m.initial_offset_mm[2]]}
+                         for k, m in modules_of(s).items()})
+
+
+def accuracy_study(scenario, settings: list[Setting], reference: Setting, out_dir, *,
+                   source: str = "<study>", progress: bool = False, wall_limit_s: float | None = None,
+                   plot: bool = True) -> AccuracyReport:
+    """Run the reference and its confirmation, then every setting; write accuracy.csv (a row per
+    run as it ends), accuracy.md and work_precision.png into `out_dir`.
+
+    Errors are against the reference run. If the confirmation ends with nothing to compare
+    (diverged), the setting one refinement coarser is run next (role `coarser check`) and bounds
+    the reference's uncertainty instead. A further run, the reference started PERTURBATION_MM
+    off, measures how sensitive the reported quantities are to the start. The paper's setting
+    (symplectic Euler at dt = 1 ms) and the scenario's own setting are marked in the `role`
+    column. Ctrl-C stops the study and keeps the rows written (report.interrupted).
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    dt = scenario.simulation.dt_s
+    confirmation = reference.refined()
+    sphere_sweep = any(s.sphere_scale != 1.0 for s in settings)
+    writer = RowWriter(out / "accuracy.csv", accuracy_columns(scenario, sphere_sweep))
+    default = setting_of(scenario)
+    # the paper's dynamics step is its 1 ms record interval; a scenario recording at another
+    # interval has no run with the paper's setting
+    paper = Setting("symplectic_euler", 1) if math.isclose(dt, 1e-3) else None
+    todo = [s for s in dict.fromkeys(settings) if s not in (reference, confirmation)]
+    report = AccuracyReport(scenario.name, dt, reference, Outcome("interrupted", "not run"), confirmation,
+                            None, math.nan, "", writer.rows)
+    from ..sim.run import progress_bar
+
+    bar = progress_bar(len(todo) + 3, progress, f"{scenario.name}: accuracy", "run")
+
+    def role(s: Setting) -> str:
+        return "paper" if s == paper else "default" if s == default else "sweep"
+
+    try:
+        warm_up(scenario, sorted({s.method for s in (*settings, reference)}))
+        for setting, name in ((reference, "reference"), (confirmation, "confirmation")):
+            bar.set_postfix_str(setting.label(dt))
+            o = run_once(setting.apply(scenario), source, wall_limit_s)
+            if name == "reference":
+                report.reference_outcome = o
+            else:
+                report.confirmation_outcome = o
+            row = accuracy_row(scenario, setting, name, o, report.reference_outcome)
+            writer.write(row)
+            bar.update(1)
+        names, centroid = grasp_names(scenario), free_floating(scenario)
+        change = errors(report.confirmation_outcome, report.reference_outcome, names, centroid)
+        report.change_rel, report.change_what = change["max_err_rel"], worst(change)
+        coarser = reference.coarsened()
+        if math.isnan(report.change_rel) and report.reference_outcome.comparable and coarser is not None:
+            # the refinement gave nothing to compare (it diverged): bound the reference from below
+            bar.set_postfix_str(coarser.label(dt))
+            o = run_once(coarser.apply(scenario), source, wall_limit_s)
+            writer.write(accuracy_row(scenario, coarser, "coarser check", o, report.reference_outcome))
+            change = errors(o, report.reference_outcome, names, centroid)
+            report.coarser, report.coarser_change_rel, report.coarser_change_what = coarser, change["max_err_rel"], \
+                worst(change)
+            todo = [s for s in todo if s != coarser]
+        bar.set_postfix_str(f"{reference.label(dt)}, started {PERTURBATION_MM * 1e6:g} nm off")
+        o = run_once(reference.apply(perturbed(scenario)), source, wall_limit_s)
+        writer.write(accuracy_row(scenario, reference, "perturbed", o, report.reference_outcome))
+        change = errors(o, report.reference_outcome, names, centroid)
+        report.sensitivity_rel, report.sensitivity_what = change["max_err_rel"], worst(change)
+        bar.update(1)
+        for setting in todo:
+            bar.set_postfix_str(setting.label(dt))
+            o = run_once(setting.apply(scenario), source, wall_limit_s)
+            writer.write(accuracy_row(scenario, setting, role(setting), o, report.reference_outcome))
+            bar.update(1)
+    except KeyboardInterrupt:
+        report.interrupted = True
+    finally:
+        bar.close()
+        writer.close()
+    report.files = [writer.path, out / "accuracy.md"]
+    (out / "accuracy.md").write_text(accuracy_markdown(scenario, report))
+    if plot and report.rows:
+        work_precision_plot(scenario, report, out / "work_precision.png")
+        report.files.append(out / "work_precision.png")
+    return report
+
+
+def accuracy_markdown(scenario, report: AccuracyReport) -> str:
+    names, centroid = grasp_names(scenario), free_floating(scenario)
+    header = ["setting", "role", "status", "wall (s)", "force evals"]
+    for p in names:
+        g = f"{p[:-1]} " if p else ""
+        header += [f"{g}offset (mm)", f"{g}offset error (mm)", f"{g}offset error", f"{g}peak force (N)",
+                   f"{g}peak force error"]
+        if centroid:
+            header += [f"{g}centroid displ. (mm)", f"{g}centroid error"]
+    header += ["within 1 %", "momentum drift lin / ang"]
+    rows = []
+    for r in report.rows:
+        cells = [r["setting"], r["role"], r["status"] if r["status"] in COMPARABLE else
+                 f"{r['status']}: {r['message']}", sig(r["wall_time_s"]), sig(r["force_evaluations"], 4)]
+        for p in names:
+            cells += [sig(r[f"{p}offset_norm_mm"], 4), sig(r[f"{p}offset_err_mm"], 2), percent(r[f"{p}offset_err_rel"]),
+                      sig(r[f"{p}peak_force_N"], 4), percent(r[f"{p}peak_force_err_rel"])]
+            if centroid:
+                cells += [sig(r[f"{p}centroid_norm_mm"], 4), percent(r[f"{p}centroid_err_rel"])]
+        cells += ["yes" if r["within_1pct"] else "no",
+                  f"{sig(r['linear_drift_rel'], 2)} / {sig(r['angular_drift_rel'], 2)}"]
+        rows.append(cells)
+    text = [f"# Accuracy study: {report.scenario}", "",
+            (f"Errors against the reference, {report.reference.label(report.dt_s)}. The offset is O_b from "
+             f"O_a at the end of the run (the residual offset of a completed grasp); its error is the norm "
+             f"of the vector difference. Wall time is the simulation loop's."), "",
+            f"- {report.confirmation_text()}",
+            f"- {report.sensitivity_text()}",
+            f"- {report.fastest_text()}"]
+    if report.interrupted:
+        text.append("- **interrupted**: the study was stopped; the rows below are the runs that finished")
+    ladder = ("\n\nPer quantity: how well the reference is known, and the fastest setting within each "
+              "bound of it (wall time, error):\n\n"
+              + report.ladder_table().rstrip()) if report.rows else ""
+    return "\n".join(text) + ladder + "\n\nEvery run:\n\n" + markdown_table(header, rows)
+
+
+def work_precision_plot(scenario, report: AccuracyReport, path: Path) -> None:
+    """Error against wall time, log-log, one line per integrator (and sphere scale): the offset
+    error (mm), the peak force's relative error and, on a free-floating robot, the centroid
+    displacement's. The worst grasp's error where there are several. Runs with no error (diverged,
+    stopped) are drawn as crosses on the top edge; the paper's setting is circled."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.ticker import NullFormatter
+
+    names = grasp_names(scenario)
+    panels = [("offset_err_mm", "residual offset error (mm)"), ("peak_force_err_rel", "peak force error (relative)")]
+    if free_floating(scenario):
+        panels.append(("centroid_err_rel", "centroid displacement error (relative)"))
+    fig, axes = plt.subplots(1, len(panels), figsize=(5.2 * len(panels), 5.2), squeeze=False)
+    rows = [r for r in report.rows if r["role"] not in ("reference", "perturbed") and not math.isnan(r["wall_time_s"])]
+    ref = next((r for r in report.rows if r["role"] == "reference"), None)
+    moved = next((r for r in report.rows if r["role"] == "perturbed"), None)
+    for ax, (key, label) in zip(axes[0], panels):
+        def err(r, key=key):
+            return max((r[f"{p}{key}"] for p in names), default=math.nan)
+
+        good = [err(r) for r in rows if not math.isnan(err(r))]
+        floor = min([e for e in good if e > 0], default=1e-6) / 3
+        top = max(good, default=1.0) * 3
+        lines = {}
+        for r in rows:
+            lines.setdefault((r["method"], r.get("sphere_scale", 1.0)), []).append(r)
+        for (method, scale), group in lines.items():
+            group.sort(key=lambda r: r["rtol"] if method == "dopri5" else -r["substeps"], reverse=True)
+            xs = [r["wall_time_s"] for r in group if not math.isnan(err(r))]
+            ys = [max(err(r), floor) for r in group if not math.isnan(err(r))]
+            name = method + (f", spheres x{scale:g}" if scale != 1.0 else "")
+            (line,) = ax.loglog(xs, ys, "o-", lw=1.2, ms=4, label=name)
+            for r in group:
+                short = f"rtol {r['rtol']:g}" if method == "dopri5" else f"{r['step_ms']:g} ms"
+                if math.isnan(err(r)):
+                    ax.plot(r["wall_time_s"], top, "x", color=line.get_color(), ms=8, mew=2)
+                    ax.annotate(f"{short}: {r['status']}", (r["wall_time_s"], top), fontsize=7,
+                                rotation=90, va="top", ha="right", color=line.get_color())
+                else:
+                    ax.annotate(short, (r["wall_time_s"], max(err(r), floor)), fontsize=6,
+                                xytext=(3, 3), textcoords="offset points", color=line.get_color())
+        for r in rows:
+            if r["role"] == "paper":
+                y = top if math.isnan(err(r)) else max(err(r), floor)
+                ax.plot(r["wall_time_s"], y, "o", ms=14, mfc="none", mec="black", mew=1.5,
+                        label=f"paper's setting (symplectic Euler, 1 ms): {r['status']}")
+            if r["role"] == "default":
+                ax.plot(r["wall_time_s"], max(err(r), floor) if not math.isnan(err(r)) else top, "s", ms=11,
+                        mfc="none", mec="tab:gray", mew=1.5, label="the scenario's setting")
+        if ref is not None and not math.isnan(ref["wall_time_s"]):
+            ax.axvline(ref["wall_time_s"], ls=":", color="black", lw=1,
+                       label=f"reference: {ref['setting']}")
+        if moved is not None and not math.isnan(err(moved)) and err(moved) > 0:
+            ax.axhline(err(moved), ls="-.", color="tab:purple", lw=1,
+                       label=f"the reference started {PERTURBATION_MM * 1e6:g} nm off")
+        if key.endswith("_rel"):
+            ax.axhline(WITHIN_REL, ls="--", color="tab:green", lw=1, label="1 %")
+        elif ref is not None:
+            one = max((WITHIN_REL * ref[f"{p}offset_norm_mm"] for p in names), default=math.nan)
+            if not math.isnan(one):
+                ax.axhline(one, ls="--", color="tab:green", lw=1, label="1 % of the reference's offset")
+        ax.set_xlabel("wall time (s)")
+        ax.set_ylabel(label)
+        ax.xaxis.set_minor_formatter(NullFormatter())  # the decades alone: minor labels collide
+        ax.grid(alpha=0.3, which="both")
+    handles, labels = axes[0][0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=3, fontsize=7, frameon=False)
+    fig.suptitle(f"{report.scenario}: error against wall time\n{textwrap.shorten(report.confirmation_text(), 150)}",
+                 fontsize=9)
+    fig.tight_layout(rect=(0, 0.14, 1, 1))
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+

@@ -1,0 +1,273 @@
+"""One run of a study and what a study keeps of it, compared and written out.
+
+A run may be given a wall-time budget: it then runs in a child process, killed when the
+budget is spent. Studies write their CSV a row at a time as runs finish, so that Ctrl-C keeps
+what was computed.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import multiprocessing
+import traceback
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import SpotsimError
+from ..scenario import modules_of, replace, to_dict
+
+#: What a run ended as, besides the simulator's statuses.
+WALL_LIMIT, REJECTED, EXCEPTION = "wall limit", "rejected", "exception"
+#: Statuses whose record may be compared with the reference's.
+COMPARABLE = ("completed", "incomplete")
+
+
+# ----------------------------------------------------------------------------- one run
+
+
+@dataclass
+class Outcome:
+    """What a study keeps of one run. Per grasp: the offset of O_b from O_a at the end (the
+    residual offset of a completed grasp, mm), the peak contact force norm (N) and, on a
+    free-floating robot, the centroid displacement (mm); None where the grasp never ran."""
+
+    status: str
+    message: str
+    wall_time_s: float = math.nan
+    sim_time_s: float = math.nan
+    completed_s: float = math.nan
+    steps: float = math.nan
+    force_evaluations: float = math.nan
+    rejected_steps: float = math.nan
+    offsets: list = field(default_factory=list)
+    peaks: list = field(default_factory=list)
+    centroids: list = field(default_factory=list)
+    linear_drift_rel: float = math.nan
+    angular_drift_rel: float = math.nan
+    finite: bool = True  # every recorded number finite
+    prediction: object = None  # stability.StepPrediction of the run's model
+
+    @property
+    def comparable(self) -> bool:
+        return self.status in COMPARABLE
+
+
+def run_once(scenario, source: str = "<study>", wall_limit_s: float | None = None) -> Outcome:
+    """Build, check and simulate `scenario`; never raises but on the user's Ctrl-C.
+
+    A scenario the model or the start check rejects is status `rejected`; any exception out
+    of `simulate` is status `exception` (it must never raise: a bug the study reports).
+
+    With `wall_limit_s`, the run goes on in a forked child process, which is killed once the
+    budget is spent (status `wall limit`; what it recorded is lost with it). A signal raised
+    into the run instead would land inside numba's callbacks, which turn it into a SystemError;
+    and a child also survives what the simulator must never do, a crash in compiled code.
+    """
+    if not wall_limit_s:
+        return _run_once(scenario, source)
+    ctx = multiprocessing.get_context("fork")  # the child inherits the loaded kernels
+    receive, send = ctx.Pipe(duplex=False)
+    child = ctx.Process(target=_child, args=(send, scenario, source), daemon=True)
+    child.start()
+    send.close()
+    try:
+        if receive.poll(wall_limit_s):
+            o = receive.recv()
+        else:
+            o = Outcome(WALL_LIMIT, f"wall limit of {wall_limit_s:g} s reached: the run was stopped")
+    except EOFError:  # the child died without a word
+        child.join()
+        o = Outcome(EXCEPTION, f"the run's process died (exit code {child.exitcode})")
+    finally:
+        if child.is_alive():
+            child.kill()
+        child.join()
+        receive.close()
+    if o.status == "interrupted":
+        raise KeyboardInterrupt  # the user's Ctrl-C reached the child too: the study stops
+    if o.prediction is None and o.status in (WALL_LIMIT, EXCEPTION):
+        o.prediction = _prediction(scenario, source)
+    return o
+
+
+def _child(send, scenario, source) -> None:
+    try:
+        o = _run_once(scenario, source)
+    except KeyboardInterrupt:
+        o = Outcome("interrupted", "interrupted by the user")
+    send.send(o)
+    send.close()
+
+
+def _prediction(scenario, source):
+    """stability.predict_step of the scenario's model, or None if it cannot be built."""
+    from ..build.model import build_model
+    from ..sim.stability import predict_step
+
+    try:
+        return predict_step(build_model(scenario, source))
+    except SpotsimError:
+        return None
+
+
+def _caused_by_ctrl_c(e: BaseException) -> bool:
+    """Whether a KeyboardInterrupt lies in `e`'s chain of causes: Ctrl-C landing inside one of
+    numba's callbacks comes out as a SystemError."""
+    seen = set()
+    while e is not None and id(e) not in seen:
+        if isinstance(e, KeyboardInterrupt):
+            return True
+        seen.add(id(e))
+        e = e.__cause__ or e.__context__
+    return False
+
+
+def _run_once(scenario, source: str) -> Outcome:
+    from ..build.model import build_model
+    from ..sim.run import check_start, simulate
+    from ..sim.stability import predict_step
+
+    prediction = None
+    try:
+        model = build_model(scenario, source)
+        prediction = predict_step(model)
+        check_start(model, source)
+    except SpotsimError as e:  # the scenario's own problem, found before anything ran
+        return Outcome(REJECTED, str(e).replace("\n", "; "), prediction=prediction)
+    try:
+        result = simulate(scenario, model=model, source=source)
+    except Exception as e:  # simulate must never raise: the study reports it rather than dies of it
+        if _caused_by_ctrl_c(e):
+            raise KeyboardInterrupt from e
+        where = traceback.extract_tb(e.__traceback__)[-1]
+        return Outcome(EXCEPTION, f"{type(e).__name__} raised by simulate: {e} "
+                                  f"({Path(where.filename).name}:{where.lineno})", prediction=prediction)
+    s = result.summary
+    if s["status"] == "interrupted":
+        raise KeyboardInterrupt  # the user's Ctrl-C: the study stops
+    integrator = s["integrator"]
+    done = [g["completed_s"] for g in s["grasps"]]
+    return Outcome(
+        s["status"], s["message"], s["wall_time_s"], s["sim_time_s"],
+        done[-1] if s["status"] == "completed" else math.nan,
+        s["steps"], integrator.get("force_evaluations", s["steps"]), integrator.get("rejected_steps", 0),
+        [None if g["final_offset_mm"] is None else np.array(g["final_offset_mm"]) for g in s["grasps"]],
+        [g["peak_force_norm_N"] for g in s["grasps"]],
+        [np.array(g["robot_centroid_displacement_mm"]) if "robot_centroid_displacement_mm" in g else None
+         for g in s["grasps"]],
+        s["momentum"]["linear_drift_rel"], s["momentum"]["angular_drift_rel"],
+        all(bool(np.all(np.isfinite(a))) for a in result.timeseries.values()
+            if np.issubdtype(np.asarray(a).dtype, np.floating)),
+        prediction)
+
+
+# ----------------------------------------------------------------------------- comparing
+
+
+def grasp_names(scenario) -> list[str]:
+    """Column prefixes of the grasps: none for one grasp, `g1_`, `g2_`... for several."""
+    n = len(modules_of(scenario))
+    return [""] if n == 1 else [f"g{i + 1}_" for i in range(n)]
+
+
+def free_floating(scenario) -> bool:
+    return scenario.kind == "dual_arm"
+
+
+def errors(o: Outcome, ref: Outcome, names: list[str], centroid: bool) -> dict[str, float]:
+    """The errors of `o` against `ref`, per grasp: offset (norm of the vector difference, mm,
+    and relative to the reference's norm), peak force (relative) and centroid displacement
+    (mm, relative); and `max_err_rel`, the largest relative one. nan where either run has
+    nothing comparable (diverged, rejected, a grasp that never ran)."""
+    out = {}
+    ok = o.comparable and ref.comparable
+    for g, p in enumerate(names):
+        def diff(a, b):
+            if not ok or a is None or b is None:
+                return math.nan, math.nan
+            d = float(np.linalg.norm(np.asarray(a) - np.asarray(b)))
+            return d, d / max(float(np.linalg.norm(b)), 1e-300)
+
+        out[f"{p}offset_err_mm"], out[f"{p}offset_err_rel"] = diff(o.offsets[g], ref.offsets[g])
+        out[f"{p}peak_force_err_rel"] = diff(o.peaks[g], ref.peaks[g])[1]
+        if centroid:
+            out[f"{p}centroid_err_mm"], out[f"{p}centroid_err_rel"] = diff(o.centroids[g], ref.centroids[g])
+    rel = [v for k, v in out.items() if k.endswith("_rel")]
+    out["max_err_rel"] = math.nan if any(math.isnan(v) for v in rel) else max(rel)
+    return out
+
+
+def worst(errs: dict[str, float]) -> str:
+    """The name of the largest relative error."""
+    rel = {k: v for k, v in errs.items() if k.endswith("_rel") and k != "max_err_rel"}
+    return max(rel, key=lambda k: -1.0 if math.isnan(rel[k]) else rel[k])
+
+
+# ----------------------------------------------------------------------------- output
+
+
+def fmt(x) -> str:
+    """A CSV cell: numbers to 6 significant digits, nan spelt out."""
+    if isinstance(x, (bool, np.bool_)):
+        return "yes" if x else "no"
+    if isinstance(x, (int, np.integer)):
+        return str(int(x))
+    if isinstance(x, (float, np.floating)):
+        return "nan" if math.isnan(x) else f"{x:.6g}"
+    return str(x)
+
+
+class RowWriter:
+    """A CSV written and flushed a row at a time."""
+
+    def __init__(self, path: Path, columns: list[str]):
+        self.path, self.columns = path, columns
+        self._file = open(path, "w", newline="")  # noqa: SIM115 - open across rows, closed by close()
+        self._csv = csv.writer(self._file)
+        self._csv.writerow(columns)
+        self._file.flush()
+        self.rows: list[dict] = []
+
+    def write(self, row: dict) -> None:
+        missing = [c for c in self.columns if c not in row]
+        if missing:
+            raise KeyError(f"row lacks {missing}")
+        self._csv.writerow([fmt(row[c]) for c in self.columns])
+        self._file.flush()
+        self.rows.append(row)
+
+    def close(self) -> None:
+        self._file.close()
+
+
+def markdown_table(header: list[str], rows: list[list]) -> str:
+    lines = ["| " + " | ".join(header) + " |", "| " + " | ".join("---" for _ in header) + " |"]
+    lines += ["| " + " | ".join(str(c).replace("|", "\\|") for c in r) + " |" for r in rows]
+    return "\n".join(lines) + "\n"
+
+
+def sig(x, digits=3) -> str:
+    """A markdown cell: `digits` significant digits, a dash for nan."""
+    if isinstance(x, (float, np.floating)) and math.isnan(x):
+        return "–"
+    return f"{x:.{digits}g}"
+
+
+def percent(x) -> str:
+    if isinstance(x, (float, np.floating)) and math.isnan(x):
+        return "–"
+    return f"{100 * x:.3g} %"
+
+
+def warm_up(scenario, methods, duration_s: float = 0.5) -> None:
+    """Run each method briefly (dopri5 at a loose tolerance), so that no timed run pays for
+    loading its compiled kernels."""
+    for method in methods:
+        integrator = {**to_dict(scenario.simulation.integrator), "method": method}
+        if method == "dopri5":
+            integrator.update(rtol=1e-3, atol=1e-6)
+        run_once(replace(scenario, simulation={"duration_s": min(duration_s, scenario.simulation.duration_s),
+                                               "integrator": integrator}))

@@ -1,0 +1,377 @@
+"""The stability study: stiff and extreme variants of a scenario, each with the predicted
+stable step, the verdict (converged / not captured / diverged (detected) / rejected at start)
+and the run's outcome."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from dataclasses import replace as dc_replace
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import SpotsimError
+from ..scenario import TOLERANCE_DEG, TOLERANCE_OFFSET_MM, modules_of, replace, to_dict
+from .runs import (
+    COMPARABLE,
+    EXCEPTION,
+    REJECTED,
+    WALL_LIMIT,
+    Outcome,
+    RowWriter,
+    markdown_table,
+    run_once,
+    sig,
+    warm_up,
+)
+
+#: A stability case's wall-time budget, s: a hundred times Case I's run at its default step.
+STABILITY_WALL_LIMIT_S = 300.0
+
+# ----------------------------------------------------------------------------- stability
+
+
+@dataclass(frozen=True)
+class Case:
+    """A variant of a scenario: its name, group (baseline, stiff, extreme), what it changes, and
+    the changes as a function of the scenario (the keyword arguments of scenario.replace)."""
+
+    name: str
+    group: str
+    what: str
+    changes: object  # scenario -> dict
+    detail: object = None  # the changed scenario -> a value to add to `what` (a computed load)
+    misalignment: bool = False  # rejected at start, it is run again with a start gap that clears it
+
+    def apply(self, s):
+        return replace(s, **self.changes(s))
+
+    def describe(self, changed) -> str:
+        return self.what if self.detail is None else f"{self.what}: {self.detail(changed)}"
+
+
+#: The start gaps tried, mm, for a misaligned start that interpenetrates at the scenario's.
+START_GAPS_MM = (12.0, 15.0, 20.0, 25.0, 30.0, 40.0)
+
+
+def _travel_time(s, gap_mm: float) -> float:
+    """The time the fingers take to close `gap_mm`, s."""
+    return gap_mm * 1e-3 / s.end_effector.closing_speed_m_s
+
+
+def _later(s, dt_s: float) -> dict:
+    """Changes that give every grasp phase and the run `dt_s` more time."""
+    return {"simulation": {"duration_s": s.simulation.duration_s + dt_s},
+            "completion": {"phase_timeout_s": s.completion.phase_timeout_s + dt_s}}
+
+
+def clearing_gap(s) -> float | None:
+    """The smallest of START_GAPS_MM at which `s`'s fingers and groove do not interpenetrate at
+    the start, mm (None if none does)."""
+    from ..build.model import build_model
+    from ..sim.run import initial_contacts
+
+    for gap in START_GAPS_MM:
+        if gap > s.end_effector.start_gap_mm:
+            wider = replace(s, end_effector={"start_gap_mm": gap})
+            if not initial_contacts(build_model(wider)):
+                return gap
+    return None
+
+
+def widened(s, gap_mm: float):
+    """`s` with its fingers starting `gap_mm` from a centred groove, and as much more time as
+    the longer travel takes."""
+    extra = _travel_time(s, gap_mm - s.end_effector.start_gap_mm)
+    return replace(s, end_effector={"start_gap_mm": gap_mm}, **_later(s, extra))
+
+
+def _closing(speed_m_s: float):
+    """A closing speed; a slower one gets the time its longer approach and settling take (the
+    scenario's times scaled by the speed ratio)."""
+    def changes(s):
+        slower = s.end_effector.closing_speed_m_s / speed_m_s
+        out = {"end_effector": {"closing_speed_m_s": speed_m_s}}
+        if slower > 1:
+            out["simulation"] = {"duration_s": s.simulation.duration_s * slower}
+            out["completion"] = {"phase_timeout_s": s.completion.phase_timeout_s * slower}
+        return out
+    return changes
+
+
+def _modules(s, **fields) -> dict:
+    """The same changes to every module section of `s`."""
+    return {section: dict(fields) for section in modules_of(s)}
+
+
+def _misaligned(offset=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0)):
+    """Every module started centred but for one misalignment (mm, deg)."""
+    return lambda s: _modules(s, initial_offset_mm=list(offset), initial_rpy_deg=list(rpy))
+
+
+def _scaled(section: str, **factors):
+    return lambda s: {section: {k: getattr(getattr(s, section), k) * f for k, f in factors.items()}}
+
+
+def _lighter(factor: float):
+    def changes(s):
+        out = {}
+        for section, m in modules_of(s).items():
+            inertia = {k: v * factor for k, v in to_dict(m.inertia_kg_m2).items()}
+            out[section] = {"mass_kg": m.mass_kg * factor, "inertia_kg_m2": inertia}
+        return out
+    return changes
+
+
+def load_limit(model) -> float:
+    """The largest grasp load, N, at which the scenario's dynamics step is still inside its
+    integrator's predicted stability region (stability.predict_step; bisection in log load)."""
+    import dataclasses
+
+    from ..sim.stability import predict_step
+
+    s = model.scenario
+
+    def stable(load):
+        m = dataclasses.replace(model, scenario=replace(s, end_effector={"grasp_load_N": load}))
+        return predict_step(m).stable
+
+    lo, hi = 1e-3, 1e7
+    if not stable(lo):
+        return lo
+    if stable(hi):
+        return hi
+    for _ in range(50):
+        mid = math.sqrt(lo * hi)
+        lo, hi = (mid, hi) if stable(mid) else (lo, mid)
+    return lo
+
+
+def _at_load_limit(s) -> dict:
+    from ..build.model import build_model
+
+    return {"end_effector": {"grasp_load_N": load_limit(build_model(s))}}
+
+
+def stability_cases() -> list[Case]:
+    """The stiff and the extreme cases of the issue, in the order the study runs them."""
+    off, deg = TOLERANCE_OFFSET_MM, TOLERANCE_DEG
+    E = ("youngs_modulus_finger_Pa", "youngs_modulus_groove_Pa")
+    r = ("sphere_radius_finger_mm", "sphere_radius_groove_mm")
+    cases = [
+        Case("baseline", "baseline", "the scenario as given", lambda s: {}),
+        Case("E x10", "stiff", "both Young's moduli x10", _scaled("contact", **{k: 10.0 for k in E})),
+        Case("E x100", "stiff", "both Young's moduli x100", _scaled("contact", **{k: 100.0 for k in E})),
+        Case("spheres x0.5", "stiff", "both sphere radii x0.5", _scaled("contact", **{k: 0.5 for k in r})),
+        Case("restitution 0.3", "stiff", "contact.restitution = 0.3", lambda s: {"contact": {"restitution": 0.3}}),
+        Case("k_b x10", "stiff", "bristle stiffness x10", _scaled("friction", bristle_stiffness_N_m=10.0)),
+        Case("module /100", "stiff", "module mass and inertia x0.01", _lighter(0.01)),
+    ]
+    for sign in (1, -1):
+        for axis, i in (("x_a", 0), ("y_a", 1)):
+            o = [0.0, 0.0, 0.0]
+            o[i] = sign * off
+            cases.append(Case(f"{axis} {sign * off:+g} mm", "extreme", f"offset {o} mm, at the claimed tolerance",
+                              _misaligned(offset=o), misalignment=True))
+    for sign in (1, -1):
+        for i, name in enumerate(("roll", "pitch", "yaw")):
+            a = [0.0, 0.0, 0.0]
+            a[i] = sign * deg[name]
+            cases.append(Case(f"{name} {sign * deg[name]:+g} deg", "extreme",
+                              f"rpy {a} deg, at the claimed tolerance", _misaligned(rpy=a), misalignment=True))
+    past = [("x_a", [12.0, 0.0, 0.0], None), ("y_a", [0.0, 12.0, 0.0], None), ("roll", None, [35.0, 0.0, 0.0]),
+            ("pitch", None, [0.0, 70.0, 0.0]), ("yaw", None, [0.0, 0.0, 35.0])]
+    for name, o, a in past:
+        value = f"{o[o.index(max(o))]:+g} mm" if o else f"{max(a):+g} deg"
+        what = f"{'offset' if o else 'rpy'} {o or a} {'mm' if o else 'deg'}, past the claimed tolerance"
+        cases.append(Case(f"{name} {value}", "extreme", what, _misaligned(offset=o or (0, 0, 0), rpy=a or (0, 0, 0)),
+                          misalignment=True))
+    def load(s):
+        return f"{s.end_effector.grasp_load_N:.4g} N"
+
+    cases += [
+        Case("closing 5 mm/s", "extreme", "closing speed 5 mm/s (duration and phase time-out x speed ratio)",
+             _closing(0.005)),
+        Case("closing 50 mm/s", "extreme", "closing speed 50 mm/s", _closing(0.05)),
+        Case("load x10", "extreme", "grasp load x10",
+             lambda s: {"end_effector": {"grasp_load_N": 10 * s.end_effector.grasp_load_N}}, load),
+        Case("load at limit", "extreme", "grasp load at the largest the step is predicted stable for",
+             _at_load_limit, load),
+    ]
+    return cases
+
+
+#: The suite's cases: one of each kind of verdict on Case I, each short.
+QUICK_CASES = ("baseline", "E x100", "module /100", "y_a +10 mm", "closing 50 mm/s")
+#: Long enough for Case I to complete (1.03 s, 1.41 s from a 12 mm gap), short enough for the suite.
+QUICK_DURATION_S = 1.5
+
+
+def _key(name: str) -> str:
+    return name.replace(" ", "").lower()
+
+
+def select_cases(names: list[str]) -> list[Case]:
+    """The cases named (spaces and case ignored: `Ex100`, `y_a+10mm`) or of the groups named
+    (`stiff`, `extreme`, `baseline`), in the study's order; ValueError lists the valid names."""
+    cases = stability_cases()
+    wanted = {_key(n) for n in names}
+    known = {_key(c.name) for c in cases} | {c.group for c in cases}
+    unknown = sorted(wanted - known)
+    if unknown:
+        raise ValueError(f"unknown case(s) {', '.join(unknown)}; valid: groups stiff, extreme, baseline, or "
+                         f"{', '.join(c.name for c in cases)}")
+    return [c for c in cases if _key(c.name) in wanted or c.group in wanted]
+
+
+#: A completed grasp left farther off than this, mm, is "converged, off centre": the suite's
+#: bound on Case I, a tenfold reduction of its 3 mm start.
+CENTRED_MM = 0.3
+
+
+def verdict(o: Outcome) -> str:
+    """converged (or converged, off centre) / not captured / diverged (detected) / rejected at
+    start, or a failure of the simulator that the study exists to catch (an exception, a
+    silent NaN)."""
+    if o.status in COMPARABLE and not o.finite:
+        return "FAILED: silent NaN"
+    if o.status == "completed" and max(float(np.linalg.norm(x)) for x in o.offsets if x is not None) > CENTRED_MM:
+        return "converged, off centre"
+    return {"completed": "converged", "incomplete": "not captured", "diverged": "diverged (detected)",
+            REJECTED: "rejected at start", WALL_LIMIT: "no verdict: wall limit",
+            EXCEPTION: "FAILED: exception"}.get(o.status, o.status)
+
+
+STABILITY_COLUMNS = ["case", "group", "change", "dynamics_step_ms", "predicted_stable_step_ms", "omega_h",
+                     "damping_h", "predicted_stable", "verdict", "prediction_held", "status", "completed_s",
+                     "residual_offset_mm", "final_offset_mm", "peak_force_N", "sim_time_s", "wall_time_s",
+                     "finite", "message", "finer_verdict", "finer_message"]
+#: A diverged case runs again this many times finer (fixed step; dopri5: rtol / this): if it
+#: still diverges, the cause is not the step.
+FINER = 4
+
+
+def finer(s):
+    """`s` with its dynamics step FINER times smaller (dopri5: its rtol and atol)."""
+    i = s.simulation.integrator
+    if i.method == "dopri5":
+        return replace(s, simulation={"integrator": {**to_dict(i), "rtol": i.rtol / FINER, "atol": i.atol / FINER}})
+    return replace(s, simulation={"substeps": s.simulation.substeps * FINER})
+
+
+def stability_row(case: Case, o: Outcome, changed=None, fine: Outcome | None = None) -> dict:
+    """A stability CSV row: the case, its prediction, verdict and outcome, and (`fine`) the
+    verdict of the same case FINER times finer when it diverged ("not run" otherwise)."""
+    p = o.prediction
+    v = verdict(o)
+    if p is None or o.status not in (*COMPARABLE, "diverged"):
+        held = "n/a"
+    elif p.stable and o.status == "diverged" and fine is not None and fine.status == "diverged":
+        held = "yes (not the step's divergence)"  # the step was not the cause: nothing to predict
+    else:
+        held = "yes" if p.stable == (o.status != "diverged") else "no"
+    finals = [float(np.linalg.norm(x)) for x in o.offsets if x is not None]
+    return {"case": case.name, "group": case.group,
+            "change": case.what if changed is None else case.describe(changed),
+            "dynamics_step_ms": math.nan if p is None else p.step_s * 1e3,
+            "predicted_stable_step_ms": math.nan if p is None else p.stable_step_s * 1e3,
+            "omega_h": math.nan if p is None else p.omega_h,
+            "damping_h": math.nan if p is None else p.damping_rate_1_s * p.step_s,
+            "predicted_stable": "n/a" if p is None else ("yes" if p.stable else "no"),
+            "verdict": v, "prediction_held": held, "status": o.status, "completed_s": o.completed_s,
+            "residual_offset_mm": max(finals) if o.status == "completed" else math.nan,
+            "final_offset_mm": max(finals, default=math.nan), "peak_force_N": max(o.peaks, default=math.nan),
+            "sim_time_s": o.sim_time_s, "wall_time_s": o.wall_time_s,
+            "finite": "n/a" if o.status not in COMPARABLE else ("yes" if o.finite else "no"),
+            "message": o.message, "finer_verdict": "not run" if fine is None else verdict(fine),
+            "finer_message": "not run" if fine is None else fine.message}
+
+
+@dataclass
+class StabilityReport:
+    scenario: str
+    rows: list[dict]
+    interrupted: bool = False
+    files: list[Path] = field(default_factory=list)
+
+    @property
+    def failures(self) -> list[dict]:
+        """Cases that ended in what the simulator must never do: an exception or a silent NaN."""
+        return [r for r in self.rows if r["verdict"].startswith("FAILED")]
+
+
+def check_finer(o: Outcome, s, source: str, wall_limit_s) -> Outcome | None:
+    """A diverged run's case again, FINER times finer; None for any other outcome."""
+    return run_once(finer(s), source, wall_limit_s) if o.status == "diverged" else None
+
+
+def stability_study(scenario, cases: list[Case], out_dir, *, source: str = "<study>", progress: bool = False,
+                    wall_limit_s: float | None = STABILITY_WALL_LIMIT_S) -> StabilityReport:
+    """Run every case of `scenario`; write stability.csv (a row per case as it ends) and
+    stability.md into `out_dir`. A misaligned start rejected for interpenetrating is run once
+    more with the start gap that clears it (a second row). A diverged case runs again FINER
+    times finer (`finer_verdict`): one that still diverges does not diverge for its step.
+    Ctrl-C stops the study and keeps the rows written."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    writer = RowWriter(out / "stability.csv", STABILITY_COLUMNS)
+    report = StabilityReport(scenario.name, writer.rows)
+    from ..sim.run import progress_bar
+
+    bar = progress_bar(len(cases), progress, f"{scenario.name}: stability", "run")
+    try:
+        warm_up(scenario, [scenario.simulation.integrator.method])
+        for case in cases:
+            bar.set_postfix_str(case.name)
+            try:
+                s = case.apply(scenario)
+            except SpotsimError as e:
+                s, o = None, Outcome(REJECTED, str(e).replace("\n", "; "))
+            else:
+                o = run_once(s, source, wall_limit_s)
+            writer.write(stability_row(case, o, s, check_finer(o, s, source, wall_limit_s)))
+            gap = clearing_gap(s) if case.misalignment and o.status == REJECTED and s is not None else None
+            if gap is not None:  # the same start, with fingers opened wide enough to clear it
+                wide = dc_replace(case, name=f"{case.name}, gap {gap:g} mm",
+                                  what=f"{case.what}; start gap {s.end_effector.start_gap_mm:g} -> {gap:g} mm")
+                s = widened(s, gap)
+                o = run_once(s, source, wall_limit_s)
+                writer.write(stability_row(wide, o, s, check_finer(o, s, source, wall_limit_s)))
+            bar.update(1)
+    except KeyboardInterrupt:
+        report.interrupted = True
+    finally:
+        bar.close()
+        writer.close()
+    (out / "stability.md").write_text(stability_markdown(scenario, report))
+    report.files = [writer.path, out / "stability.md"]
+    return report
+
+
+def stability_markdown(scenario, report: StabilityReport) -> str:
+    header = ["case", "change", "predicted stable step (ms)", "ω·h", "verdict", "prediction held",
+              "residual offset (mm)", "peak force (N)", "sim / wall (s)", "outcome", f"diverged: at h/{FINER}"]
+    rows = [[r["case"], r["change"], sig(r["predicted_stable_step_ms"]), sig(r["omega_h"]), r["verdict"],
+             r["prediction_held"],
+             sig(r["residual_offset_mm"]), sig(r["peak_force_N"]), f"{sig(r['sim_time_s'])} / {sig(r['wall_time_s'])}",
+             r["message"], "" if r["finer_verdict"] == "not run" else f"{r['finer_verdict']}: {r['finer_message']}"]
+            for r in report.rows]
+    counts = {}
+    for r in report.rows:
+        counts[r["verdict"]] = counts.get(r["verdict"], 0) + 1
+    step = next((r["dynamics_step_ms"] for r in report.rows if not math.isnan(r["dynamics_step_ms"])), math.nan)
+    text = [f"# Stability study: {report.scenario}", "",
+            (f"Dynamics step {sig(step)} ms ({scenario.simulation.integrator.method}). The predicted stable step "
+             f"is stability.predict_step's; ω·h is the stiffest contact mode times the step (the integrator's "
+             f"limit on the imaginary axis is 2 for symplectic Euler). A converged grasp left more than "
+             f"{CENTRED_MM:g} mm off is \"converged, off centre\". A diverged case runs again with a step "
+             f"{FINER} times smaller: if it still diverges, the step is not the cause."), "",
+            "- verdicts: " + ", ".join(f"{n} {v}" for v, n in counts.items())]
+    if report.failures:
+        text.append(f"- **{len(report.failures)} case(s) FAILED** (an exception or a silent NaN): "
+                    + ", ".join(r["case"] for r in report.failures))
+    if report.interrupted:
+        text.append("- **interrupted**: the study was stopped; the rows below are the cases that finished")
+    return "\n".join(text) + "\n\n" + markdown_table(header, rows)
+
