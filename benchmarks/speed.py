@@ -169,8 +169,8 @@ def main() -> None:
               f"({best['free_flight_steps']} free-flight), {r['steps_per_s']:.0f} steps/s, real-time factor "
               f"{r['realtime']:.2f}")
         print(f"  contact stage from first contact ({r['pairs']:.1f} pairs on average): culled "
-              f"{r['culled_us']:.2f} us, literal {r['literal_us']:.0f} us ({r['literal_us'] / r['culled_us']:.0f}x); the literal stage against "
-              f"the default run's mean step of {step_us:.2f} us: {r['literal_us'] / step_us:.0f}x")
+              f"{r['culled_us']:.2f} us, literal {r['literal_us']:.0f} us ({r['literal_us'] / r['culled_us']:.0f}x); "
+              f"the literal stage against the default run's mean step of {step_us:.2f} us: {r['literal_us'] / step_us:.0f}x")
     print("\n| case | simulated s | wall s, fastest | steps/s | real-time factor | contact stage, culled us | "
           "literal us | literal / culled | literal stage / default mean step |")
     print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")

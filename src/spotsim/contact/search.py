@@ -470,13 +470,22 @@ def world_spheres(m, d):
 
 
 @njit
+def _touches(chi, w, R):
+    """Whether phi = -chi + sqrt(chi^2 - w) > 0 with a real root, a superset by SEARCH_SLACK:
+    chi^2 >= w and (chi < 0 or w < 0), the same test without a square root (Eq. 8)."""
+    return (chi * chi - w >= -SEARCH_SLACK * R) & ((chi < SEARCH_SLACK) | (w < SEARCH_SLACK * R))
+
+
+@njit
 def literal_search(m, d):
     """The paper's literal search: every master sphere against every slave sphere, Eq. (6)-(10),
-    as Candidates (a superset by SEARCH_SLACK; `penetration1` decides).
+    as Candidates (a superset by SEARCH_SLACK; `penetration` decides).
 
     The spheres of one face share its normal, so each block of two faces has one common
     normal; no pair is skipped. Coordinates are taken relative to a point of the slave face, so
     that |c1 - c2|^2, expanded, is free of cancellation: centres are within centimetres of it.
+    Each block's products c1 . c2 come from one matrix product, and its pairs are counted
+    without a branch before the few that touch are listed.
     """
     C1, N1, C2, N2 = world_spheres(m, d)
     R = m.law.r1 + m.law.r2
@@ -486,25 +495,28 @@ def literal_search(m, d):
     n_found = 0
     for b in range(slave_runs.shape[0] - 1):
         s0, s1 = slave_runs[b], slave_runs[b + 1]
-        origin = (C2[s0, 0], C2[s0, 1], C2[s0, 2])
+        C2b = C2[s0:s1] - C2[s0]
+        w2 = (C2b * C2b).sum(axis=1) - R * R  # |c2|^2 - R^2 of Eq. (10)
         for a in range(master_runs.shape[0] - 1):
             a0, a1 = master_runs[a], master_runs[a + 1]
             dn = (N2[s0, 0] - N1[a0, 0], N2[s0, 1] - N1[a0, 1], N2[s0, 2] - N1[a0, 2])
             norm = math.sqrt(_dot(dn, dn))
             if norm <= NORMAL_EPS:
                 continue  # faces facing the same way: Eq. (6) undefined, no pair
-            n_c = (dn[0] / norm, dn[1] / norm, dn[2] / norm)
-            for i in range(a0, a1):
-                c1 = (C1[i, 0] - origin[0], C1[i, 1] - origin[1], C1[i, 2] - origin[2])
-                c1_n, c1_sq = _dot(c1, n_c), _dot(c1, c1)
-                for j in range(s0, s1):
-                    c2 = (C2[j, 0] - origin[0], C2[j, 1] - origin[1], C2[j, 2] - origin[2])
-                    chi = c1_n - _dot(c2, n_c)  # Eq. (9)
-                    w = c1_sq - 2.0 * _dot(c1, c2) + _dot(c2, c2) - R * R  # Eq. (10)
-                    # phi = -chi + sqrt(chi^2 - w) > 0 with a real root  <=>  chi^2 >= w and
-                    # (chi < 0 or w < 0): the same test without a square root
-                    if chi * chi - w >= -SEARCH_SLACK * R and (chi < SEARCH_SLACK or w < SEARCH_SLACK * R):
-                        found_m, found_s = _push(found_m, found_s, n_found, i, j)
+            n_c = np.array((dn[0] / norm, dn[1] / norm, dn[2] / norm))
+            C1b = C1[a0:a1] - C2[s0]
+            products = C1b @ C2b.T  # every c1 . c2 of the block (BLAS)
+            chi1, chi2, w1 = C1b @ n_c, C2b @ n_c, (C1b * C1b).sum(axis=1)
+            for i in range(a1 - a0):
+                row = products[i]
+                hits = 0
+                for j in range(s1 - s0):  # chi (Eq. 9) and w (Eq. 10) of each pair
+                    hits += _touches(chi1[i] - chi2[j], w1[i] - 2.0 * row[j] + w2[j], R)
+                if hits == 0:
+                    continue
+                for j in range(s1 - s0):
+                    if _touches(chi1[i] - chi2[j], w1[i] - 2.0 * row[j] + w2[j], R):
+                        found_m, found_s = _push(found_m, found_s, n_found, a0 + i, s0 + j)
                         n_found += 1
     key = found_m[:n_found] * C2.shape[0] + found_s[:n_found]
     order = np.argsort(key)
