@@ -1,0 +1,159 @@
+"""The scene of a scenario: which XACRO, which joints to lock, which bodies take part.
+
+Everything here is by name and fixed for a run (a weld makes a new scene with its module
+joined to the robot).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+import pinocchio as pin
+
+from ..errors import ModelError
+from ..scenario import DualArmScenario, Scenario
+from . import assets
+
+#: Smallest eigenvalue a body's inertia may have, kg m^2, below which it is not positive definite.
+MIN_INERTIA_EIGENVALUE = 1e-12
+FINGER_NAMES = ("finger_upper", "finger_lower")
+
+
+@dataclass(frozen=True)
+class SceneSpec:
+    """What a scenario's scene is made of, by name: the XACRO, the joints to lock, the
+    end-effectors (name, link prefix), the modules (name, link prefix, scenario section, the
+    end-effector it starts at) and the grasp sequence (end-effector, module)."""
+
+    xacro: object
+    args: dict
+    locked: dict  # joint name -> angle, rad; names listed in `checked` are limit-checked
+    checked: dict  # joint name -> scenario key path, for limit errors
+    end_effectors: tuple[tuple[str, str], ...]
+    modules: tuple[tuple[str, str, object, int], ...]
+    grasps: tuple[tuple[int, int], ...]
+    robot_joint: str | None = None
+    # modules fixed to their end-effector (grasp done): (module, xyz, rpy of O_b in O_a)
+    welded: tuple[tuple[int, tuple, tuple], ...] = ()
+    # the arm fragments the XACRO includes (`assets.prefixed_arm`): (arm model, prefix)
+    arms: tuple[tuple[str, str], ...] = ()
+
+    @property
+    def welded_modules(self) -> set[int]:
+        return {k for k, _, _ in self.welded}
+
+
+def geometry_args(g) -> dict:
+    """XACRO arguments of a scenario's `geometry` block (the XACRO's arguments of the same names)."""
+    return {f.name: getattr(g, f.name) for f in fields(g)}
+
+
+def module_args(prefix: str, m) -> dict:
+    """XACRO arguments of one module, named with the scene's prefix convention."""
+    args = {f"{prefix}mass_kg": m.mass_kg, f"{prefix}com_x_mm": m.com_mm[0],
+            f"{prefix}com_y_mm": m.com_mm[1], f"{prefix}com_z_mm": m.com_mm[2]}
+    args.update({f"{prefix}{k.name}": getattr(m.inertia_kg_m2, k.name) for k in fields(m.inertia_kg_m2)})
+    return args
+
+
+def scene_spec(s, welded: dict | None = None) -> SceneSpec:
+    """The scene of a scenario. welded: module index -> (xyz, rpy) of its O_b in its
+    end-effector's grasp frame, for modules already grasped."""
+    welded = welded or {}
+    if isinstance(s, Scenario):
+        args = {**geometry_args(s.geometry), **module_args("module_", s.module)}
+        arm = [f"joint{i}" for i in range(1, 7)]
+        locked = {**dict(zip(arm, s.arm.joint_angles_rad, strict=True)), "jointGripper": 0.0,
+                  "ee_finger_upper": 0.0, "ee_finger_lower": 0.0}
+        checked = {name: f"arm.joint_angles_rad[{i}]" for i, name in enumerate(arm)}
+        return SceneSpec(assets.URDF_DIR / "single_arm_scene.urdf.xacro", args, locked, checked,
+                         (("EE", "ee_"),), (("TM", "tm_", s.module, 0),), ((0, 0),))
+    if isinstance(s, DualArmScenario):
+        from .robot import ARM_JOINTS
+
+        args = {**geometry_args(s.geometry), **module_args("tm1_", s.tm1), **module_args("tm2_", s.tm2)}
+        for k, (xyz, rpy) in welded.items():
+            prefix = ("tm1_", "tm2_")[k]
+            args.update({f"{prefix}joint_type": "fixed", f"{prefix}parent": f"ee{k + 1}_grasp",
+                         f"{prefix}xyz": " ".join(repr(float(x)) for x in xyz),
+                         f"{prefix}rpy": " ".join(repr(float(x)) for x in rpy)})
+        locked, checked = {}, {}
+        for arm, angles in (("arm1_", s.robot.arm1_joint_angles_rad), ("arm2_", s.robot.arm2_joint_angles_rad)):
+            for i, (name, angle) in enumerate(zip(ARM_JOINTS, angles, strict=True)):
+                locked[arm + name] = angle
+                checked[arm + name] = f"robot.{arm}joint_angles_rad[{i}]"
+            for finger in FINGER_NAMES:
+                locked[f"ee{arm[3]}_{finger}"] = 0.0
+        return SceneSpec(assets.URDF_DIR / "dual_arm_scene.urdf.xacro", args, locked, checked,
+                         (("EE-1", "ee1_"), ("EE-2", "ee2_")),
+                         (("TM-1", "tm1_", s.tm1, 0), ("TM-2", "tm2_", s.tm2, 1)),
+                         ((0, 0), (1, 1)), robot_joint="fdr_free_flyer",
+                         welded=tuple((k, tuple(map(float, xyz)), tuple(map(float, rpy)))
+                                      for k, (xyz, rpy) in sorted(welded.items())),
+                         arms=((s.robot.arm_model, "arm1_"), (s.robot.arm_model, "arm2_")))
+    raise TypeError(f"not a scenario: {type(s).__name__}")
+
+
+def check_inertias(model: pin.Model, joints=None) -> None:
+    """Reject non-finite values, negative masses and inertias that are not positive definite.
+
+    Pinocchio accepts all of these silently. `joints`: the bodies that must have mass > 0.
+    """
+    problems = []
+    for j in range(1, model.njoints):
+        I = model.inertias[j]
+        name = model.names[j]
+        if not (np.isfinite(I.mass) and np.all(np.isfinite(I.lever)) and np.all(np.isfinite(I.inertia))):
+            problems.append(f"body of joint {name}: non-finite mass, centroid or inertia")
+            continue
+        if I.mass < 0 or (joints is not None and j in joints and I.mass <= 0):
+            problems.append(f"body of joint {name}: mass {I.mass} kg must be > 0")
+        if I.mass > 0 and np.linalg.eigvalsh(I.inertia).min() < MIN_INERTIA_EIGENVALUE:
+            problems.append(f"body of joint {name}: inertia {I.inertia.tolist()} is not positive definite")
+    if problems:
+        raise ModelError("; ".join(problems))
+
+
+def lock_joints(full: pin.Model, spec: SceneSpec) -> tuple[pin.Model, list[str]]:
+    """Reduce away the locked joints (arms at the scenario's angles, fingers at opening 0)."""
+    q_ref = pin.neutral(full)
+    problems, lock = [], []
+    for name, angle in spec.locked.items():
+        j = full.getJointId(name)
+        lo, hi = full.lowerPositionLimit[full.idx_qs[j]], full.upperPositionLimit[full.idx_qs[j]]
+        if name in spec.checked and not lo <= angle <= hi:
+            problems.append(f"{spec.checked[name]} = {angle}: must be within the {name} limits "
+                            f"[{lo:.4f}, {hi:.4f}] rad")
+        q_ref[full.idx_qs[j]] = angle
+        lock.append(j)
+    return pin.buildReducedModel(full, lock, q_ref), problems
+
+
+def frame(model: pin.Model, name: str) -> pin.Frame:
+    return model.frames[model.getFrameId(name, pin.BODY)]
+
+
+def weld_urdf(urdf: str, spec: SceneSpec) -> str:
+    """The compiled scene `urdf` with the modules of `spec.welded` fixed to their end-effectors:
+    each module's floating joint `<prefix>free_flyer` becomes a fixed joint in its
+    end-effector's `<prefix>grasp` link at the welded pose, as the scene's XACRO compiles it
+    with `<prefix>joint_type:=fixed` (`scene_spec`). Editing that one joint costs milliseconds;
+    compiling the XACRO again costs ~0.1 s of a run."""
+    import re
+    import xml.etree.ElementTree as ET
+
+    for k, xyz, rpy in spec.welded:
+        prefix = spec.modules[k][1]
+        ee = next(e for e, m in spec.grasps if m == k)
+        # that one element is parsed and rewritten; the rest of the text is kept as it is
+        found = re.search(rf'<joint\s[^>]*name="{prefix}free_flyer".*?</joint>', urdf, re.DOTALL)
+        if found is None:
+            raise ModelError(f"the scene has no joint {prefix}free_flyer to weld module {spec.modules[k][0]} by")
+        joint = ET.fromstring(found.group(0))
+        joint.set("type", "fixed")
+        joint.find("parent").set("link", f"{spec.end_effectors[ee][1]}grasp")
+        joint.find("origin").set("xyz", " ".join(repr(float(x)) for x in xyz))
+        joint.find("origin").set("rpy", " ".join(repr(float(x)) for x in rpy))
+        urdf = urdf[:found.start()] + ET.tostring(joint, encoding="unicode") + urdf[found.end():]
+    return urdf
