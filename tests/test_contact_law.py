@@ -69,8 +69,8 @@ def test_cutoff_covers_every_pair_up_to_the_divergence_limit():
     """Random pairs in contact with phi <= r_min all lie within the search cutoff."""
     rng = np.random.default_rng(0)
     c1 = rng.uniform(-2e-3, 2e-3, size=(20_000, 3))
-    found = np.array([pair(c, [0, 0, 0])[1:] for c in c1])
-    phi, hit = found[:, 0], found[:, 1].astype(bool)
+    found = [pair(c, [0, 0, 0]) for c in c1]
+    phi, hit = np.array([phi for _, phi, _ in found]), np.array([hit for _, _, hit in found])
     ok = hit & (phi <= min(R1, R2))
     assert ok.sum() > 100
     assert np.linalg.norm(c1[ok], axis=1).max() <= cutoff_distance(R1, R2, min(R1, R2))

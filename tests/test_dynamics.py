@@ -6,7 +6,6 @@ import pytest
 from conftest import ROOT
 
 import spotsim
-from spotsim.contact.wrenches import Loads
 from spotsim.sim.bodies import kinematics
 from spotsim.sim.data import make_data
 from spotsim.sim.dynamics import accelerations
@@ -30,8 +29,7 @@ def test_free_body_dynamics_is_pinocchios_aba(config, gravity):
         q = pin.randomConfiguration(m, -np.ones(m.nq), np.ones(m.nq))
         v = rng.normal(scale=2.0, size=m.nv)
         f_local = rng.normal(scale=30.0, size=(m.njoints, 6))
-        loads = data.loads
-        data.assign(q=q, v=v, loads=Loads(f_local, *loads[1:]))
+        data.assign(q=q, v=v, loads=data.loads._replace(f_local=f_local))
         kinematics(model.sim, data)
         accelerations(model.sim, data)
         f_ext = pin.StdVec_Force()

@@ -58,7 +58,6 @@ def test_force_free_tumbling_body_keeps_its_momentum_and_straight_path(case_I):
 
 def test_centroid_acceleration_is_force_over_mass(model_I):
     """The compiled accelerations, turned into the centroid's world acceleration, are F / m."""
-    from spotsim.contact.wrenches import Loads
     from spotsim.sim.data import make_data
     from spotsim.sim.dynamics import accelerations
 
@@ -72,7 +71,7 @@ def test_centroid_acceleration_is_force_over_mass(model_I):
         v = rng.normal(size=m.nv)
         f_local = np.zeros((m.njoints, 6))
         f_local[j] = rng.normal(size=6)  # force and moment about the joint origin, joint axes
-        data.assign(q=q, v=v, loads=Loads(f_local, *data.loads[1:]))
+        data.assign(q=q, v=v, loads=data.loads._replace(f_local=f_local))
         kinematics(model_I.sim, data)
         accelerations(model_I.sim, data)
         iv = m.idx_vs[j]

@@ -319,8 +319,9 @@ def main(argv=None) -> int:
     s = result.summary
     print(f"{s['scenario']}: {s['status']} - {s['message']}")
     for g in s["grasps"]:
-        print(f"  {g['end_effector']} on {g['module']}: first contact {g['contact_onset_s']} s, "
-              f"complete {g['completed_s']} s")
+        when = lambda t: "never" if t is None else f"at {t:.4f} s"
+        print(f"  {g['end_effector']} on {g['module']}: first contact {when(g['contact_onset_s'])}, "
+              f"complete {when(g['completed_s'])}")
         if g["residual_offset_mm"] is not None:
             x, y, z = g["residual_offset_mm"]
             print(f"    residual offset [{x:.4f}, {y:.4f}, {z:.4f}] mm, e = {g['residual_offset_norm_mm']:.4f} mm")

@@ -4,14 +4,31 @@ from __future__ import annotations
 
 import os
 import sys
+import sysconfig
 from functools import lru_cache
+from importlib import resources
 from pathlib import Path
 
 from ..errors import ModelError
 
-#: Repository root: spotsim is installed editable (see README), so `urdf/` and `config/`
-#: sit beside `src/`. SPOTSIM_ROOT overrides it for relocated assets.
-ROOT = Path(os.environ.get("SPOTSIM_ROOT", Path(__file__).resolve().parents[3]))
+
+def assets_root() -> Path:
+    """The directory holding spotsim's `urdf/` and `config/`: inside the installed package (a
+    wheel ships them there), else the checkout's top level (an editable install). The
+    environment variable SPOTSIM_ROOT overrides both."""
+    if os.environ.get("SPOTSIM_ROOT"):
+        return Path(os.environ["SPOTSIM_ROOT"])
+    packaged = resources.files("spotsim")
+    if packaged.joinpath("urdf").is_dir():
+        return Path(str(packaged))
+    checkout = Path(__file__).resolve().parents[3]
+    if (checkout / "urdf").is_dir():
+        return checkout
+    raise ModelError(f"spotsim's urdf/ is neither in the package ({packaged}) nor in a checkout ({checkout}); "
+                     "reinstall spotsim")
+
+
+ROOT = assets_root()
 URDF_DIR = ROOT / "urdf"
 CONFIG_DIR = ROOT / "config"
 
@@ -19,11 +36,10 @@ CONFIG_DIR = ROOT / "config"
 @lru_cache(maxsize=1)
 def example_robot_data_dir() -> Path:
     """The example-robot-data share directory (version 6 ships data only, under cmeel)."""
-    for entry in [sys.prefix, *sys.path]:
-        for sub in ("lib/python3.11/site-packages/cmeel.prefix/share", "cmeel.prefix/share"):
-            candidate = Path(entry) / sub / "example-robot-data"
-            if (candidate / "robots").is_dir():
-                return candidate
+    for entry in [sysconfig.get_paths()["purelib"], sysconfig.get_paths()["platlib"], *sys.path]:
+        candidate = Path(entry) / "cmeel.prefix" / "share" / "example-robot-data"
+        if (candidate / "robots").is_dir():
+            return candidate
     raise ModelError(
         "example-robot-data not found under any cmeel prefix; install it with "
         "`pip install example-robot-data`"

@@ -27,29 +27,22 @@ from ..contact.normal import damping_factor, hertz_stiffness
 from ..errors import ModelError, ScenarioError
 from ..sim.bodies import free_bodies
 from ..sim.integrators import METHODS, tableau
-from ..sim.model import (CompletionParams, DriveParams, Fingers, Grasps, IntegratorParams, Limits, ModelFields,
-                         RecordFrames, SimModel, sim_model)
+from ..sim.model import (
+    CompletionParams,
+    DriveParams,
+    Fingers,
+    Grasps,
+    IntegratorParams,
+    Limits,
+    ModelFields,
+    RecordFrames,
+    SimModel,
+    sim_model,
+)
 from ..sim.record import REPLAY_RATE_HZ, Layout
 from . import assets
 from .faces import contact_faces, sphere_layer
 from .scene import FINGER_NAMES, SceneSpec, check_inertias, frame, lock_joints, scene_spec, weld_urdf
-
-
-@dataclass(frozen=True)
-class ContactParams:
-    """Contact law constants: radii (m), Hertz K (N/m^1.5), damping factor, floors."""
-
-    r1: float
-    r2: float
-    K: float
-    damping_factor: float
-    approach_speed_floor: float
-    cutoff: float
-    margin: float
-    bristle: BristleParams
-    broad_phase: str
-    force_point: str = "common"
-    skin: float = 0.0  # the margin's extra beyond contact reach, m
 
 
 @dataclass(frozen=True)
@@ -106,13 +99,16 @@ class Model:
     fingers: tuple[Finger, ...]
     finger_geoms: tuple[tuple[int, int], ...]  # (geometry object, finger) of each finger patch
     contact_joints: tuple[int, ...]  # joints carrying contact faces
-    params: ContactParams
     q0: np.ndarray
     v0: np.ndarray
     free_joints: tuple[int, ...]
     faces: tuple  # every contact face of the URDF, active or not (`faces.contact_faces`); a weld keeps them
     layout: Layout  # the time series a run of this scene records (fixed by the unwelded scene)
     sim: SimModel
+
+    @property
+    def law(self) -> ContactLaw:
+        return self.sim.law
 
     @property
     def master(self) -> MasterSpheres:
@@ -152,25 +148,20 @@ def groove_placement(model: pin.Model, module: ModuleBody) -> tuple[int, pin.SE3
     return f.parentJoint, f.placement
 
 
-def contact_params(s) -> ContactParams:
-    c = s.contact
+def contact_law(s) -> ContactLaw:
+    """The contact law's constants of a scenario's `contact` and `friction` blocks."""
+    c, f = s.contact, s.friction
     r1, r2 = c.sphere_radius_finger_mm * 1e-3, c.sphere_radius_groove_mm * 1e-3
-    cutoff = cutoff_distance(r1, r2, min(r1, r2))
-    return ContactParams(
+    return ContactLaw(
         r1=r1, r2=r2,
-        K=hertz_stiffness(c.youngs_modulus_finger_Pa, c.poisson_finger,
-                          c.youngs_modulus_groove_Pa, c.poisson_groove, r1, r2),
-        damping_factor=damping_factor(c.restitution),
-        approach_speed_floor=c.approach_speed_floor_m_s,
-        cutoff=cutoff,
-        # a sphere centre sits r off its face, so faces whose spheres may pair are within
-        # r1 + cutoff + r2 of each other; the skin keeps the culling conservative
-        margin=r1 + r2 + cutoff + c.skin_mm * 1e-3,
-        bristle=BristleParams(s.friction.mu_k, s.friction.mu_s, s.friction.bristle_stiffness_N_m,
-                              s.friction.bristle_damping_N_s_m, s.friction.velocity_deadband_m_s),
-        broad_phase=c.broad_phase,
-        force_point=c.force_point,
-        skin=c.skin_mm * 1e-3,
+        K=hertz_stiffness(c.youngs_modulus_finger_Pa, c.poisson_finger, c.youngs_modulus_groove_Pa, c.poisson_groove,
+                          r1, r2),
+        damping=damping_factor(c.restitution),
+        floor=c.approach_speed_floor_m_s,
+        cutoff=cutoff_distance(r1, r2, min(r1, r2)),
+        bristle=BristleParams(f.mu_k, f.mu_s, f.bristle_stiffness_N_m, f.bristle_damping_N_s_m,
+                              f.velocity_deadband_m_s),
+        common_point=c.force_point == "common",
     )
 
 
@@ -218,14 +209,14 @@ def build_model(s, source: str = "<scenario>", welded: dict | None = None, urdf:
     free = tuple(m.joint for m in modules if m.joint) + ((robot_joint,) if robot_joint else ())
     check_inertias(model, joints=set(free))
 
-    params = contact_params(s)
+    law = contact_law(s)
     active = [k for k in range(len(modules)) if k not in spec.welded_modules]
     finger_links = [f"{prefix}{finger}" for e, (_, prefix) in enumerate(spec.end_effectors)
                     if not any(g == (e, m) for m in spec.welded_modules for g in spec.grasps)
                     for finger in FINGER_NAMES]
     module_prefixes = [modules[k].prefix for k in active]
     faces = tuple(contact_faces(urdf)) if faces is None else faces
-    layers = _contact_layers(model, faces, finger_links, module_prefixes, params)
+    layers = _contact_layers(model, faces, finger_links, module_prefixes, law)
     movable = [j for j in layers.contact_joints if j and model.joints[j].shortname() != "JointModelFreeFlyer"]
     if movable:  # the compiled kinematics reads contact bodies' poses from free-flyers only
         raise ModelError(f"contact faces on joints {[model.names[j] for j in movable]}, which are neither "
@@ -251,14 +242,14 @@ def build_model(s, source: str = "<scenario>", welded: dict | None = None, urdf:
         mod = next(m for (ee, m) in spec.grasps if ee == e)
         axis_J = f.placement.rotation[:, 2]  # prismatic finger joints open along their local z
         touch = _opening_at_touch(model, f.parentJoint, axis_J, layers, layers.master_finger == len(fingers),
-                                  end_effectors[e], modules[mod], params)
+                                  end_effectors[e], modules[mod], law)
         start = touch + s.end_effector.start_gap_mm * 1e-3
         fingers.append(Finger(link, f.parentJoint, axis_J, e, touch, start))
     layout = Layout(scene_fingers(spec), bool(robot_joint), [m.name for m in modules], [e.name for e in end_effectors])
-    parts = _Parts(s, model, end_effectors, modules, spec.grasps, robot_joint, tuple(fingers), free, layers, params,
+    parts = _Parts(s, model, end_effectors, modules, spec.grasps, robot_joint, tuple(fingers), free, layers, law,
                    layout)
     return Model(s, spec, urdf, model, layers.geom, tuple(end_effectors), tuple(modules), spec.grasps, robot_joint,
-                 tuple(fingers), layers.finger_geoms, layers.contact_joints, params, q0, np.zeros(model.nv), free,
+                 tuple(fingers), layers.finger_geoms, layers.contact_joints, q0, np.zeros(model.nv), free,
                  faces, layout, sim_model(model_fields(parts)))
 
 
@@ -278,7 +269,7 @@ class _Layers:
     contact_joints: tuple[int, ...]
 
 
-def _contact_layers(model, faces, finger_links, module_prefixes, params) -> _Layers:
+def _contact_layers(model, faces, finger_links, module_prefixes, law) -> _Layers:
     """Sphere layers of the active contact faces, stacked by role, and the coal face patches.
 
     Master faces: those on `finger_links`, placed at opening 0 on the joint the finger is
@@ -302,7 +293,7 @@ def _contact_layers(model, faces, finger_links, module_prefixes, params) -> _Lay
             finger_of_face.append(finger_links.index(face.link))
             finger_geoms.append((len(geom.geometryObjects), finger_of_face[-1]))
         verts_J = face.vertices_L @ jMl.rotation.T + jMl.translation
-        layer = sphere_layer(verts_J, params.r1 if role == "master" else params.r2)
+        layer = sphere_layer(verts_J, law.r1 if role == "master" else law.r2)
         T = face.T_LC
         placement = jMl * pin.SE3(T[:3, :3], T[:3, 3])
         gid = geom.addGeometryObject(pin.GeometryObject(face.name, j, placement, coal.Box(*face.box_size)))
@@ -346,7 +337,7 @@ def _contact_layers(model, faces, finger_links, module_prefixes, params) -> _Lay
                    contact_joints)
 
 
-def _opening_at_touch(model, parent_joint, axis_J, layers, on_finger, ee, module, params):
+def _opening_at_touch(model, parent_joint, axis_J, layers, on_finger, ee, module, law):
     """The finger opening (m) at which its sphere layer first touches its groove, centred.
 
     For each of the finger's faces opposed to a groove face (normals anti-parallel), the
@@ -370,15 +361,15 @@ def _opening_at_touch(model, parent_joint, axis_J, layers, on_finger, ee, module
     for fm in np.unique(layers.master_face[on_finger]):
         k = np.flatnonzero(layers.master_face == fm)[0]
         n_f = oMf.rotation @ layers.master_normal_J[k]
-        x_f = oMf.act(layers.master_centre_J[k] - params.r1 * layers.master_normal_J[k])
+        x_f = oMf.act(layers.master_centre_J[k] - law.r1 * layers.master_normal_J[k])
         for fs in np.unique(slave.face[on_module]):
             i = np.flatnonzero(slave.face == fs)[0]
             n_g = oMm.rotation @ slave.normal_J[i]
             if n_f @ n_g > -1 + 1e-9 or abs(axis_W @ n_g) < 1e-9:
                 continue
-            x_g = oMm.act(slave.centre_J[i] - params.r2 * slave.normal_J[i])
+            x_g = oMm.act(slave.centre_J[i] - law.r2 * slave.normal_J[i])
             dist0 = (x_f - x_g) @ n_g
-            opening = (2 * (params.r1 + params.r2) - dist0) / (axis_W @ n_g)
+            opening = (2 * (law.r1 + law.r2) - dist0) / (axis_W @ n_g)
             best = opening if best is None else max(best, opening)
     if best is None:
         raise ModelError("a finger has no face opposed to a groove face")
@@ -401,13 +392,13 @@ class _Parts:
     fingers: tuple
     free_joints: tuple
     layers: _Layers
-    params: ContactParams
+    law: ContactLaw
     layout: Layout
 
 
 def model_fields(p: _Parts) -> ModelFields:
     """The fields of a scene's compiled Model."""
-    s, model, layers, params = p.scenario, p.pin_model, p.layers, p.params
+    s, model, layers, law = p.scenario, p.pin_model, p.layers, p.law
     bodies = free_bodies(model)
     body_row = {int(j): b for b, j in enumerate(bodies.joint)}
     axes = np.array([f.axis_J for f in p.fingers], dtype=float).reshape(-1, 3)
@@ -423,7 +414,10 @@ def model_fields(p: _Parts) -> ModelFields:
                     np.array([model.inertias[p.modules[k].joint].lever for k in mods]).reshape(-1, 3))
     reach = _sphere_reach(master, layers.slave, p.fingers)
     reach = [(body_row[j], r) for j, r in reach if j != 0]
-    limits = Limits(min(params.r1, params.r2), params.skin,
+    skin = s.contact.skin_mm * 1e-3
+    # a sphere centre sits r off its face, so faces whose spheres may pair are within
+    # r1 + cutoff + r2 of each other; the skin keeps the culling conservative
+    limits = Limits(min(law.r1, law.r2), skin, law.r1 + law.r2 + law.cutoff + skin,
                     bool((master.joint == 0).any() or (layers.slave.joint == 0).any()),
                     np.array([b for b, _ in reach], dtype=np.int64), np.array([r for _, r in reach], dtype=float))
     c, ee, sim = s.completion, s.end_effector, s.simulation
@@ -431,13 +425,11 @@ def model_fields(p: _Parts) -> ModelFields:
     integrator = IntegratorParams(METHODS.index(sim.integrator.method), len(e) > 0, A, b, c_nodes, e,
                                   sim.integrator.rtol, sim.integrator.atol, sim.integrator.h_min_s,
                                   sim.integrator.h_max_s)
-    law = ContactLaw(params.r1, params.r2, params.K, params.damping_factor, params.approach_speed_floor, params.cutoff,
-                     params.bristle, params.force_point == "common")
     return ModelFields(bodies, np.array(model.gravity.linear), master, layers.slave, layers.faces, law,
-                    params.broad_phase == "none", fingers, grasps,
+                    s.contact.broad_phase == "none", fingers, grasps,
                     DriveParams(ee.closing_speed_m_s, ee.grasp_load_N, ee.resume_fraction),
                     CompletionParams(c.hold_s, c.max_contact_speed_m_s, c.max_net_force_N, c.phase_timeout_s),
-                    limits, _record_frames(p, body_row), integrator, sim.dt_s, sim.substeps)
+                    limits, _record_frames(p, body_row), integrator, sim.dt_s, sim.substeps, sim.dt_s / sim.substeps)
 
 
 def _sphere_reach(master, slave, fingers) -> list[tuple[int, float]]:

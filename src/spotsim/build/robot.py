@@ -7,8 +7,8 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from . import assets
 from ..scenario import TABLE6_ARM1, TABLE6_ARM2
+from . import assets
 
 DUAL_ARM_XACRO = assets.URDF_DIR / "dual_arm_scene.urdf.xacro"
 ARM = "ur3"

@@ -215,7 +215,7 @@ def _contact_bodies(run, frames, keys, states, datas, spheres, commands) -> list
     model = run.model
     snaps = run.snapshots
     bodies, n_mf = _body_of_faces(model)
-    p = model.params
+    p = model.law
     # three.js draws a point of `size` as wide as a segment of size * tan(fov / 2) at its depth
     focal = 1 / np.tan(np.radians(CAMERA_FOV_DEG) / 2)
     face_layers = []  # per face (first-model numbering): (positions in its body frame, radius)
@@ -271,9 +271,9 @@ def _pair_clouds(model, snaps, snap, kind, i, tree, focal):
     clouds: dict[bytes, tuple[dict, np.ndarray]] = {}
     order = []
     if kind == "finger":
-        layers, r, idx_key, on_body = model.master, model.params.r1, "master", model.master.finger == i
+        layers, r, idx_key, on_body = model.master, model.law.r1, "master", model.master.finger == i
     else:
-        layers, r, idx_key = model.slave, model.params.r2, "slave"
+        layers, r, idx_key = model.slave, model.law.r2, "slave"
         on_body = layers.joint == model.modules[i].joint
     for frame, s in enumerate(snap):
         if s < 0:

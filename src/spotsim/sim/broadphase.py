@@ -27,7 +27,7 @@ class BroadPhase:
         self.pin_data = m.createData()
         self.geom_data = pin.GeometryData(model.geom_model)
         for req in self.geom_data.collisionRequests:
-            req.security_margin = model.params.margin
+            req.security_margin = model.sim.limits.margin
         self.manager = pin.BroadPhaseManager_DynamicAABBTreeCollisionManager(m, model.geom_model, self.geom_data)
 
     def near(self, q: np.ndarray, opening: np.ndarray) -> np.ndarray:

@@ -180,7 +180,7 @@ def make_data(model, rows: int = ROWS_PER_CALL) -> Data:
         energy_start=0.0, energy_now=0.0, energy_passive=math.nan, momentum_start=np.zeros(3),
         angular_momentum_start=np.zeros(3), momentum_max=0.0, angular_momentum_max=0.0, momentum_drift=0.0,
         angular_momentum_drift=0.0,
-        left=0, h=sim.dt / sim.substeps, t_end=0.0, flight=False, held=False,
+        left=0, h=sim.h, t_end=0.0, flight=False, held=False,
         h_next=0.0, fsal=False, fsal_t=0.0, fsal_rate=np.zeros(n_f),
         fsal_dy=np.zeros(RK_STATE * len(sim.bodies.joint)), fsal_external=np.zeros(6),
         rows=np.zeros((rows, sim.record.width)), n_rows=0, row_index=0,

@@ -78,9 +78,9 @@ def begin_interval(m, d):
     if d.flight:
         d.left, d.h = 1, m.dt
     elif m.integrator.adaptive:
-        d.left, d.h = 1, m.dt / m.substeps
+        d.left, d.h = 1, m.h
     else:
-        d.left, d.h = m.substeps, m.dt / m.substeps
+        d.left, d.h = m.substeps, m.h
     d.held = d.stalled[m.grasps.ee[d.active]]  # the drive holds through the interval so far
 
 

@@ -60,6 +60,7 @@ class Limits(NamedTuple):
 
     max_penetration: float  # a pair deeper than this (the smaller sphere radius) has diverged, m
     skin: float  # coal's margin beyond contact reach: the travel allowed before a refresh, m
+    margin: float  # coal's security margin: contact reach plus the skin, m
     fixed_contact: bool  # a fixed body carries contact faces (contact impulses are external)
     reach_rows: np.ndarray  # (n,) rows of `bodies` carrying contact spheres
     reach: np.ndarray  # (n,) the farthest of their spheres from their joint's origin, m
@@ -121,6 +122,7 @@ class ModelFields(NamedTuple):
     integrator: IntegratorParams
     dt: float  # the record interval, s
     substeps: int  # dynamics steps per record interval
+    h: float  # the dynamics step, dt / substeps, s
 
 
 @structref.register

@@ -85,7 +85,7 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
     done = 0  # record intervals taken
     try:
         while done < n_records:
-            if broad is not None and out.travel > model.params.skin:
+            if broad is not None and out.travel > model.sim.limits.skin:
                 try:
                     near = broad.refresh(data)  # the Verlet skin is used up
                 except StateOverflow as e:
@@ -241,7 +241,7 @@ def _summary(s, model, v, rec, series, status, message, wall, welds) -> dict:
         "pair_steps": v.pair_steps,  # sphere pairs in contact, summed over the steps
         "dt_s": sim.dt_s,
         "substeps": sim.substeps,
-        "dynamics_dt_s": sim.dt_s / sim.substeps,
+        "dynamics_dt_s": model.sim.h,
         # steps of a whole record interval, taken where no contact could start within it
         "free_flight_steps": v.flights,
         "integrator": {"method": sim.integrator.method, "accepted_steps": v.accepted, "rejected_steps": v.rejected,

@@ -86,9 +86,9 @@ def effective_mass(model) -> float:
 
 def predict_step(model, pairs: int = EXPECTED_PAIRS) -> StepPrediction:
     """The stiffest contact mode of `model`'s scene and its integrator's largest stable step."""
-    s, p = model.scenario, model.params
+    s, p = model.scenario, model.law
     method = s.simulation.integrator.method
-    h = s.simulation.dt_s / s.simulation.substeps
+    h = model.sim.h
     m = effective_mass(model)
     K_phi = p.K / 2.0**1.5  # F = K (phi/2)^1.5 = K_phi phi^1.5
     load = max(s.end_effector.grasp_load_N, impact_peak_force(K_phi, m, s.end_effector.closing_speed_m_s))
@@ -96,7 +96,7 @@ def predict_step(model, pairs: int = EXPECTED_PAIRS) -> StepPrediction:
     k_bristle = pairs * p.bristle.k_b
     omega = math.sqrt((k_hertz + k_bristle) / m)
     # Zhang: each pair's damper is factor * F_pair / v_minus (per unit of delta_dot = phi_dot/2)
-    c = pairs * p.bristle.c_b + 0.5 * p.damping_factor * load / p.approach_speed_floor
+    c = pairs * p.bristle.c_b + 0.5 * p.damping * load / p.floor
     rate = c / m
     imag, real = STABILITY_INTERVAL[method]
     stable = min(imag / omega, real / rate if rate > 0 else math.inf)
