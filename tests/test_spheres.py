@@ -3,24 +3,13 @@
 import numpy as np
 import pytest
 
-from spotsim.build.faces import face_basis, sphere_layer, to_body_frame
+from spotsim.build.faces import face_basis, sphere_layer
 from spotsim.errors import ModelError
 
 #: Geometry here is exact up to double round-off on millimetre numbers.
 TOL = 1e-12
 
 SQUARE = np.array([[0, 0, 0], [4e-3, 0, 0], [4e-3, 2e-3, 0], [0, 2e-3, 0]], dtype=float)
-
-
-def test_body_frame_is_the_inverse_pose():
-    """Eq. (1): N^b = R^T (N - T) undoes the body's pose."""
-    rng = np.random.default_rng(1)
-    R, _ = np.linalg.qr(rng.normal(size=(3, 3)))
-    R *= np.sign(np.linalg.det(R))
-    T = rng.normal(size=3)
-    N_b = rng.normal(size=(5, 3))
-    N_W = N_b @ R.T + T
-    assert np.allclose(to_body_frame(N_W, R, T), N_b, atol=TOL)
 
 
 def test_normal_and_basis_of_a_counter_clockwise_square():

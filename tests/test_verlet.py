@@ -3,7 +3,7 @@
 import numpy as np
 import pinocchio as pin
 
-from spotsim.contact.search import GAP_SLACK, _face_frame, _moved, by_key, empty_pair_list, grid_search, listed_search
+from spotsim.contact.search import GAP_SLACK, _moved, by_key, empty_pair_list, face_frame, grid_search, listed_search
 from spotsim.sim.bodies import kinematics
 from spotsim.sim.broadphase import BroadPhase
 from spotsim.sim.run import Stepper
@@ -98,8 +98,8 @@ def test_kept_pair_list_finds_the_grid_search_pairs_after_any_small_motion(model
                 if built.scan[f] or built.stop[f] == built.start[f]:
                     continue
                 A = np.empty((3, 3))
-                frame = _face_frame(m, data, f, A)
-                moved = _moved(A, frame[4], built.A[f], built.off[f], m.faces.master_centre_J[f],
+                frame = face_frame(m, data, f, A)
+                moved = _moved(A, frame.off, built.A[f], built.off[f], m.faces.master_centre_J[f],
                                m.faces.master_radius[f])
                 skipped += int(np.sum(built.gap[built.start[f]:built.stop[f]] > moved + GAP_SLACK))
     assert found > 100 and kept > 20 and skipped > 0
@@ -128,7 +128,7 @@ def test_pair_list_falls_back_to_the_grid_search_off_the_ball_regime(model_I, re
         assert np.array_equal(grid.key, listed.key)
         found += len(grid.key)
         # face pairs that face each other yet are searched anew: the fallback at work
-        scanned += any(pair_list.scan[f] and _face_frame(m, data, f, np.empty((3, 3)))[0] for f in near)
+        scanned += any(pair_list.scan[f] and face_frame(m, data, f, np.empty((3, 3))).facing for f in near)
     assert found > 100 and scanned > 0
 
 

@@ -11,6 +11,7 @@ from .errors import ModelError, ScenarioError, SimulationError, SpotsimError
 from .results import write_results
 from .scenario import Scenario, from_dict, load_scenario, replace, to_yaml
 from .sim.run import Result, simulate
+from .version import __version__
 
 __all__ = [
     "Model",
@@ -27,4 +28,5 @@ __all__ = [
     "simulate",
     "to_yaml",
     "write_results",
+    "__version__",
 ]

@@ -34,29 +34,7 @@ if not os.environ.get("NUMBA_CACHE_DIR"):  # a directory the user chose wins
 #: Compiled, cached, and bit-for-bit IEEE arithmetic (no fast-math reassociation): the culled
 #: and the literal searches must give identical forces.
 njit = numba.njit(cache=True, fastmath=False, nogil=True)
-#: ... and compiled into each caller (numba IR inlining): a call that passes a dozen arrays costs
-#: a few hundred ns, a small kernel's arithmetic a few tens.
+#: ... and compiled into each caller (numba IR inlining), for small helpers called inside the
+#: stages' loops: their arguments' reference counts then fall where numba's pruning removes them.
 njit_inline = numba.njit(cache=True, fastmath=False, nogil=True, inline="always")
 
-
-def direct(kernel):
-    """A caller of `kernel` that finds its compiled version at the first call and calls it
-    directly afterwards, skipping the dispatcher's type resolution.
-
-    For the step's contact kernel (~40 arguments, three of them named tuples) that resolution
-    cost ~30 us a call, a third of a step. Only for call sites whose argument types cannot
-    change within a process: arrays of the model (fixed at build) and of the state (made by
-    the kernels themselves), Python floats.
-    """
-    compiled = None
-
-    def call(*args):
-        nonlocal compiled
-        if compiled is None:
-            result = kernel(*args)  # compiles or loads it for these types
-            compiled = kernel.overloads[tuple(kernel.typeof_pyval(a) for a in args)].entry_point
-            return result
-        return compiled(*args)
-
-    call.__doc__ = kernel.__doc__
-    return call

@@ -55,16 +55,6 @@ def _choice(*options):
     return rule
 
 
-def _each(rule):
-    def check(xs):
-        for x in xs:
-            msg = rule(x)
-            if msg:
-                return f"every entry {msg}"
-        return None
-    return check
-
-
 def key(default=dataclasses.MISSING, rule=None, doc=""):
     """A scenario key: its default (none: required), a rule returning an error or None, a doc."""
     meta = {"rule": rule, "doc": doc}

@@ -50,11 +50,6 @@ class SphereLayer:
     index_map: np.ndarray
 
 
-def to_body_frame(N_W: np.ndarray, R_WB: np.ndarray, p_WB: np.ndarray) -> np.ndarray:
-    """Eq. (1): vertices (k, 3) from the inertial frame into the body frame, N^b = R^T (N - T)."""
-    return (np.asarray(N_W) - p_WB) @ R_WB
-
-
 def face_basis(vertices: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Eq. (2)-(3): outward unit normal n and in-plane basis t1, t2 = n x t1 of a face.
 

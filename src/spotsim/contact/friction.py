@@ -9,7 +9,6 @@ from ..linalg import norm3
 
 #: Pair states, as the paper's Fig. 9 colours them.
 NONE, SLIPPING, STICKING = 0, 1, 2
-STATE_NAMES = ("none", "slipping", "sticking")
 
 
 class BristleParams(NamedTuple):

@@ -53,8 +53,3 @@ class FaceTable(NamedTuple):
     master_centre_J: np.ndarray  # (n, 3)
     master_radius: np.ndarray  # (n,)
 
-
-def face_runs(face: np.ndarray) -> list[slice]:
-    """The contiguous run of spheres of each face of a stacked layer (`face` of the spheres)."""
-    starts = np.flatnonzero(np.r_[True, np.diff(face) != 0, True])
-    return [slice(a, b) for a, b in zip(starts[:-1], starts[1:])]

@@ -15,7 +15,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..jit import njit, njit_inline
-from ..linalg import mv3
+from ..linalg import dot3, mv3
 from .detection import NORMAL_EPS
 
 #: The grid search keeps pairs whose penetration, computed in face coordinates, exceeds
@@ -61,7 +61,7 @@ class PairList(NamedTuple):
     scan: np.ndarray  # (n_table,) whether it is searched anew at every step instead (not a ball)
     normal_W: np.ndarray  # (n_table, 3) its common normal (world) at the build
     A: np.ndarray  # (n_table, 3, 3) its map of master centres to face coordinates at the build (ball regime)
-    off: np.ndarray  # (n_table, 3) and the map's offset (`_face_frame`)
+    off: np.ndarray  # (n_table, 3) and the map's offset (`FaceFrame`)
 
 
 def empty_pair_list(n_face_pairs: int) -> PairList:
@@ -93,29 +93,33 @@ def grow(a):
     return np.concatenate((a, np.empty(a.shape, dtype=a.dtype)))
 
 
-@njit
-def _dot(a, b):
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+class FaceFrame(NamedTuple):
+    """A face pair's search frame (`face_frame`)."""
+
+    facing: bool  # its faces face each other: Eq. (6) is defined
+    nu: float  # the common normal in face coordinates (u, v along the slave face, h along its normal)
+    nv: float
+    nh: float
+    off: tuple  # the offset of the map A c + off of master centres to face coordinates, m
+    normal_W: tuple  # the common normal in world
 
 
 @njit_inline
-def _face_frame(m, d, f, A):
-    """Face pair f's search frame at d's kinematics and finger openings: whether its faces
-    face each other (Eq. 6 defined), the common normal in face coordinates (n_u, n_v, n_h),
-    the offset `off` of the affine map A c + off taking a master centre c in its joint's frame
-    to face coordinates (u, v, height above the face plane), and the common normal in world
-    (3-tuple). A: (3, 3), the map's matrix, written in place (left as it was when the faces
-    do not face each other)."""
+def face_frame(m, d, f, A):
+    """Face pair f's search frame at d's kinematics and finger openings, a FaceFrame: the map
+    A c + off takes a master centre c in its joint's frame to face coordinates (u, v, height
+    above the face plane). A: (3, 3), the map's matrix, written in place (left as it was when
+    the faces do not face each other)."""
     js, jm, first = m.faces.slave_joint[f], m.faces.master_joint[f], m.faces.master_start[f]
     b0, b1, b2 = mv3(d.R_W[js], m.faces.t1_J[f]), mv3(d.R_W[js], m.faces.t2_J[f]), mv3(d.R_W[js], m.faces.n_J[f])
     nm = mv3(d.R_W[jm], m.master.normal_J[first])
     dn = (b2[0] - nm[0], b2[1] - nm[1], b2[2] - nm[2])
-    norm = math.sqrt(_dot(dn, dn))
+    norm = math.sqrt(dot3(dn, dn))
     if norm <= NORMAL_EPS:
-        return False, 0.0, 0.0, 0.0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)  # faces facing the same way never pair
+        return FaceFrame(False, 0.0, 0.0, 0.0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))  # facing the same way: never a pair
     n_W = (dn[0] / norm, dn[1] / norm, dn[2] / norm)
     # the common normal in face coordinates
-    nu, nv, nh = _dot(dn, b0) / norm, _dot(dn, b1) / norm, _dot(dn, b2) / norm
+    nu, nv, nh = dot3(dn, b0) / norm, dot3(dn, b1) / norm, dot3(dn, b2) / norm
     o = mv3(d.R_W[js], m.faces.origin_J[f])
     # a master centre c (its joint's frame) in face coordinates is A c + off: the rows of A are
     # the face axes in the master's frame, and off holds the master origin and the finger's
@@ -127,10 +131,10 @@ def _face_frame(m, d, f, A):
     x = d.opening[m.master.finger[first]]
     shift = (x * m.master.axis_J[first, 0], x * m.master.axis_J[first, 1], x * m.master.axis_J[first, 2])
     e = (d.p_W[jm, 0] - o[0] - d.p_W[js, 0], d.p_W[jm, 1] - o[1] - d.p_W[js, 1], d.p_W[jm, 2] - o[2] - d.p_W[js, 2])
-    off = (A[0, 0] * shift[0] + A[0, 1] * shift[1] + A[0, 2] * shift[2] + _dot(e, b0),
-           A[1, 0] * shift[0] + A[1, 1] * shift[1] + A[1, 2] * shift[2] + _dot(e, b1),
-           A[2, 0] * shift[0] + A[2, 1] * shift[1] + A[2, 2] * shift[2] + _dot(e, b2))
-    return True, nu, nv, nh, off, n_W
+    off = (A[0, 0] * shift[0] + A[0, 1] * shift[1] + A[0, 2] * shift[2] + dot3(e, b0),
+           A[1, 0] * shift[0] + A[1, 1] * shift[1] + A[1, 2] * shift[2] + dot3(e, b1),
+           A[2, 0] * shift[0] + A[2, 1] * shift[1] + A[2, 2] * shift[2] + dot3(e, b2))
+    return FaceFrame(True, nu, nv, nh, off, n_W)
 
 
 @njit
@@ -187,7 +191,7 @@ def grid_search(m, d, near):
     R = r1 + radius
     A = np.empty((3, 3))
     for f in near:
-        facing, nu, nv, nh, off, _ = _face_frame(m, d, f, A)
+        facing, nu, nv, nh, off, _ = face_frame(m, d, f, A)
         if not facing:
             continue
         n_uv = math.hypot(nu, nv)
@@ -261,7 +265,7 @@ def build_pair_list(m, d, near):
     for f in near:
         built[f] = True
         A = A_b[f]
-        facing, nu, nv, nh, off, n_W = _face_frame(m, d, f, A)
+        facing, nu, nv, nh, off, n_W = face_frame(m, d, f, A)
         if not facing:
             scan[f] = True
             continue
@@ -355,7 +359,7 @@ def listed_search(m, d):
     for i in range(k):
         f = d.near[i]
         A = frames[i][:3]
-        facing, nu, nv, nh, off, n_W = _face_frame(m, d, f, A)
+        facing, nu, nv, nh, off, n_W = face_frame(m, d, f, A)
         frames[i, 3, 0], frames[i, 3, 1], frames[i, 3, 2] = off
         frames[i, 4, 0], frames[i, 4, 1], frames[i, 4, 2] = nu, nv, nh
         if not d.pair_list.built[f]:
@@ -500,7 +504,7 @@ def literal_search(m, d):
         for a in range(master_runs.shape[0] - 1):
             a0, a1 = master_runs[a], master_runs[a + 1]
             dn = (N2[s0, 0] - N1[a0, 0], N2[s0, 1] - N1[a0, 1], N2[s0, 2] - N1[a0, 2])
-            norm = math.sqrt(_dot(dn, dn))
+            norm = math.sqrt(dot3(dn, dn))
             if norm <= NORMAL_EPS:
                 continue  # faces facing the same way: Eq. (6) undefined, no pair
             n_c = np.array((dn[0] / norm, dn[1] / norm, dn[2] / norm))

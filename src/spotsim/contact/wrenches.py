@@ -14,7 +14,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..jit import njit, njit_inline
-from ..linalg import add3, mv3
+from ..linalg import add3, dot3, mv3
 
 
 class Loads(NamedTuple):
@@ -112,34 +112,35 @@ def body_wrenches(m, d):
     d.loads = Loads(local, F, T_O, ext_f, ext_t, load)
 
 
+@njit_inline
+def _grasp_axis(m, d, g, a):
+    """Axis a of grasp g's frame O_a in world: column a of R_W[ee joint] R_ee, a 3-tuple."""
+    j = m.grasps.ee_joint[g]
+    return (d.R_W[j, 0, 0] * m.grasps.R_ee[g, 0, a] + d.R_W[j, 0, 1] * m.grasps.R_ee[g, 1, a] +
+            d.R_W[j, 0, 2] * m.grasps.R_ee[g, 2, a],
+            d.R_W[j, 1, 0] * m.grasps.R_ee[g, 0, a] + d.R_W[j, 1, 1] * m.grasps.R_ee[g, 1, a] +
+            d.R_W[j, 1, 2] * m.grasps.R_ee[g, 2, a],
+            d.R_W[j, 2, 0] * m.grasps.R_ee[g, 0, a] + d.R_W[j, 2, 1] * m.grasps.R_ee[g, 1, a] +
+            d.R_W[j, 2, 2] * m.grasps.R_ee[g, 2, a])
+
+
 @njit
 def contact_summary(m, d):
     """Stage: d.summary, the wrench on the active grasp's module from d.loads in its grasp
     frame O_a (its moment about the module's centroid), and the extremes over d.contacts."""
     g = d.active
-    module_joint, ee_joint = m.grasps.module_joint[g], m.grasps.ee_joint[g]
-    r_G = add3(mv3(d.R_W[module_joint], m.grasps.module_lever[g]), d.p_W[module_joint])
-    f = (d.loads.force_W[module_joint, 0], d.loads.force_W[module_joint, 1], d.loads.force_W[module_joint, 2])
-    T = (d.loads.torque_O_W[module_joint, 0], d.loads.torque_O_W[module_joint, 1],
-         d.loads.torque_O_W[module_joint, 2])
+    j = m.grasps.module_joint[g]
+    r_G = add3(mv3(d.R_W[j], m.grasps.module_lever[g]), d.p_W[j])
+    f = (d.loads.force_W[j, 0], d.loads.force_W[j, 1], d.loads.force_W[j, 2])
+    T = (d.loads.torque_O_W[j, 0], d.loads.torque_O_W[j, 1], d.loads.torque_O_W[j, 2])
     tau = (T[0] - (r_G[1] * f[2] - r_G[2] * f[1]), T[1] - (r_G[2] * f[0] - r_G[0] * f[2]),
            T[2] - (r_G[0] * f[1] - r_G[1] * f[0]))
-    out = np.zeros(6)
-    for a in range(3):
-        # column a of R = A B, the grasp frame's axes in world (A: the end-effector joint's
-        # rotation, B: the grasp frame's in it)
-        R0 = d.R_W[ee_joint, 0, 0] * m.grasps.R_ee[g, 0, a] + d.R_W[ee_joint, 0, 1] * m.grasps.R_ee[g, 1, a] + \
-            d.R_W[ee_joint, 0, 2] * m.grasps.R_ee[g, 2, a]
-        R1 = d.R_W[ee_joint, 1, 0] * m.grasps.R_ee[g, 0, a] + d.R_W[ee_joint, 1, 1] * m.grasps.R_ee[g, 1, a] + \
-            d.R_W[ee_joint, 1, 2] * m.grasps.R_ee[g, 2, a]
-        R2 = d.R_W[ee_joint, 2, 0] * m.grasps.R_ee[g, 0, a] + d.R_W[ee_joint, 2, 1] * m.grasps.R_ee[g, 1, a] + \
-            d.R_W[ee_joint, 2, 2] * m.grasps.R_ee[g, 2, a]
-        out[a] = R0 * f[0] + R1 * f[1] + R2 * f[2]
-        out[3 + a] = R0 * tau[0] + R1 * tau[1] + R2 * tau[2]
+    x, y, z = _grasp_axis(m, d, g, 0), _grasp_axis(m, d, g, 1), _grasp_axis(m, d, g, 2)
     fastest = deepest = 0.0
     if d.contacts.speed.shape[0]:
         fastest, deepest = d.contacts.speed.max(), d.contacts.phi.max()
-    d.summary = Summary((out[0], out[1], out[2]), (out[3], out[4], out[5]), fastest, deepest)
+    d.summary = Summary((dot3(x, f), dot3(y, f), dot3(z, f)), (dot3(x, tau), dot3(y, tau), dot3(z, tau)), fastest,
+                        deepest)
 
 
 @njit_inline

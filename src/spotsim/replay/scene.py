@@ -214,7 +214,7 @@ def _contact_bodies(run, frames, keys, states, datas, spheres, commands) -> list
     faces in contact range and, over them, the spheres of the pairs in contact by state."""
     model = run.model
     snaps = run.snapshots
-    bodies, n_mf = _body_of_faces(model)
+    bodies, _ = _body_of_faces(model)
     p = model.law
     # three.js draws a point of `size` as wide as a segment of size * tan(fov / 2) at its depth
     focal = 1 / np.tan(np.radians(CAMERA_FOV_DEG) / 2)

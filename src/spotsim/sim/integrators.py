@@ -33,8 +33,9 @@ from .data import RK_STATE
 from .dynamics import accelerations
 from .forces import forces
 
-SYMPLECTIC_EULER, RK4, DOPRI5 = range(3)
+#: The integrators, by their scenario names; a Model names its own by its index here.
 METHODS = ("symplectic_euler", "rk4", "dopri5")
+SYMPLECTIC_EULER = METHODS.index("symplectic_euler")
 #: An adaptive step grows at most, and shrinks at least, by these factors per try; its error
 #: ratio r scales it by SAFETY r^(-1/5) in between (Hairer, Norsett and Wanner, II.4).
 GROW_MAX, SHRINK_MIN, SAFETY = 5.0, 0.2, 0.9
@@ -261,7 +262,3 @@ def tableau(method: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray
     if method == "symplectic_euler":
         return np.zeros((0, 0)), np.zeros(0), np.zeros(0), np.zeros(0)
     raise ValueError(f"unknown integrator {method!r}; valid: {', '.join(METHODS)}")
-
-
-#: Each method's order (for the studies' convergence checks).
-ORDER = {"symplectic_euler": 1, "rk4": 4, "dopri5": 5}

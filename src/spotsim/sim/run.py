@@ -17,6 +17,7 @@ from ..build.model import Model, build_model
 from ..contact.search import literal_search
 from ..errors import ScenarioError
 from ..scenario import modules_of, tolerance_warnings
+from ..version import __version__
 from .bodies import kinematics
 from .broadphase import BroadPhase, StateOverflow
 from .data import ROWS_PER_CALL, SELF_CENTRING, make_data
@@ -233,6 +234,7 @@ def _summary(s, model, v, rec, series, status, message, wall, welds) -> dict:
     sim = s.simulation
     return {
         "scenario": s.name,
+        "spotsim_version": __version__,
         "status": status,
         "message": message,
         "wall_time_s": wall,

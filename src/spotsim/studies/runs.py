@@ -192,7 +192,7 @@ def errors(o: Outcome, ref: Outcome, names: list[str], centroid: bool) -> dict[s
             return d, d / max(float(np.linalg.norm(b)), 1e-300)
 
         out[f"{p}offset_err_mm"], out[f"{p}offset_err_rel"] = diff(o.offsets[g], ref.offsets[g])
-        out[f"{p}peak_force_err_rel"] = diff(o.peaks[g], ref.peaks[g])[1]
+        _, out[f"{p}peak_force_err_rel"] = diff(o.peaks[g], ref.peaks[g])
         if centroid:
             out[f"{p}centroid_err_mm"], out[f"{p}centroid_err_rel"] = diff(o.centroids[g], ref.centroids[g])
     rel = [v for k, v in out.items() if k.endswith("_rel")]
