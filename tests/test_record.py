@@ -8,7 +8,8 @@ from conftest import ROOT
 import spotsim
 from spotsim.build.model import grasp_frame, groove_frame
 from spotsim.sim.data import make_data
-from spotsim.sim.record import NONFINITE, close_interval, quat_xyzw, rpy, sample
+from spotsim.sim.events import NONFINITE
+from spotsim.sim.record import close_interval, quat_xyzw, rpy, sample
 
 #: The compiled kinematics compose the same products as Pinocchio's in another order.
 FRAME_TOL = 1e-12

@@ -15,17 +15,10 @@ import numpy as np
 
 from ..jit import njit
 from .data import COMPLETE
-from .record import ENERGY as ENERGY_RECORD
-from .record import ENERGY_WORK as ENERGY_WORK_RECORD
-from .record import NONFINITE as NONFINITE_RECORD
+from .events import RAN, REFRESH, STOPPED, TOO_DEEP, UNDERFLOW
 from .record import close_interval
 from .step import free_flight, step
 
-#: Why `run_intervals` returned: it recorded the rows asked for; the skin is used up (refresh
-#: coal and go on); the grasp phase completed or timed out; a pair penetrated deeper than a
-#: sphere radius; the state became non-finite; energy grew in a passive phase, or past what
-#: the drives could have put in; an adaptive step fell below its least size.
-RAN, REFRESH, STOPPED, TOO_DEEP, NONFINITE, ENERGY, ENERGY_WORK, UNDERFLOW = range(8)
 #: An adaptive integrator's interval is covered once less than this share of dt is left.
 INTERVAL_COVERED = 1e-9
 
@@ -34,7 +27,7 @@ class Progress(NamedTuple):
     """What a call of the loop tells Python: why it returned, where the run is, and what it
     recorded (the first n_rows of rows, the first n_snapshots snapshots)."""
 
-    event: int
+    event: int  # `events`
     t: float  # s
     travel: float  # the broad phase's travel since its last run, m
     active: int  # the grasp under way
@@ -59,6 +52,13 @@ def progress_of(d, event):
 def skin_used(m, d):
     """Whether coal's face pairs must be refreshed before the next step (culled search only)."""
     return not m.literal and d.travel > m.limits.skin
+
+
+@njit
+def phase_ended(m, d):
+    """Whether the active grasp's phase completed or timed out."""
+    g = d.active
+    return d.phase[g] == COMPLETE or d.t - d.t_start[g] > m.completion.phase_timeout
 
 
 @njit
@@ -100,10 +100,9 @@ def interval_steps(m, d):
             d.left -= 1
         if d.contacts.key.shape[0] and d.summary.max_penetration > m.limits.max_penetration:
             return TOO_DEEP
-        g = d.active
-        if d.phase[g] == COMPLETE or d.t - d.t_start[g] > m.completion.phase_timeout:
+        if phase_ended(m, d):
             return STOPPED
-        if not m.literal and d.travel > m.limits.skin and d.left > 0:
+        if skin_used(m, d) and d.left > 0:
             return REFRESH
     return RAN
 
@@ -125,22 +124,17 @@ def run_intervals(m, d, n_records):
 def _intervals(m, d, n_records):
     while True:
         if d.left == 0:
-            if not m.literal and d.travel > m.limits.skin:
+            if skin_used(m, d):
                 return REFRESH
             begin_interval(m, d)
         event = interval_steps(m, d)
         if event == REFRESH or event == TOO_DEEP or event == UNDERFLOW:
             return event
         d.left = 0  # the interval ends here (early if its phase ended)
-        code = close_interval(m, d)
-        if code == NONFINITE_RECORD:
-            return NONFINITE
-        if code == ENERGY_RECORD:
-            return ENERGY
-        if code == ENERGY_WORK_RECORD:
-            return ENERGY_WORK
-        g = d.active
-        if d.phase[g] == COMPLETE or d.t - d.t_start[g] > m.completion.phase_timeout:
+        event = close_interval(m, d)
+        if event != RAN:  # a divergence
+            return event
+        if phase_ended(m, d):
             return STOPPED
         if d.n_rows == n_records:
             return RAN

@@ -26,12 +26,8 @@ from .bodies import (
     kinetic_energy,
 )
 from .data import Snapshots
+from .events import ENERGY, ENERGY_WORK, NONFINITE, RAN
 from .stability import ENERGY_FLOOR_J, ENERGY_GROWTH, mechanical_energy
-
-#: What `close_interval` found: nothing wrong, a non-finite state (no row written), energy
-#: growth in a passive phase, or more energy than the drives could have put in (the row
-#: written for both).
-OK, NONFINITE, ENERGY, ENERGY_WORK = range(4)
 
 #: Contact snapshots per simulated second kept for `spotsim replay`: its highest display rate.
 #: 100 Hz is ten samples of a 10 ms bounce.
@@ -254,8 +250,8 @@ def begin_record(m, d):
 
 @njit
 def close_interval(m, d):
-    """The loop's work at the end of a record interval: returns OK, NONFINITE, ENERGY or
-    ENERGY_WORK.
+    """The loop's work at the end of a record interval: returns RAN (nothing wrong), NONFINITE,
+    ENERGY or ENERGY_WORK (`events`).
 
     A NaN or an infinity anywhere in (q, v) is NONFINITE, and nothing is recorded. When the
     drive held the fingers through the whole interval (d.held: a passive phase), the
@@ -269,7 +265,7 @@ def close_interval(m, d):
     """
     if not math.isfinite(np.sum(d.q) + np.sum(d.v)):
         return NONFINITE
-    code = OK
+    code = RAN
     E = mechanical_energy(m.bodies, d.q, d.v, d.contacts.phi, d.memory.s, m.law.K, m.law.bristle.k_b)
     d.energy_now = E
     if d.held:
@@ -279,7 +275,7 @@ def close_interval(m, d):
             code = ENERGY
     else:
         d.energy_passive = np.nan
-    if code == OK and m.record.energy_bound and E > ENERGY_GROWTH * (d.energy_start + d.drive_work) + ENERGY_FLOOR_J:
+    if code == RAN and m.record.energy_bound and E > ENERGY_GROWTH * (d.energy_start + d.drive_work) + ENERGY_FLOOR_J:
         code = ENERGY_WORK
     record_row(m, d)
     P, L, p_b, l_b, _ = bodies_momentum(m.bodies, m.record.all_rows, d.q, d.v)

@@ -21,18 +21,8 @@ from ..version import __version__
 from .bodies import kinematics
 from .broadphase import BroadPhase, StateOverflow
 from .data import ROWS_PER_CALL, SELF_CENTRING, make_data
-from .loop import (
-    ENERGY,
-    ENERGY_WORK,
-    NONFINITE,
-    RAN,
-    REFRESH,
-    TOO_DEEP,
-    UNDERFLOW,
-    progress_of,
-    run_intervals,
-    skin_used,
-)
+from .events import ENERGY, ENERGY_WORK, NONFINITE, RAN, REFRESH, TOO_DEEP, UNDERFLOW
+from .loop import progress_of, run_intervals, skin_used
 from .phase import completion_criteria
 from .record import begin_record
 from .recorder import Recorder
