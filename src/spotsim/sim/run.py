@@ -11,6 +11,7 @@ import math
 import time
 from dataclasses import dataclass, field
 
+import numba
 import numpy as np
 
 from ..build.model import Model, build_model
@@ -71,6 +72,7 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
     out = progress_of(data, RAN)
     rec.collect(model, out, near)
     status, message, welds = INCOMPLETE, "", []
+    compile_loop(model, data)  # the run's wall time is the simulation's, not the compiler's
     bar = progress_bar(n_records, progress)
     wall0 = time.perf_counter()
     done = 0  # record intervals taken
@@ -115,6 +117,12 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
     series = rec.arrays()
     summary = _summary(scenario, model, data.view(), rec, series, status, message, wall, welds)
     return Result(scenario, model, summary, series, rec.replay_arrays())
+
+
+def compile_loop(model: Model, data) -> None:
+    """Compile the loop for this Model and Data's types (or load it from numba's cache)
+    without running it."""
+    run_intervals.compile((numba.typeof(model.sim), numba.typeof(data), numba.types.int64))
 
 
 class Stepper:
