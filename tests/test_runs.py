@@ -160,6 +160,7 @@ def test_interrupted_run_keeps_what_it_recorded(case_I, tmp_path, monkeypatch):
             raise KeyboardInterrupt
         return real(m, d, n)
 
+    then_interrupt.compile = real.compile  # the run compiles its loop before starting the clock
     monkeypatch.setattr(run, "run_intervals", then_interrupt)
     monkeypatch.setattr(run, "ROWS_PER_CALL", 10)  # the loop returns every 10 records
     r = spotsim.simulate(case_I)
