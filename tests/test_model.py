@@ -89,3 +89,19 @@ def test_non_finite_inertia_is_rejected():
 def test_shipped_scene_passes_the_inertia_check(model_I):
     """Every body of the reduced scene has positive mass and a positive-definite inertia."""
     check_inertias(model_I.pin_model, set(range(1, model_I.pin_model.njoints)))
+
+
+def test_dual_arm_modules_take_their_products_of_inertia():
+    """Every inertia key of a dual-arm module reaches its body, products included (the XACRO
+    once fixed them at zero, silently)."""
+    from conftest import ROOT
+
+    import spotsim
+
+    s = spotsim.load_scenario(ROOT / "config" / "dual_arm_sequential.yaml")
+    products = {"ixy": 0.01, "ixz": -0.02, "iyz": 0.005}
+    for k, section in enumerate(("tm1", "tm2")):
+        inertia = {**spotsim.scenario.to_dict(getattr(s, section).inertia_kg_m2), **products}
+        model = spotsim.build_model(spotsim.replace(s, **{section: {"inertia_kg_m2": inertia}}))
+        I = model.pin_model.inertias[model.modules[k].joint].inertia
+        assert (I[0, 1], I[0, 2], I[1, 2]) == pytest.approx((0.01, -0.02, 0.005), abs=1e-15)
