@@ -66,7 +66,7 @@ def _study_parser(sub) -> None:
         v.add_argument("--duration", type=float, metavar="S", help="simulation.duration_s of every run")
         v.add_argument("--quiet", action="store_true", help="no progress bar")
     acc.add_argument("--grid", choices=list(GRIDS), default="default",
-                     help="the settings swept and the reference (default: default; see the README)")
+                     help="the settings swept and the reference (default: default; see docs/usage.md)")
     acc.add_argument("--quick", action="store_true", help="the suite's grid: Case I's first contact, 7 runs")
     acc.add_argument("--methods", metavar="M,M", help="only these of symplectic_euler, rk4, dopri5")
     acc.add_argument("--substeps", metavar="N,N", help="the fixed-step methods' substeps (replaces the grid's)")

@@ -95,19 +95,19 @@ class Arm:
 @dataclass(frozen=True, kw_only=True)
 class EndEffector:
     closing_speed_m_s: float = key(rule=_positive, doc="finger closing speed (Table 3)")
-    grasp_load_N: float = key(20.0, _positive, "force at which a finger stalls")
+    grasp_load_N: float = key(20.0, _positive, "mean finger load at which the drive stalls (not in the paper)")
     start_gap_mm: float = key(9.0, _positive, "finger travel from start to touching a centred groove")
-    resume_fraction: float = key(0.5, _fraction, "a stalled finger resumes closing below this share of the grasp load")
+    resume_fraction: float = key(0.5, _fraction, "a stalled drive resumes closing below this share of the grasp load")
 
 
 @dataclass(frozen=True, kw_only=True)
 class Inertia:
-    ixx: float = key(rule=_positive)
-    iyy: float = key(rule=_positive)
-    izz: float = key(rule=_positive)
-    ixy: float = key(0.0)
-    ixz: float = key(0.0)
-    iyz: float = key(0.0)
+    ixx: float = key(rule=_positive, doc="moment of inertia about x_b through the centroid, kg m^2")
+    iyy: float = key(rule=_positive, doc="moment of inertia about y_b through the centroid, kg m^2")
+    izz: float = key(rule=_positive, doc="moment of inertia about z_b through the centroid, kg m^2")
+    ixy: float = key(0.0, doc="product of inertia xy, kg m^2: the tensor's entry, as in URDF")
+    ixz: float = key(0.0, doc="product of inertia xz, kg m^2: the tensor's entry, as in URDF")
+    iyz: float = key(0.0, doc="product of inertia yz, kg m^2: the tensor's entry, as in URDF")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -181,15 +181,15 @@ class Scenario:
 
     name: str = key(doc="scenario name, used in results")
     kind: str = key("single_arm", _choice("single_arm"), "single_arm or dual_arm")
-    simulation: Simulation = key()
-    arm: Arm = key()
-    end_effector: EndEffector = key()
-    module: Module = key()
+    simulation: Simulation = key(doc="time step, duration and integrator")
+    arm: Arm = key(doc="the arm on its fixed base")
+    end_effector: EndEffector = key(doc="the finger drive")
+    module: Module = key(doc="the target module")
     description: str = key("", doc="free text")
-    geometry: Geometry = key(Geometry())
-    contact: Contact = key(Contact())
-    friction: Friction = key(Friction())
-    completion: Completion = key(Completion())
+    geometry: Geometry = key(Geometry(), doc="the double V-groove and the fingers")
+    contact: Contact = key(Contact(), doc="sphere layers, search and the normal contact law (Table 1)")
+    friction: Friction = key(Friction(), doc="bristle friction (Table 2)")
+    completion: Completion = key(Completion(), doc="when a grasp is complete, and its time-out")
 
 
 #: Table 6: the arms' joint states during the grasps, rad.
@@ -212,16 +212,16 @@ class DualArmScenario:
 
     name: str = key(doc="scenario name, used in results")
     kind: str = key(rule=_choice("dual_arm"), doc="single_arm or dual_arm")
-    simulation: Simulation = key()
+    simulation: Simulation = key(doc="time step, duration and integrator")
     end_effector: EndEffector = key(doc="both end-effectors")
     tm1: Module = key(doc="target module 1 (Table 5 body 1), offset from EE-1")
     tm2: Module = key(doc="target module 2 (Table 5 body 2), offset from EE-2")
     description: str = key("", doc="free text")
-    robot: Robot = key(Robot())
-    geometry: Geometry = key(Geometry())
-    contact: Contact = key(Contact())
-    friction: Friction = key(Friction())
-    completion: Completion = key(Completion())
+    robot: Robot = key(Robot(), doc="the free-flying dual-arm robot")
+    geometry: Geometry = key(Geometry(), doc="the double V-groove and the fingers")
+    contact: Contact = key(Contact(), doc="sphere layers, search and the normal contact law (Table 1)")
+    friction: Friction = key(Friction(), doc="bristle friction (Table 2)")
+    completion: Completion = key(Completion(), doc="when a grasp is complete, and its time-out")
 
 
 SCENARIO_KINDS = {"single_arm": Scenario, "dual_arm": DualArmScenario}

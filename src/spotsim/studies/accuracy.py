@@ -160,7 +160,7 @@ class Grid:
 #: The grids. The references are fine fixed steps of symplectic Euler: on Case I, 12.5 us takes
 #: ~5 s and its confirmation at 6.25 us ~10 s, where dopri5 takes ~200 s at rtol 1e-6 and did
 #: not finish in 19 min at 1e-7 (every contact onset and stick-slip switch is a kink its error
-#: control steps through). Costs on Case I in the README.
+#: control steps through). Costs on Case I in docs/validation.md.
 GRIDS = {
     # the suite's: Case I's first 120 ms of contact, in which the paper's setting diverges (0.49 s)
     "quick": Grid({"symplectic_euler": (1, 5, 10), "rk4": (10,)}, (1e-4,), Setting("symplectic_euler", 40),
