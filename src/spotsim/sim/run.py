@@ -21,7 +21,7 @@ from ..scenario import modules_of, tolerance_warnings
 from ..version import __version__
 from .bodies import kinematics
 from .broadphase import BroadPhase, StateOverflow
-from .data import ROWS_PER_CALL, SELF_CENTRING, make_data
+from .data import APPROACH, PHASE_NAMES, ROWS_PER_CALL, SELF_CENTRING, make_data
 from .events import ENERGY, ENERGY_WORK, NONFINITE, RAN, REFRESH, TOO_DEEP, UNDERFLOW
 from .loop import progress_of, run_intervals, skin_used
 from .phase import completion_criteria
@@ -78,7 +78,7 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
     done = 0  # record intervals taken
     try:
         while done < n_records:
-            if broad is not None and out.travel > model.sim.limits.skin:
+            if skin_used(model.sim, data):
                 try:
                     near = broad.refresh(data)  # the Verlet skin is used up
                 except StateOverflow as e:
@@ -202,9 +202,10 @@ def _summary(s, model, v, rec, series, status, message, wall, welds) -> dict:
         last = rows[-1] if len(rows) else None
         done = completed is not None and last is not None
         offset = series["offset_mm"][last] if done else None
-        times = {name: x for name, x in (("self_centring", _time(v.t_contact[g])), ("complete", completed))
-                 if x is not None}
-        phases.append({"approach": _time(v.t_start[g]), **times})
+        # when each phase began: the approach always (None if the grasp never started), the
+        # others once reached
+        began = dict(zip(PHASE_NAMES, (_time(v.t_start[g]), _time(v.t_contact[g]), completed), strict=True))
+        phases.append({name: t for name, t in began.items() if t is not None or name == PHASE_NAMES[APPROACH]})
         entry = {
             "end_effector": model.end_effectors[ee].name,
             "module": model.modules[k].name,
