@@ -124,9 +124,12 @@ def table(header: list[str], rows: list[list[str]]) -> str:
 
 def setting_label(row: dict) -> str:
     """A study row's setting, readably: 'symplectic Euler, 0.1 ms'."""
-    method = {"symplectic_euler": "symplectic Euler", "rk4": "RK4", "dopri5": "dopri5"}[row["method"]]
+    method = {"symplectic_euler": "symplectic Euler", "rk4": "RK4", "dopri5": "dopri5",
+              "adaptive_euler": "adaptive Euler"}[row["method"]]
     if row["method"] == "dopri5":
         return f"{method}, rtol {num(row['rtol'])}"
+    if row["method"] == "adaptive_euler":
+        return f"{method}, tol {num(row['tol'])} m/s"
     return f"{method}, {step_text(row['step_ms'])}"
 
 

@@ -156,6 +156,57 @@ def test_dopri5_controls_its_error_by_rejecting_steps(case_I):
     assert np.abs(state - reference).max() < DOPRI5_AGREEMENT
 
 
+def adaptive_tumble(case_I, velocity_tol):
+    """The tumbling module's (q, v) after TUMBLE_S by adaptive_euler asked for one step of
+    TUMBLE_S at a time, and its Data. No pair starts in the tumble, so its onset guard is
+    lifted (a 1 m onset depth): the error control alone sets the steps."""
+    _, stepper = tumbling(case_I, "adaptive_euler", velocity_tol_m_s=velocity_tol, onset_depth_m=1.0, h_max_s=TUMBLE_S)
+    while stepper.data.t < TUMBLE_S - 1e-12:
+        assert stepper.step(TUMBLE_S - stepper.data.t) > 0.0
+    return np.concatenate([stepper.data.q, stepper.data.v]), stepper.data.view()
+
+
+#: adaptive_euler is first order: a step's error ~ h^2 is held to the tolerance, so h ~
+#: tol^(1/2) and the error over a fixed time ~ h ~ tol^(1/2): a hundredth of the tolerance
+#: gives a tenth of the error. 5 leaves room for the step sequence's own jitter.
+ADAPTIVE_ERROR_RATIO_PER_100X_TOL = 5.0
+
+
+def test_adaptive_euler_rejects_steps_and_converges_as_its_tolerance_falls(case_I):
+    """Asked for one 20 ms step of a tumbling module, adaptive_euler rejects it, takes shorter
+    ones, and its error against RK4's converged state falls ~10x for a 100x tighter tolerance."""
+    reference = tumble(case_I, "rk4", TUMBLE_S / 160)
+    errors = []
+    for tol in (1e-6, 1e-8):
+        state, v = adaptive_tumble(case_I, tol)
+        assert v.rejected > 0 and v.accepted > 1
+        errors.append(np.abs(state - reference).max())
+    assert errors[0] / errors[1] >= ADAPTIVE_ERROR_RATIO_PER_100X_TOL, errors
+
+
+def test_adaptive_euler_rejected_try_leaves_no_trace(recorded_states, model_I):
+    """A step whose first try is rejected ends bit-identical (state, fingers, pair memory) to
+    the same step asked for at the length it was accepted at: a rejection restores everything."""
+    s = spotsim.replace(model_I.scenario, simulation={"integrator": {"method": "adaptive_euler",
+                                                                     "velocity_tol_m_s": 1e-6}})
+    model = spotsim.build_model(s)
+    checked = 0
+    for state in recorded_states:
+        first = Stepper(model, state.copy())
+        h = first.step(1e-3)
+        if first.data.rejected == state.rejected:
+            continue  # accepted at once: nothing to check here
+        again = Stepper(model, state.copy())
+        assert again.step(h) == h and again.data.rejected == state.rejected
+        a, b = first.data.view(), again.data.view()
+        for name in ("q", "v", "opening"):
+            assert np.array_equal(getattr(a, name), getattr(b, name)), name
+        for name in a.memory._fields:
+            assert np.array_equal(getattr(a.memory, name), getattr(b.memory, name)), name
+        checked += 1
+    assert checked >= 3
+
+
 #: The agreement asked of the closed-form Hertz impact; the crossings are resolved to 1e-6.
 ORACLE_RTOL = 1e-3
 

@@ -68,12 +68,14 @@ def _study_parser(sub) -> None:
     acc.add_argument("--grid", choices=list(GRIDS), default="default",
                      help="the settings swept and the reference (default: default; see docs/usage.md)")
     acc.add_argument("--quick", action="store_true", help="the suite's grid: Case I's first contact, 7 runs")
-    acc.add_argument("--methods", metavar="M,M", help="only these of symplectic_euler, rk4, dopri5")
+    acc.add_argument("--methods", metavar="M,M", help="only these of symplectic_euler, adaptive_euler, rk4, dopri5")
     acc.add_argument("--substeps", metavar="N,N", help="the fixed-step methods' substeps (replaces the grid's)")
     acc.add_argument("--rtols", metavar="R,R", help="dopri5's relative tolerances (replaces the grid's)")
+    acc.add_argument("--tols", metavar="T,T", help="adaptive_euler's velocity tolerances, m/s (replaces the grid's)")
     acc.add_argument("--sphere-scales", metavar="F,F", help="factors on both sphere radii (default: the grid's)")
     acc.add_argument("--reference", metavar="METHOD:VALUE",
-                     help="the reference, e.g. dopri5:1e-7 or symplectic_euler:80; its refinement confirms it")
+                     help="the reference, e.g. symplectic_euler:80, adaptive_euler:1e-6 or dopri5:1e-7; its "
+                          "refinement confirms it")
     acc.add_argument("--wall-limit", type=float, metavar="S", help="wall-time budget of each run (default: none)")
     acc.add_argument("--no-plot", action="store_true", help="skip the work-precision plot")
     stab.add_argument("--cases", metavar="NAME,NAME",
@@ -99,6 +101,7 @@ def _numbers(text: str | None, kind, what: str):
 def _study(args) -> int:
     """`spotsim study accuracy|stability`: exit 2 on bad input, 130 if interrupted, 1 if a
     stability case failed, else 0."""
+    from .sim.integrators import ADAPTIVE, METHODS
     from .studies import accuracy, stability
 
     overrides = list(args.set)
@@ -109,23 +112,24 @@ def _study(args) -> int:
         if args.study == "accuracy":
             grid = accuracy.GRIDS["quick" if args.quick else args.grid]
             methods = args.methods.split(",") if args.methods else None
-            bad = [m for m in methods or () if m not in ("symplectic_euler", "rk4", "dopri5")]
+            bad = [m for m in methods or () if m not in METHODS]
             if bad:
-                raise ValueError(f"--methods {args.methods}: unknown {', '.join(bad)}; valid: symplectic_euler, "
-                                 f"rk4, dopri5")
+                raise ValueError(f"--methods {args.methods}: unknown {', '.join(bad)}; valid: {', '.join(METHODS)}")
             substeps = _numbers(args.substeps, int, "--substeps")
             rtols = _numbers(args.rtols, float, "--rtols")
+            tols = _numbers(args.tols, float, "--tols")
             scales = _numbers(args.sphere_scales, float, "--sphere-scales")
             reference = accuracy.parse_setting(args.reference) if args.reference else grid.reference
             if args.wall_limit is not None and not args.wall_limit > 0:
                 raise ValueError(f"--wall-limit {args.wall_limit}: must be > 0")
             fixed = {m: substeps or n for m, n in grid.substeps.items()}
             if substeps:  # a method the grid leaves out is swept too when asked for by name
-                fixed.update({m: substeps for m in methods or () if m != "dopri5"})
+                fixed.update({m: substeps for m in methods or () if m not in ADAPTIVE})
             if methods:
                 fixed = {m: n for m, n in fixed.items() if m in methods}
             chosen = accuracy.Grid(fixed, (rtols or grid.rtols) if not methods or "dopri5" in methods else (),
-                                reference, scales or grid.sphere_scales)
+                                reference, scales or grid.sphere_scales,
+                                tols=(tols or grid.tols) if not methods or "adaptive_euler" in methods else ())
             duration = duration or grid.duration_s
         else:
             if args.wall_limit is not None and not args.wall_limit > 0:

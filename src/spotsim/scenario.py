@@ -68,12 +68,16 @@ def key(default=dataclasses.MISSING, rule=None, doc=""):
 
 @dataclass(frozen=True, kw_only=True)
 class Integrator:
-    method: str = key("symplectic_euler", _choice("symplectic_euler", "rk4", "dopri5"),
-                      "symplectic_euler (the paper's fixed step), rk4 (fixed step), dopri5 (adaptive)")
+    method: str = key("adaptive_euler", _choice("adaptive_euler", "symplectic_euler", "rk4", "dopri5"),
+                      "symplectic_euler (the paper's fixed step), adaptive_euler (symplectic Euler, its "
+                      "error controlled), rk4 (fixed step), dopri5 (adaptive)")
     rtol: float = key(1e-6, _positive, "dopri5: relative tolerance per state component")
     atol: float = key(1e-9, _positive, "dopri5: absolute tolerance (m, rad, m/s, rad/s)")
-    h_min_s: float = key(1e-9, _positive, "dopri5: smallest step; below it the run is diverged")
-    h_max_s: float = key(1e-3, _positive, "dopri5: largest step")
+    velocity_tol_m_s: float = key(1e-5, _positive, "adaptive_euler: a step's error in any contact sphere's velocity")
+    onset_depth_m: float = key(1e-6, _positive, "adaptive_euler: while pairs may start, the most a step moves two "
+                               "spheres closer (a new pair's first penetration)")
+    h_min_s: float = key(1e-9, _positive, "adaptive methods: smallest step; below it the run is diverged")
+    h_max_s: float = key(1e-3, _positive, "adaptive methods: largest step")
 
 
 @dataclass(frozen=True, kw_only=True)

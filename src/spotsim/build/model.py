@@ -26,7 +26,7 @@ from ..contact.layers import FaceTable, MasterSpheres, SlaveSpheres
 from ..contact.normal import damping_factor, hertz_stiffness
 from ..errors import ModelError, ScenarioError
 from ..sim.bodies import free_bodies
-from ..sim.integrators import METHODS, tableau
+from ..sim.integrators import ADAPTIVE, METHODS, tableau
 from ..sim.model import (
     CompletionParams,
     DriveParams,
@@ -421,15 +421,29 @@ def model_fields(p: _Parts) -> ModelFields:
                     bool((master.joint == 0).any() or (layers.slave.joint == 0).any()),
                     np.array([b for b, _ in reach], dtype=np.int64), np.array([r for _, r in reach], dtype=float))
     c, ee, sim = s.completion, s.end_effector, s.simulation
-    A, b, c_nodes, e = tableau(sim.integrator.method)
-    integrator = IntegratorParams(METHODS.index(sim.integrator.method), len(e) > 0, A, b, c_nodes, e,
-                                  sim.integrator.rtol, sim.integrator.atol, sim.integrator.h_min_s,
-                                  sim.integrator.h_max_s)
+    i = sim.integrator
+    A, b, c_nodes, e = tableau(i.method)
+    integrator = IntegratorParams(METHODS.index(i.method), i.method in ADAPTIVE, A, b, c_nodes, e, i.rtol, i.atol,
+                                  i.h_min_s, i.h_max_s, i.velocity_tol_m_s, i.onset_depth_m,
+                                  _error_levers(bodies, master, layers.slave, p.fingers))
     return ModelFields(bodies, np.array(model.gravity.linear), master, layers.slave, layers.faces, law,
                     s.contact.broad_phase == "none", fingers, grasps,
                     DriveParams(ee.closing_speed_m_s, ee.grasp_load_N, ee.resume_fraction),
                     CompletionParams(c.hold_s, c.max_contact_speed_m_s, c.max_net_force_N, c.phase_timeout_s),
                     limits, _record_frames(p, body_row), integrator, sim.dt_s, sim.substeps, sim.dt_s / sim.substeps)
+
+
+def _error_levers(bodies, master, slave, fingers) -> np.ndarray:
+    """Each free body's farthest contact sphere from its centroid (fingers anywhere in their
+    travel), m; a body without spheres: its radius of gyration. The adaptive integrator
+    bounds how far its spheres' errors reach with it."""
+    travel = max((f.opening_start for f in fingers), default=0.0)
+    levers = np.empty(len(bodies.joint))
+    for b, j in enumerate(bodies.joint):
+        far = [np.linalg.norm(layer.centre_J[layer.joint == j] - bodies.lever[b], axis=1).max() + extra
+               for layer, extra in ((master, travel), (slave, 0.0)) if np.any(layer.joint == j)]
+        levers[b] = max(far) if far else np.sqrt(np.trace(bodies.inertia_G[b]) / (2 * bodies.mass[b]))
+    return levers
 
 
 def _sphere_reach(master, slave, fingers) -> list[tuple[int, float]]:

@@ -218,3 +218,21 @@ def kinetic_energy(bodies, q, v):
         total += 0.5 * bodies.mass[b] * (v_G[0] * v_G[0] + v_G[1] * v_G[1] + v_G[2] * v_G[2]) + \
             0.5 * (w[0] * Iw[0] + w[1] * Iw[1] + w[2] * Iw[2])
     return total
+
+
+# ------------------------------------------------------------------------------- motion bound
+
+
+@njit
+def travel_rate(m, d):
+    """A bound on how fast any two contact spheres approach each other, m/s: the sum over the
+    free contact bodies of |v_O| + |omega| reach, plus the fastest finger slide."""
+    rate = 0.0
+    for i in range(d.opening_rate.shape[0]):
+        rate = max(rate, abs(d.opening_rate[i]))
+    for i in range(m.limits.reach_rows.shape[0]):
+        # a free-flyer's v = (v_O, omega) in its frame; norms are frame-free
+        iv = m.bodies.idx_v[m.limits.reach_rows[i]]
+        rate += math.sqrt(d.v[iv] ** 2 + d.v[iv + 1] ** 2 + d.v[iv + 2] ** 2) + \
+            math.sqrt(d.v[iv + 3] ** 2 + d.v[iv + 4] ** 2 + d.v[iv + 5] ** 2) * m.limits.reach[i]
+    return rate

@@ -23,6 +23,7 @@ from ..contact.forces import Contacts, Memory, no_contacts, no_memory
 from ..contact.search import Candidates, PairList, empty_pair_list, no_candidates
 from ..contact.wrenches import Loads, Summary, no_loads, no_summary
 from ..structs import StructProxy, StructType, new_struct, register, view
+from .drive import finger_drive
 
 #: Record rows the row buffer holds: the compiled loop returns to Python after at most this
 #: many (each return updates the progress bar and lets Ctrl-C in); 250 rows are 0.25 s
@@ -156,7 +157,7 @@ def _copied(x):
 
 def make_data(model, rows: int = ROWS_PER_CALL) -> Data:
     """The Data of a run's start on `model` (a `build.model.Model`): at rest in q0, the fingers
-    at their start openings, no contact, every grasp still to come."""
+    at their start openings and the first grasp's closing, no contact, every grasp still to come."""
     sim = model.sim
     nj, n_f = model.pin_model.njoints, len(model.fingers)
     n_g, n_ee, n_mod = len(model.grasps), len(model.end_effectors), len(model.modules)
@@ -188,4 +189,6 @@ def make_data(model, rows: int = ROWS_PER_CALL) -> Data:
         snapshots=Snapshots(ints(snap_cap), ints(snap_cap), np.zeros((snap_cap, n_mod, 3)), ints(64), ints(64),
                             ints(64)),
         n_snapshots=0, n_snapshot_pairs=0)
-    return new_struct(f)
+    data = new_struct(f)
+    finger_drive(sim, data)  # the first grasp's drive closes from the start (no load yet)
+    return data

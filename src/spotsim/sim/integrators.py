@@ -1,10 +1,15 @@
 """Time integrators, compiled: each advances d by one step through the same stages.
 
 An integrator is one function `f(m, d, h) -> h_taken` that evaluates the forces
-(`sim.forces.forces`) and the accelerations (`sim.dynamics.accelerations`) where its scheme
-needs them, commits the pair memory of the state it ends at, updates (q, v), and sets the
-step's mean external wrench on the free bodies (for the momentum balance). `integrate`
-dispatches on the model's method; a new integrator is one more such function and its code.
+(`sim.forces`) and the accelerations (`sim.dynamics.accelerations`) where its scheme needs
+them, commits the pair memory of the state it ends at, updates (q, v), and sets the step's
+mean external wrench on the free bodies (for the momentum balance). `integrate` dispatches on
+the model's method; a new integrator is one more such function and its code.
+
+- `symplectic_euler`: the paper's explicit fixed step.
+- `adaptive_euler`: symplectic Euler with its error controlled by an embedded estimate
+  (Euler against Heun's trapezoid, from the end's forces, which start the next step).
+- `rk4`, `dopri5`: explicit Runge-Kutta, fixed and error-controlled.
 
 Free bodies hang on free-flyer joints, whose velocity Pinocchio keeps in the body frame. The
 integrators advance each free body's centroid in the world frame instead: contact forces come
@@ -27,17 +32,23 @@ from .bodies import (
     centroid_acceleration,
     centroid_state,
     centroid_state_at,
+    kinematics,
     set_centroid_state,
+    travel_rate,
 )
 from .data import RK_STATE
 from .dynamics import accelerations
 from .forces import forces
 
 #: The integrators, by their scenario names; a Model names its own by its index here.
-METHODS = ("symplectic_euler", "rk4", "dopri5")
+METHODS = ("symplectic_euler", "rk4", "dopri5", "adaptive_euler")
 SYMPLECTIC_EULER = METHODS.index("symplectic_euler")
+ADAPTIVE_EULER = METHODS.index("adaptive_euler")
+#: The error-controlled methods.
+ADAPTIVE = ("dopri5", "adaptive_euler")
 #: An adaptive step grows at most, and shrinks at least, by these factors per try; its error
-#: ratio r scales it by SAFETY r^(-1/5) in between (Hairer, Norsett and Wanner, II.4).
+#: ratio r scales it by SAFETY r^(-1/p) in between, p the order of its local error estimate
+#: (Hairer, Norsett and Wanner, II.4): 5 for dopri5, 2 for adaptive_euler.
 GROW_MAX, SHRINK_MIN, SAFETY = 5.0, 0.2, 0.9
 
 
@@ -48,6 +59,8 @@ def integrate(m, d, h):
     if m.integrator.method == SYMPLECTIC_EULER:
         symplectic_euler(m, d, h)
         return h
+    if m.integrator.method == ADAPTIVE_EULER:
+        return adaptive_euler(m, d, h)
     return runge_kutta(m, d, h)
 
 
@@ -70,6 +83,15 @@ def _euler_body(bodies, b, R, q, v, a_O, alpha, h):
     set_centroid_state(bodies, b, q, v, axpy3(h, v_G, p_G), v_G, quat, w)
 
 
+@njit_inline
+def _euler_bodies(m, d, q, v, h):
+    """Every free body's symplectic Euler step of h (s) from (q, v), in place, with the
+    accelerations d.a and rotations d.R_W of the last evaluation (made at (q, v))."""
+    for b in range(m.bodies.joint.shape[0]):
+        iv = m.bodies.idx_v[b]
+        _euler_body(m.bodies, b, d.R_W[m.bodies.joint[b]], q, v, d.a[iv:iv + 3], d.a[iv + 3:iv + 6], h)
+
+
 @njit
 def symplectic_euler(m, d, h):
     """Semi-implicit Euler, the paper's fixed-step explicit scheme: forces and accelerations
@@ -77,13 +99,115 @@ def symplectic_euler(m, d, h):
     forces(m, d, h)
     commit_memory(d)
     accelerations(m, d)
-    for b in range(m.bodies.joint.shape[0]):
-        iv = m.bodies.idx_v[b]
-        _euler_body(m.bodies, b, d.R_W[m.bodies.joint[b]], d.q, d.v, d.a[iv:iv + 3], d.a[iv + 3:iv + 6], h)
+    _euler_bodies(m, d, d.q, d.v, h)
     d.external_force_W[:] = d.loads.external_force_W
     d.external_torque_O_W[:] = d.loads.external_torque_O_W
     d.evaluations += 1
     d.accepted += 1
+
+
+# ------------------------------------------------------------------- adaptive symplectic Euler
+
+
+@njit
+def onset_step(m, d):
+    """The longest step adaptive_euler's onset guard allows at d's state, s: while a pair may
+    start (coal keeps face pairs within its margin), a step moves no two spheres closer by
+    more than the onset depth, so that a pair that starts during a step sinks no deeper into
+    it before the error estimate sees its force. inf when no pair can start."""
+    if not m.literal and d.near.shape[0] == 0:
+        return math.inf
+    rate = travel_rate(m, d)
+    return m.integrator.onset_depth / rate if rate > 0.0 else math.inf
+
+
+@njit_inline
+def _centroid_accelerations(m, d, out):
+    """Each free body's centroid acceleration (world) and angular acceleration (body) at d's
+    last evaluation, into out (n_bodies, 6)."""
+    for b in range(m.bodies.joint.shape[0]):
+        iv = m.bodies.idx_v[b]
+        a_G = centroid_acceleration(d.R_W[m.bodies.joint[b]], m.bodies.lever[b], d.v[iv:iv + 3], d.v[iv + 3:iv + 6],
+                                    d.a[iv:iv + 3], d.a[iv + 3:iv + 6])
+        for x in range(3):
+            out[b, x] = a_G[x]
+            out[b, 3 + x] = d.a[iv + 3 + x]
+
+
+@njit
+def euler_error(m, acc0, acc1, h):
+    """The error ratio of a symplectic Euler step of h (s) whose start and end accelerations
+    are acc0 and acc1 (n_bodies, 6; `_centroid_accelerations`): the largest over the free
+    bodies of its velocity error estimate h/2 |a1 - a0| (Euler against Heun's trapezoid) at
+    any of its contact spheres, which lie within its lever of its centroid, over velocity_tol."""
+    p = m.integrator
+    ratio = 0.0
+    for b in range(acc0.shape[0]):
+        da = math.sqrt((acc1[b, 0] - acc0[b, 0]) ** 2 + (acc1[b, 1] - acc0[b, 1]) ** 2 + (acc1[b, 2] - acc0[b, 2]) ** 2)
+        dalpha = math.sqrt((acc1[b, 3] - acc0[b, 3]) ** 2 + (acc1[b, 4] - acc0[b, 4]) ** 2 +
+                           (acc1[b, 5] - acc0[b, 5]) ** 2)
+        ratio = max(ratio, 0.5 * h * (da + p.lever[b] * dalpha) / p.velocity_tol)
+    return ratio
+
+
+@njit
+def adaptive_euler(m, d, h):
+    """One accepted symplectic Euler step with its error controlled, of at most min(h, the
+    onset guard): returns the step taken, or 0.0 if it fell below h_min.
+
+    A try of h updates velocities then positions with the accelerations at the start, then
+    evaluates the forces at its end, bending the bristles over h from the memory; h/2 |a_end
+    - a_start| (`euler_error`) estimates its error. A kept try commits the memory, and its end
+    evaluation is the next step's start: one evaluation a try. A rejected one goes back to
+    the start (state, fingers, contacts) and tries SAFETY r^(-1/2) of h. The fingers move at
+    the drive's rate through the step; a new rate (the drive's decision) re-evaluates the
+    start's loads with the committed bristles, unbent.
+    """
+    p = m.integrator
+    if not (d.fsal and d.fsal_t == d.t and np.array_equal(d.fsal_rate, d.opening_rate)):
+        forces(m, d, 0.0)  # the committed memory holds the bristles at this state
+        accelerations(m, d)
+        d.evaluations += 1
+    h = min(h, onset_step(m, d))
+    n = m.bodies.joint.shape[0]
+    acc = np.empty((2, n, 6))
+    _centroid_accelerations(m, d, acc[0])
+    q0, v0, a0, opening0 = d.q.copy(), d.v.copy(), d.a.copy(), d.opening.copy()
+    start = (d.candidates, d.contacts, d.loads, d.summary)
+    external = np.empty(6)
+    external[:3] = d.loads.external_force_W
+    external[3:] = d.loads.external_torque_O_W
+    rejected = False
+    while True:
+        _euler_bodies(m, d, d.q, d.v, h)
+        for i in range(d.opening.shape[0]):
+            d.opening[i] = opening0[i] + h * d.opening_rate[i]
+        forces(m, d, h)
+        accelerations(m, d)
+        d.evaluations += 1
+        _centroid_accelerations(m, d, acc[1])
+        ratio = euler_error(m, acc[0], acc[1], h)
+        if ratio <= 1.0:
+            grow = GROW_MAX if ratio == 0.0 else min(GROW_MAX, max(SHRINK_MIN, SAFETY / math.sqrt(ratio)))
+            # no growth right after a rejection (Hairer, Norsett and Wanner, II.4)
+            d.h_next = min(p.h_max, h * (min(grow, 1.0) if rejected else grow))
+            break
+        rejected = True
+        d.rejected += 1
+        d.q[:], d.v[:], d.a[:], d.opening[:] = q0, v0, a0, opening0
+        kinematics(m, d)
+        d.candidates, d.contacts, d.loads, d.summary = start
+        h *= max(SHRINK_MIN, SAFETY / math.sqrt(ratio))
+        if h < p.h_min:
+            return 0.0
+    commit_memory(d)
+    d.accepted += 1
+    d.fsal, d.fsal_t = True, d.t + h
+    d.fsal_rate[:] = d.opening_rate
+    # the step's impulse is that of the start's forces (the velocity update's)
+    d.external_force_W[:] = external[:3]
+    d.external_torque_O_W[:] = external[3:]
+    return h
 
 
 # --------------------------------------------------------------------------- Runge-Kutta
@@ -259,6 +383,6 @@ def tableau(method: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray
         b = np.array((35 / 384, 0.0, 500 / 1113, 125 / 192, -2187 / 6784, 11 / 84, 0.0))
         b4 = np.array((5179 / 57600, 0.0, 7571 / 16695, 393 / 640, -92097 / 339200, 187 / 2100, 1 / 40))
         return A, b, np.array((0.0, 1 / 5, 3 / 10, 4 / 5, 8 / 9, 1.0, 1.0)), b - b4
-    if method == "symplectic_euler":
+    if method in ("symplectic_euler", "adaptive_euler"):  # not Runge-Kutta
         return np.zeros((0, 0)), np.zeros(0), np.zeros(0), np.zeros(0)
     raise ValueError(f"unknown integrator {method!r}; valid: {', '.join(METHODS)}")

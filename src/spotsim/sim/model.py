@@ -91,8 +91,8 @@ class RecordFrames(NamedTuple):
 class IntegratorParams(NamedTuple):
     """The time integrator (`sim.integrators`) and its tableau (explicit Runge-Kutta)."""
 
-    method: int  # SYMPLECTIC_EULER, RK4 or DOPRI5
-    adaptive: bool
+    method: int  # its index in integrators.METHODS
+    adaptive: bool  # error-controlled (integrators.ADAPTIVE)
     A: np.ndarray  # (s, s) Runge-Kutta matrix (empty for symplectic Euler)
     b: np.ndarray  # (s,) weights
     c: np.ndarray  # (s,) nodes
@@ -101,6 +101,9 @@ class IntegratorParams(NamedTuple):
     atol: float
     h_min: float  # s
     h_max: float  # s
+    velocity_tol: float  # adaptive_euler: a step's error in any contact sphere's velocity, m/s
+    onset_depth: float  # adaptive_euler: how far a step may move two spheres closer while pairs may start, m
+    lever: np.ndarray  # (n_bodies,) each free body's farthest contact sphere from its centroid, m
 
 
 class ModelFields(NamedTuple):

@@ -28,6 +28,7 @@ import numpy as np
 
 from ..jit import njit_inline
 from .bodies import kinetic_energy
+from .integrators import ADAPTIVE
 
 #: Pairs sharing the load in the estimate: the shipped runs peak at 20-100 pairs in contact
 #: (Case I ~ 20 at its impacts, the dual-arm second grasp 62).
@@ -37,8 +38,8 @@ EXPECTED_PAIRS = 32
 #: of h times the eigenvalue's magnitude. Symplectic Euler: |omega h| < 2 for an undamped
 #: oscillator and h c/m < 2 for a damper (its velocity update is explicit Euler). RK4:
 #: 2 sqrt(2) and 2.785. Dormand-Prince 5: ~3.3 on both (its region reaches -3.3 and 3.3 i).
-STABILITY_INTERVAL = {"symplectic_euler": (2.0, 2.0), "rk4": (2.0 * math.sqrt(2.0), 2.785),
-                      "dopri5": (3.3, 3.3)}
+STABILITY_INTERVAL = {"symplectic_euler": (2.0, 2.0), "adaptive_euler": (2.0, 2.0),
+                      "rk4": (2.0 * math.sqrt(2.0), 2.785), "dopri5": (3.3, 3.3)}
 
 
 @dataclass(frozen=True)
@@ -100,7 +101,7 @@ def predict_step(model, pairs: int = EXPECTED_PAIRS) -> StepPrediction:
     rate = c / m
     imag, real = STABILITY_INTERVAL[method]
     stable = min(imag / omega, real / rate if rate > 0 else math.inf)
-    if method == "dopri5":  # adaptive: the step it takes is its own; judge its largest
+    if method in ADAPTIVE:  # the step it takes is its own; judge its largest
         h = s.simulation.integrator.h_max_s
     return StepPrediction(m, load, pairs, omega, rate, stable, h, method)
 
@@ -109,7 +110,7 @@ def stability_warnings(model) -> list[str]:
     """A warning when the scenario's dynamics step lies outside its integrator's predicted
     stability region."""
     pred = predict_step(model)
-    if pred.stable or pred.integrator == "dopri5":  # an adaptive step shrinks by itself
+    if pred.stable or pred.integrator in ADAPTIVE:  # an adaptive step shrinks by itself
         return []
     return [f"the dynamics step {pred.step_s * 1e3:.3g} ms (simulation.dt_s / substeps) exceeds the "
             f"predicted stable step {pred.stable_step_s * 1e3:.3g} ms of {pred.integrator} for the "

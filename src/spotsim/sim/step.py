@@ -9,9 +9,8 @@ The integrator evaluates the forces and the dynamics where its scheme needs them
 
 from __future__ import annotations
 
-import math
-
 from ..jit import njit
+from .bodies import travel_rate
 from .bookkeeping import bookkeeping
 from .drive import finger_drive, move_fingers
 from .integrators import SYMPLECTIC_EULER, integrate
@@ -33,27 +32,12 @@ def step(m, d, h):
         return 0.0
     finger_drive(m, d)  # the active drive sets its fingers' rate for the next step
     if m.integrator.method == SYMPLECTIC_EULER:
-        move_fingers(d, h)  # at the rate just set: its velocity-first update (Runge-Kutta moves them in its stages)
+        move_fingers(d, h)  # at the rate just set: its velocity-first update (the others move them in their steps)
     d.t += h
     d.travel += h * travel_rate(m, d)
     grasp_phase(m, d)  # approach -> self-centring -> complete
     bookkeeping(m, d, d.t - t0 if m.integrator.adaptive else h)
     return h
-
-
-@njit
-def travel_rate(m, d):
-    """A bound on how fast any two contact spheres approach each other, m/s: the sum over the
-    free contact bodies of |v_O| + |omega| reach, plus the fastest finger slide."""
-    rate = 0.0
-    for i in range(d.opening_rate.shape[0]):
-        rate = max(rate, abs(d.opening_rate[i]))
-    for i in range(m.limits.reach_rows.shape[0]):
-        # a free-flyer's v = (v_O, omega) in its frame; norms are frame-free
-        iv = m.bodies.idx_v[m.limits.reach_rows[i]]
-        rate += math.sqrt(d.v[iv] ** 2 + d.v[iv + 1] ** 2 + d.v[iv + 2] ** 2) + \
-            math.sqrt(d.v[iv + 3] ** 2 + d.v[iv + 4] ** 2 + d.v[iv + 5] ** 2) * m.limits.reach[i]
-    return rate
 
 
 @njit

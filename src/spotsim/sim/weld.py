@@ -11,6 +11,8 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
+from .drive import finger_drive
+
 
 def world_momentum(M_WB: pin.SE3, inertia: pin.Inertia, v_B: pin.Motion) -> pin.Force:
     """Spatial momentum of a body (inertia and twist in its frame B) in world, about the origin."""
@@ -72,4 +74,5 @@ def weld(model, data, source: str = "<scenario>"):
         "row_index", "last_open")}
     # a new passive phase starts with the new model
     new_data.assign(q=q, v=v, opening=opening, t_start=t_start, active=old.active + 1, **carried)
+    finger_drive(new.sim, new_data)  # the next grasp's drive closes from the weld on
     return new, new_data

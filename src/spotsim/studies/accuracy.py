@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ..scenario import modules_of, replace, to_dict
+from ..sim.integrators import ADAPTIVE, METHODS
 from .runs import (
     COMPARABLE,
     Outcome,
@@ -56,19 +57,21 @@ ATOL_PER_RTOL = 1e-3
 class Setting:
     """One integrator setting of a sweep.
 
-    method: symplectic_euler, rk4 or dopri5. substeps: dynamics steps per recorded step
-    (fixed-step methods; dopri5 keeps the scenario's, its first trial step). rtol: dopri5's
-    relative tolerance (atol = ATOL_PER_RTOL rtol). sphere_scale: both sphere radii times this.
+    method: symplectic_euler, adaptive_euler, rk4 or dopri5. substeps: dynamics steps per
+    recorded step (fixed-step methods; the adaptive ones keep the scenario's, their first trial
+    step). rtol: dopri5's relative tolerance (atol = ATOL_PER_RTOL rtol). tol: adaptive_euler's
+    velocity tolerance, m/s. sphere_scale: both sphere radii times this.
     """
 
     method: str
     substeps: int = 0
     rtol: float | None = None
     sphere_scale: float = 1.0
+    tol: float | None = None
 
     @property
     def adaptive(self) -> bool:
-        return self.method == "dopri5"
+        return self.method in ADAPTIVE
 
     @property
     def atol(self) -> float | None:
@@ -79,26 +82,36 @@ class Setting:
         return math.nan if self.adaptive else dt_s / self.substeps
 
     def label(self, dt_s: float) -> str:
-        text = (f"dopri5 rtol {self.rtol:g}" if self.adaptive else
+        text = (f"dopri5 rtol {self.rtol:g}" if self.method == "dopri5" else
+                f"adaptive_euler tol {self.tol:g} m/s" if self.method == "adaptive_euler" else
                 f"{self.method} h {self.step_s(dt_s) * 1e3:g} ms")
         return text + (f", spheres x{self.sphere_scale:g}" if self.sphere_scale != 1.0 else "")
 
     def refined(self) -> Setting:
-        """The next refinement: a tenth of the tolerance, or half the step."""
-        return dc_replace(self, rtol=self.rtol / 10) if self.adaptive else dc_replace(self, substeps=2 * self.substeps)
+        """The next refinement: a tenth of dopri5's tolerance, a quarter of adaptive_euler's
+        (its steps ~ tol^(1/2): half the step), or half the step."""
+        if self.method == "dopri5":
+            return dc_replace(self, rtol=self.rtol / 10)
+        if self.method == "adaptive_euler":
+            return dc_replace(self, tol=self.tol / 4)
+        return dc_replace(self, substeps=2 * self.substeps)
 
     def coarsened(self) -> Setting | None:
         """The setting one refinement coarser (None below one substep)."""
-        if self.adaptive:
+        if self.method == "dopri5":
             return dc_replace(self, rtol=self.rtol * 10) if self.rtol < 0.1 else None
+        if self.method == "adaptive_euler":
+            return dc_replace(self, tol=self.tol * 4)
         return dc_replace(self, substeps=self.substeps // 2) if self.substeps % 2 == 0 else None
 
     def apply(self, s):
         """The scenario `s` run at this setting (validated again)."""
         integrator = {**to_dict(s.simulation.integrator), "method": self.method}
         simulation = {"integrator": integrator}
-        if self.adaptive:
+        if self.method == "dopri5":
             integrator.update(rtol=self.rtol, atol=self.atol)
+        elif self.method == "adaptive_euler":
+            integrator.update(velocity_tol_m_s=self.tol)
         else:
             simulation["substeps"] = self.substeps
         changes = {"simulation": simulation}
@@ -114,45 +127,52 @@ def setting_of(s) -> Setting:
     i = s.simulation.integrator
     if i.method == "dopri5":
         return Setting("dopri5", rtol=i.rtol)
+    if i.method == "adaptive_euler":
+        return Setting("adaptive_euler", tol=i.velocity_tol_m_s)
     return Setting(i.method, s.simulation.substeps)
 
 
 def parse_setting(text: str) -> Setting:
-    """`METHOD:VALUE`: `symplectic_euler:80`, `rk4:40` (substeps) or `dopri5:1e-7` (rtol)."""
+    """`METHOD:VALUE`: `symplectic_euler:80`, `rk4:40` (substeps), `dopri5:1e-7` (rtol) or
+    `adaptive_euler:1e-6` (velocity tolerance, m/s)."""
     method, _, value = text.partition(":")
-    if method not in ("symplectic_euler", "rk4", "dopri5") or not value:
-        raise ValueError(f"{text}: must read METHOD:VALUE with METHOD one of symplectic_euler, rk4, "
-                         f"dopri5 and VALUE its substeps (fixed step) or rtol (dopri5), e.g. dopri5:1e-7")
+    if method not in METHODS or not value:
+        raise ValueError(f"{text}: must read METHOD:VALUE with METHOD one of {', '.join(METHODS)} and VALUE its "
+                         f"substeps (fixed step), rtol (dopri5) or velocity tolerance in m/s (adaptive_euler), "
+                         f"e.g. dopri5:1e-7")
     try:
-        if method == "dopri5":
-            rtol = float(value)
-            if not 0 < rtol < 1:
+        if method in ADAPTIVE:
+            tol = float(value)
+            if not 0 < tol < 1:
                 raise ValueError
-            return Setting(method, rtol=rtol)
+            return Setting(method, rtol=tol) if method == "dopri5" else Setting(method, tol=tol)
         substeps = int(value)
         if substeps < 1:
             raise ValueError
         return Setting(method, substeps)
     except ValueError:
-        rule = "rtol must be a number in (0, 1)" if method == "dopri5" else "substeps must be an integer >= 1"
+        rule = "the tolerance must be a number in (0, 1)" if method in ADAPTIVE else "substeps must be an integer >= 1"
         raise ValueError(f"{text}: {rule}") from None
 
 
 @dataclass(frozen=True)
 class Grid:
-    """A sweep: substeps per fixed-step method, dopri5's tolerances, the sphere scales, the reference."""
+    """A sweep: substeps per fixed-step method, dopri5's and adaptive_euler's tolerances, the
+    sphere scales, the reference."""
 
     substeps: dict[str, tuple[int, ...]]
     rtols: tuple[float, ...]
     reference: Setting
     sphere_scales: tuple[float, ...] = (1.0,)
     duration_s: float | None = None  # None: the scenario's
+    tols: tuple[float, ...] = ()  # adaptive_euler's velocity tolerances, m/s
 
     def settings(self) -> list[Setting]:
         out = []
         for scale in self.sphere_scales:
             for method, substeps in self.substeps.items():
                 out += [Setting(method, n, sphere_scale=scale) for n in substeps]
+            out += [Setting("adaptive_euler", tol=t, sphere_scale=scale) for t in self.tols]
             out += [Setting("dopri5", rtol=r, sphere_scale=scale) for r in self.rtols]
         return out
 
@@ -164,13 +184,14 @@ class Grid:
 GRIDS = {
     # the suite's: Case I's first 120 ms of contact, in which the paper's setting diverges (0.49 s)
     "quick": Grid({"symplectic_euler": (1, 5, 10), "rk4": (10,)}, (1e-4,), Setting("symplectic_euler", 40),
-                  duration_s=0.55),
+                  duration_s=0.55, tols=(1e-5,)),
     "reduced": Grid({"symplectic_euler": (1, 2, 5, 10, 20), "rk4": (10, 20)}, (1e-4, 1e-5),
-                    Setting("symplectic_euler", 40)),
+                    Setting("symplectic_euler", 40), tols=(1e-4, 1e-5, 2.5e-6)),
     "default": Grid({"symplectic_euler": (1, 2, 5, 10, 20, 40), "rk4": (5, 10, 20, 40)},
-                    (1e-3, 1e-4, 1e-5, 1e-6), Setting("symplectic_euler", 80)),
+                    (1e-3, 1e-4, 1e-5, 1e-6), Setting("symplectic_euler", 80), tols=(1e-4, 4e-5, 1e-5, 2.5e-6, 6.25e-7)),
     "full": Grid({"symplectic_euler": (1, 2, 5, 10, 20, 40, 80), "rk4": (2, 5, 10, 20, 40, 80)},
-                 (1e-3, 1e-4, 1e-5, 1e-6), Setting("symplectic_euler", 160), sphere_scales=(1.0, 0.75)),
+                 (1e-3, 1e-4, 1e-5, 1e-6), Setting("symplectic_euler", 160), sphere_scales=(1.0, 0.75),
+                 tols=(1e-4, 4e-5, 1e-5, 2.5e-6, 6.25e-7)),
 }
 
 
@@ -283,7 +304,7 @@ class AccuracyReport:
 
 
 def accuracy_columns(scenario, sphere_sweep: bool) -> list[str]:
-    cols = ["role", "setting", "method", "substeps", "step_ms", "rtol", "atol"]
+    cols = ["role", "setting", "method", "substeps", "step_ms", "rtol", "atol", "tol"]
     cols += ["sphere_scale"] if sphere_sweep else []
     cols += ["status", "completed_s", "sim_time_s", "wall_time_s", "steps", "force_evaluations", "rejected_steps"]
     for p in grasp_names(scenario):
@@ -300,6 +321,7 @@ def accuracy_row(scenario, setting: Setting, role: str, o: Outcome, ref: Outcome
     row = {"role": role, "setting": setting.label(dt), "method": setting.method,
            "substeps": math.nan if setting.adaptive else setting.substeps,
            "step_ms": setting.step_s(dt) * 1e3, "rtol": setting.rtol or math.nan, "atol": setting.atol or math.nan,
+           "tol": setting.tol or math.nan,
            "sphere_scale": setting.sphere_scale, "status": o.status, "completed_s": o.completed_s,
            "sim_time_s": o.sim_time_s, "wall_time_s": o.wall_time_s, "steps": o.steps,
            "force_evaluations": o.force_evaluations, "rejected_steps": o.rejected_steps,
@@ -478,13 +500,15 @@ def work_precision_plot(scenario, report: AccuracyReport, path: Path) -> None:
         for r in rows:
             lines.setdefault((r["method"], r.get("sphere_scale", 1.0)), []).append(r)
         for (method, scale), group in lines.items():
-            group.sort(key=lambda r: r["rtol"] if method == "dopri5" else -r["substeps"], reverse=True)
+            group.sort(key=lambda r: r["rtol"] if method == "dopri5" else r["tol"] if method == "adaptive_euler"
+                       else -r["substeps"], reverse=True)
             xs = [r["wall_time_s"] for r in group if not math.isnan(err(r))]
             ys = [max(err(r), floor) for r in group if not math.isnan(err(r))]
             name = method + (f", spheres x{scale:g}" if scale != 1.0 else "")
             (line,) = ax.loglog(xs, ys, "o-", lw=1.2, ms=4, label=name)
             for r in group:
-                short = f"rtol {r['rtol']:g}" if method == "dopri5" else f"{r['step_ms']:g} ms"
+                short = (f"rtol {r['rtol']:g}" if method == "dopri5" else f"tol {r['tol']:g}"
+                         if method == "adaptive_euler" else f"{r['step_ms']:g} ms")
                 if math.isnan(err(r)):
                     ax.plot(r["wall_time_s"], top, "x", color=line.get_color(), ms=8, mew=2)
                     ax.annotate(f"{short}: {r['status']}", (r["wall_time_s"], top), fontsize=7,

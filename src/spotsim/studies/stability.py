@@ -257,6 +257,9 @@ def finer(s):
     i = s.simulation.integrator
     if i.method == "dopri5":
         return replace(s, simulation={"integrator": {**to_dict(i), "rtol": i.rtol / FINER, "atol": i.atol / FINER}})
+    if i.method == "adaptive_euler":  # its step ~ tol^(1/2)
+        return replace(s, simulation={"integrator": {**to_dict(i), "velocity_tol_m_s": i.velocity_tol_m_s / FINER**2,
+                                                     "onset_depth_m": i.onset_depth_m / FINER}})
     return replace(s, simulation={"substeps": s.simulation.substeps * FINER})
 
 
