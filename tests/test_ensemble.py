@@ -6,13 +6,16 @@ from dataclasses import astuple
 
 import numpy as np
 import pytest
-from conftest import ROOT
+from conftest import CASE_I, ROOT
 
 import spotsim
 from spotsim.build.model import with_start
+from spotsim.cli import ensemble_exit, main
 from spotsim.studies import ensemble as ens
 from spotsim.studies.ensemble import EnsembleResult, Member, Start, member_scenario, perturbed_starts, run_member
 
+#: Case I at the default step: a whole member runs in well under a second.
+SHORT_S = 0.6  # s simulated where a member need not complete: past first contact (~0.43 s)
 
 
 def comparable(summary: dict) -> dict:
@@ -146,3 +149,51 @@ def test_statistics_and_classes_of_hand_made_members(case_I):
                                   "diverged": {"count": 1, "fraction": 1 / 7}}
     assert e.statuses == {"completed": 5, "incomplete": 1, "diverged": 1, "interrupted": 1}
     assert ens.statistics([None, float("nan")])["count"] == 0
+
+
+def test_the_exit_code_is_the_worst_members():
+    """0 when every member completed; else the code of the worst status among them."""
+    assert ensemble_exit({"completed": 4}, False) == 0
+    assert ensemble_exit({"completed": 3, "incomplete": 1}, False) == 3
+    assert ensemble_exit({"incomplete": 1, "diverged": 1}, False) == 4
+    assert ensemble_exit({"diverged": 1, "exception": 1}, False) == 1
+    assert ensemble_exit({"completed": 1, "interrupted": 3}, True) == 130
+
+
+def test_the_command_line_writes_the_ensemble_and_exits_with_its_code(tmp_path, capsys):
+    """`spotsim run --ensemble 3` on runs cut short by the time-out writes ensemble.json,
+    members.csv and scenario.yaml, prints the table and exits 3 (incomplete); bad options
+    exit 2 before anything runs."""
+    out = tmp_path / "ens"
+    code = main(["run", str(CASE_I), "--ensemble", "3", "--seed", "2", "--workers", "2", "--out", str(out),
+                 "--quiet", "--set", f"simulation.duration_s={SHORT_S}"])
+    assert code == 3
+    doc = json.loads((out / "ensemble.json").read_text())
+    assert doc["members"] == 3 and doc["seed"] == 2 and doc["statuses"] == {"incomplete": 3}
+    assert doc["perturbation"]["offset_tol_mm"] == 0.01 and len(doc["starts"]) == 3
+    assert doc["starts"][1]["module"]["initial_offset_mm"] == list(perturbed_starts(
+        spotsim.load_scenario(CASE_I), 3, seed=2)[1].offsets_mm["module"])
+    table = (out / "members.csv").read_text().splitlines()
+    assert len(table) == 4 and table[0].startswith("member,status,module_offset_x_mm")
+    assert (out / "scenario.yaml").exists() and "outcome" in capsys.readouterr().out
+    assert main(["run", str(CASE_I), "--ensemble", "0", "--out", str(tmp_path / "bad"), "--quiet"]) == 2
+
+
+def test_ctrl_c_keeps_the_members_that_finished(tmp_path, monkeypatch):
+    """Ctrl-C during member 2 stops the ensemble: members 0 and 1 are kept and written, the
+    others are `interrupted`, and the command exits 130."""
+    real = ens.run_member
+
+    def interrupting(index, start, model=None, source="<ensemble>"):
+        if index == 2:
+            raise KeyboardInterrupt
+        return real(index, start, model, source)
+
+    monkeypatch.setattr(ens, "run_member", interrupting)
+    out = tmp_path / "ens"
+    code = main(["run", str(CASE_I), "--ensemble", "4", "--workers", "1", "--out", str(out), "--quiet",
+                 "--set", f"simulation.duration_s={SHORT_S}"])
+    doc = json.loads((out / "ensemble.json").read_text())
+    assert code == 130 and doc["status"] == "interrupted"
+    assert [s["status"] for s in doc["starts"]] == ["incomplete", "incomplete", "interrupted", "interrupted"]
+    assert doc["classes"]["grasp"] == {"incomplete": {"count": 2, "fraction": 1.0}}
