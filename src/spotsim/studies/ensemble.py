@@ -256,6 +256,12 @@ def _in_pool(scenario, source, model, starts, members, workers, bar, fork: bool)
     are spawned, import spotsim, load the kernels from numba's cache and build the Model once
     each.
     """
+    if fork:  # load the compiled loop and start check here once, for every worker to inherit
+        from ..sim.data import make_data
+        from ..sim.run import compile_loop, initial_contacts
+
+        compile_loop(model, make_data(model))
+        initial_contacts(model)
     ctx = multiprocessing.get_context("fork" if fork else "spawn")
     pool = ctx.Pool(workers, initializer=_init_worker,
                     initargs=(scenario, source, model if fork else None, True))
