@@ -39,12 +39,13 @@ RPY_TOL_DEG = 0.01
 
 #: The outcome of a completed grasp: `wedged` when its residual tilt max(|roll|, |pitch|)
 #: exceeds WEDGED_TILT_DEG or its residual offset exceeds WEDGED_OFFSET_MM; else `seated`.
-#: Measured at a converged step (12.5 us; Cases I-III, 255 members, docs/usage.md#ensembles),
-#: completed grasps fall in two groups with nothing between: seated, 0.09-0.30 mm off and
-#: rolled 0.27-0.99 deg, and wedged, 0.46-0.51 mm off and rolled 1.57-1.71 deg. The module
-#: rolls about x_a as it slides along y_a (about -3.3 deg per mm in both groups, pitch under
-#: 0.03 deg), so each threshold sits in the middle of the same empty gap: either one alone
-#: separates the measured groups, and both guard a scene where the two decouple.
+#: Measured at a converged step (12.5 us; 287 completed members of Cases I-III,
+#: docs/usage.md#ensembles), completed grasps fall in two groups with nothing between: seated,
+#: 0.09-0.30 mm off and rolled 0.27-0.99 deg, and wedged, 0.46-0.51 mm off and rolled
+#: 1.57-1.71 deg. The module rolls about x_a as it is left off along y_a (3.0-3.4 deg per mm in
+#: both groups, pitch under 0.03 deg), so each threshold sits in the middle of the same empty
+#: gap: either one alone separates the measured groups, and both guard a scene where the two
+#: decouple.
 WEDGED_TILT_DEG = 1.25
 WEDGED_OFFSET_MM = 0.38
 SEATED, WEDGED = "seated", "wedged"
@@ -140,19 +141,20 @@ def run_member(index: int, start: Start, model=None, source: str = "<ensemble>")
 
     if model is None:  # in a pool worker
         model, source = _WORKER["model"], _WORKER["source"]
+    stage = "the start"
     try:
         scenario = member_scenario(model.scenario, start)
         mine = with_start(model, scenario)
         check_start(mine, source)
-    except SpotsimError as e:
-        return Member(index, start, REJECTED, str(e).replace("\n", "; "))
-    try:
+        stage = "simulate"
         result = simulate(scenario, model=mine, source=source)
-    except KeyboardInterrupt:
-        raise
-    except Exception as e:  # simulate must never raise: the member reports it, the others go on
+    except SpotsimError as e:  # the perturbed start's own problem, found before anything ran
+        if stage != "the start":
+            raise
+        return Member(index, start, REJECTED, str(e).replace("\n", "; "))
+    except Exception as e:  # nothing here should raise: the member reports it, the others go on
         where = traceback.extract_tb(e.__traceback__)[-1]
-        return Member(index, start, EXCEPTION, f"{type(e).__name__} raised by simulate: {e} "
+        return Member(index, start, EXCEPTION, f"{type(e).__name__} raised by {stage}: {e} "
                                                f"({Path(where.filename).name}:{where.lineno})")
     return Member(index, start, result.status, result.summary["message"], result.summary)
 
@@ -219,10 +221,12 @@ def ensemble(scenario, n: int, *, seed: int = 0, offset_tol_mm: float = OFFSET_T
     if workers < 1:
         raise SpotsimError(f"workers = {workers}: must be >= 1")
     fork = sys.platform.startswith("linux")  # elsewhere the pool spawns: each worker builds its Model
-    if model is None and (workers == 1 or fork):
+    if model is None:  # here too under spawn: a scenario that cannot be built fails before the pool
         from ..build.model import build_model
 
         model = build_model(scenario, source)
+    elif model.scenario != scenario:
+        raise SpotsimError("ensemble: `model` was built from another scenario than `scenario`")
     starts = perturbed_starts(scenario, n, seed, offset_tol_mm, rpy_tol_deg)
     members: list[Member | None] = [None] * n
     interrupted = False
@@ -265,16 +269,19 @@ def _in_pool(scenario, source, model, starts, members, workers, bar, fork: bool)
     ctx = multiprocessing.get_context("fork" if fork else "spawn")
     pool = ctx.Pool(workers, initializer=_init_worker,
                     initargs=(scenario, source, model if fork else None, True))
+    closed = False
     try:
         for m in pool.imap_unordered(_run_task, [(i, s) for i, s in enumerate(starts)]):
             members[m.index] = m
             bar.update(1)
-        pool.close()
+        pool.close()  # the workers end on their own (terminating spawned ones leaks their semaphores)
+        closed = True
         return False
     except KeyboardInterrupt:
         return True
     finally:
-        pool.terminate()
+        if not closed:  # interrupted, or an error in the pool: stop the workers now
+            pool.terminate()
         pool.join()
 
 
