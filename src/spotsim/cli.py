@@ -25,7 +25,8 @@ def _parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", required=True)
     run = sub.add_parser("run", help="run a scenario and write its results")
     run.add_argument("config", nargs="?", help=f"scenario YAML (default: config/{DEFAULT_SCENARIO})")
-    run.add_argument("--out", help="results directory (default: results/<scenario name>)")
+    run.add_argument("--out", help="results directory (default: results/<scenario name>, with --ensemble "
+                                   "results/<scenario name>/ensemble)")
     run.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE",
                      help="override a scenario key, validated like the file (repeatable)")
     run.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
@@ -362,9 +363,10 @@ def main(argv=None) -> int:
         except ImportError as e:
             print(f"--replay needs meshcat ({e}); install it with `pip install meshcat`", file=sys.stderr)
             return 2
-    out = Path(args.out) if args.out else Path("results") / scenario.name
-    if args.ensemble is not None:
+    if args.ensemble is not None:  # by default beside the single run's files, not among them
+        out = Path(args.out) if args.out else Path("results") / scenario.name / "ensemble"
         return _ensemble(args, scenario, model, path, out)
+    out = Path(args.out) if args.out else Path("results") / scenario.name
     try:
         out.mkdir(parents=True, exist_ok=True)
         clear_summary(out)
