@@ -11,17 +11,20 @@ from .errors import ModelError, ScenarioError, SimulationError, SpotsimError
 from .results import write_results
 from .scenario import Scenario, from_dict, load_scenario, replace, to_yaml
 from .sim.run import Result, simulate
+from .studies.ensemble import EnsembleResult, ensemble
 from .version import __version__
 
 __all__ = [
     "Model",
     "ModelError",
+    "EnsembleResult",
     "Result",
     "Scenario",
     "ScenarioError",
     "SimulationError",
     "SpotsimError",
     "build_model",
+    "ensemble",
     "from_dict",
     "load_scenario",
     "replace",

@@ -1,6 +1,8 @@
 """`spotsim` command line (run, validate, plot, replay, study): a thin layer over the library.
 
 Exit codes: 0 completed (or valid), 2 bad input, 3 incomplete, 4 diverged, 130 interrupted.
+`run --ensemble N` exits with its worst member's: 0 all completed, 3 some incomplete, 4 some
+diverged, 1 some failed (an exception, or a perturbed start rejected), 130 interrupted.
 `study` exits 0 when it ran to its end, 1 when a stability case failed (an uncaught exception
 or a silent NaN: what the simulator must never do), 2 on bad input, 130 when interrupted.
 """
@@ -23,13 +25,20 @@ def _parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", required=True)
     run = sub.add_parser("run", help="run a scenario and write its results")
     run.add_argument("config", nargs="?", help=f"scenario YAML (default: config/{DEFAULT_SCENARIO})")
-    run.add_argument("--out", help="results directory (default: results/<scenario name>)")
+    run.add_argument("--out", help="results directory (default: results/<scenario name>, with --ensemble "
+                                   "results/<scenario name>/ensemble)")
     run.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE",
                      help="override a scenario key, validated like the file (repeatable)")
     run.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
     run.add_argument("--replay", action="store_true", help="replay the run in Meshcat when it ends")
     run.add_argument("--zmq-url", help="with --replay: the Meshcat server to use (default: start one)")
+    run.add_argument("--ensemble", type=int, metavar="N",
+                     help="run N members from starts perturbed within +-10 um and +-0.01 deg (member 0 "
+                          "unperturbed) and write their statistics (ensemble.json, members.csv)")
+    run.add_argument("--seed", type=int, default=0, metavar="S", help="with --ensemble: the perturbations' seed "
+                                                                      "(default 0)")
+    run.add_argument("--workers", type=int, metavar="W", help="with --ensemble: processes (default: CPU count)")
     val = sub.add_parser("validate", help="print the resolved scenario, or every problem in it")
     val.add_argument("config")
     val.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE")
@@ -239,6 +248,57 @@ def _replay(result_dir, args, run_code=None) -> int:
     return 0 if run_code is None else run_code
 
 
+#: `run --ensemble`'s exit code: that of the worst member status present, in this order.
+ENSEMBLE_EXIT = (("interrupted", 130), ("exception", 1), ("rejected", 1), ("diverged", 4), ("incomplete", 3))
+
+
+def ensemble_exit(statuses: dict[str, int], interrupted: bool) -> int:
+    """`run --ensemble`'s exit code from its members' status counts."""
+    if interrupted:
+        return 130
+    return next((code for status, code in ENSEMBLE_EXIT if statuses.get(status)), 0)
+
+
+def _ensemble(args, scenario, model, path: Path, out: Path) -> int:
+    """`spotsim run --ensemble N`: exit 2 on bad input, else `ensemble_exit`."""
+    from .studies.ensemble import ensemble, report_lines, write_ensemble
+
+    bad = []
+    if args.ensemble < 1:
+        bad.append(f"--ensemble {args.ensemble}: must be >= 1")
+    if args.workers is not None and args.workers < 1:
+        bad.append(f"--workers {args.workers}: must be >= 1")
+    if args.replay:
+        bad.append("--replay: not with --ensemble (replay a member by running its start from ensemble.json)")
+    if bad:
+        print("\n".join(bad), file=sys.stderr)
+        return 2
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        print(f"{out}: cannot write results: {e.strerror}", file=sys.stderr)
+        return 2
+    e = ensemble(scenario, args.ensemble, seed=args.seed, workers=args.workers, progress=not args.quiet,
+                 model=model, source=str(path))
+    try:
+        files = write_ensemble(e, out)
+    except OSError as err:
+        print(f"{out}: cannot write results: {err.strerror}", file=sys.stderr)
+        return 2
+    counts = ", ".join(f"{k} {v}" for k, v in sorted(e.statuses.items()))
+    print(f"{scenario.name}: ensemble of {len(e.members)} (seed {e.seed}, +-{e.offset_tol_mm:g} mm, "
+          f"+-{e.rpy_tol_deg:g} deg): {counts}")
+    print("  median [p10, p90] over the completed members:")
+    for line in report_lines(e):
+        print(line)
+    print(f"  wall time {e.wall_time_s:.2f} s on {e.workers} worker{'s' if e.workers > 1 else ''}")
+    for f in files:
+        print(f"  {f}")
+    if e.interrupted:
+        print("interrupted: the members that finished are kept", file=sys.stderr)
+    return ensemble_exit(e.statuses, e.interrupted)
+
+
 def _config_path(arg: str | None) -> Path:
     from .build.assets import CONFIG_DIR
 
@@ -307,6 +367,9 @@ def main(argv=None) -> int:
         except ImportError as e:
             print(f"--replay needs meshcat ({e}); install it with `pip install meshcat`", file=sys.stderr)
             return 2
+    if args.ensemble is not None:  # by default beside the single run's files, not among them
+        out = Path(args.out) if args.out else Path("results") / scenario.name / "ensemble"
+        return _ensemble(args, scenario, model, path, out)
     out = Path(args.out) if args.out else Path("results") / scenario.name
     try:
         out.mkdir(parents=True, exist_ok=True)

@@ -222,18 +222,7 @@ def build_model(s, source: str = "<scenario>", welded: dict | None = None, urdf:
         raise ModelError(f"contact faces on joints {[model.names[j] for j in movable]}, which are neither "
                          "fixed nor free-flyers: lock them (reduced away) or make them free")
 
-    q0 = pin.neutral(model)
-    data = model.createData()
-    pin.forwardKinematics(model, data, q0)
-    for k in active:
-        _, _, m, e = spec.modules[k]
-        ee = end_effectors[e]
-        oMa = data.oMi[ee.joint] * ee.placement
-        rpy = np.radians(m.initial_rpy_deg)
-        oMb = oMa * pin.SE3(pin.rpy.rpyToMatrix(*rpy), np.array(m.initial_offset_mm) * 1e-3)
-        j = modules[k].joint
-        jMb = model.jointPlacements[j].inverse() * oMb * modules[k].placement.inverse()
-        q0[model.idx_qs[j]:model.idx_qs[j] + 7] = pin.SE3ToXYZQUAT(jMb)
+    q0 = start_configuration(model, spec, end_effectors, modules)
 
     fingers = []
     for link in finger_links:
@@ -251,6 +240,57 @@ def build_model(s, source: str = "<scenario>", welded: dict | None = None, urdf:
     return Model(s, spec, urdf, model, layers.geom, tuple(end_effectors), tuple(modules), spec.grasps, robot_joint,
                  tuple(fingers), layers.finger_geoms, layers.contact_joints, q0, np.zeros(model.nv), free,
                  faces, layout, sim_model(model_fields(parts)))
+
+
+def start_configuration(model: pin.Model, spec: SceneSpec, end_effectors, modules) -> np.ndarray:
+    """The configuration at the start (nq,): the arms' joints neutral (the locked ones are
+    reduced away) and each active module at its `initial_offset_mm` and `initial_rpy_deg`
+    from its end-effector's grasp frame O_a."""
+    q0 = pin.neutral(model)
+    data = model.createData()
+    pin.forwardKinematics(model, data, q0)
+    for k, (_, _, m, e) in enumerate(spec.modules):
+        if k in spec.welded_modules:
+            continue
+        ee = end_effectors[e]
+        oMa = data.oMi[ee.joint] * ee.placement
+        rpy = np.radians(m.initial_rpy_deg)
+        oMb = oMa * pin.SE3(pin.rpy.rpyToMatrix(*rpy), np.array(m.initial_offset_mm) * 1e-3)
+        j = modules[k].joint
+        jMb = model.jointPlacements[j].inverse() * oMb * modules[k].placement.inverse()
+        q0[model.idx_qs[j]:model.idx_qs[j] + 7] = pin.SE3ToXYZQUAT(jMb)
+    return q0
+
+
+def with_start(model: Model, s) -> Model:
+    """`model` with the modules' starts of scenario `s`: a scenario that differs from
+    `model.scenario` only in the modules' `initial_offset_mm` and `initial_rpy_deg`.
+
+    Nothing else of a Model depends on those starts (the fingers' openings at touch are
+    computed with the module centred, `_opening_at_touch`), so only `q0`, the spec's module
+    sections and the scenario change; the Pinocchio model, the sphere layers and the compiled
+    Model are shared, not copied. Raises ValueError for any other difference, or a welded model.
+    """
+    from dataclasses import replace
+
+    from ..scenario import modules_of, to_dict
+
+    if model.spec.welded:
+        raise ValueError("with_start: the model has welded modules; restart from the unwelded scene")
+
+    def without_starts(scenario) -> dict:
+        raw = to_dict(scenario)
+        for k in modules_of(scenario):
+            del raw[k]["initial_offset_mm"], raw[k]["initial_rpy_deg"]
+        return raw
+
+    if type(s) is not type(model.scenario) or without_starts(s) != without_starts(model.scenario):
+        raise ValueError("with_start: the scenarios differ in more than the modules' starts")
+    sections = list(modules_of(s).values())
+    spec = replace(model.spec, modules=tuple((name, prefix, sections[k], e)
+                                             for k, (name, prefix, _, e) in enumerate(model.spec.modules)))
+    q0 = start_configuration(model.pin_model, spec, model.end_effectors, model.modules)
+    return replace(model, scenario=s, spec=spec, q0=q0)
 
 
 @dataclass(frozen=True)

@@ -1,1 +1,2 @@
-"""Studies over many runs of one scenario: accuracy against run time, and numerical stability."""
+"""Studies over many runs of one scenario: accuracy against run time, numerical stability, and
+ensembles over perturbed starts."""

@@ -1,0 +1,469 @@
+"""An ensemble: one scenario run from many starts perturbed within a stated tolerance.
+
+At a converged step the residual offset of a grasp depends on microscopic details of its
+start (model.md Sec. 9): a run is one sample of a distribution. `ensemble` runs N copies of a
+scenario, each module's start moved uniformly within +-`offset_tol_mm` on each of x, y, z of
+`initial_offset_mm` and +-`rpy_tol_deg` on each of roll, pitch, yaw of `initial_rpy_deg`,
+in parallel processes, and reports per member its summary and across members the statistics
+of each headline quantity and the share of each outcome class.
+
+Member 0 is the scenario's own, unperturbed start; members 1..N-1 draw their perturbations
+from numpy's `default_rng(seed)`, member after member, so the first k members of an ensemble
+are the same whatever its size.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+import multiprocessing
+import os
+import signal
+import sys
+import traceback
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import SpotsimError
+from ..scenario import modules_of, replace
+
+#: Default perturbation of each module's start: +-10 um on each axis of the offset and
+#: +-0.01 deg on each of roll, pitch, yaw, well below any tolerance a drawing would state and
+#: far above the nanometres that already change the outcome.
+OFFSET_TOL_MM = 0.01
+RPY_TOL_DEG = 0.01
+
+#: The outcome of a completed grasp: `wedged` when its residual tilt max(|roll|, |pitch|)
+#: exceeds WEDGED_TILT_DEG or its residual offset exceeds WEDGED_OFFSET_MM; else `seated`.
+#: Measured at a converged step (12.5 us; 287 completed members of Cases I-III,
+#: docs/usage.md#ensembles), completed grasps fall in two groups with nothing between: seated,
+#: 0.09-0.30 mm off and rolled 0.27-0.99 deg, and wedged, 0.46-0.51 mm off and rolled
+#: 1.57-1.71 deg. The module rolls about x_a as it is left off along y_a (3.0-3.4 deg per mm in
+#: both groups, pitch under 0.03 deg), so each threshold sits in the middle of the same empty
+#: gap: either one alone separates the measured groups, and both guard a scene where the two
+#: decouple.
+WEDGED_TILT_DEG = 1.25
+WEDGED_OFFSET_MM = 0.38
+SEATED, WEDGED = "seated", "wedged"
+
+#: What a member ended as besides the simulator's statuses: its start interpenetrates
+#: (`rejected`), or something raised out of the run (`exception`: a bug to report).
+REJECTED, EXCEPTION = "rejected", "exception"
+#: Statuses of members that did not run to an outcome of their own: left out of every share.
+NOT_RUN = ("interrupted",)
+
+
+# ----------------------------------------------------------------------------- starts
+
+
+@dataclass(frozen=True)
+class Start:
+    """One member's start: per module section (`module`, or `tm1`, `tm2`), its
+    `initial_offset_mm` and `initial_rpy_deg`."""
+
+    offsets_mm: dict[str, tuple[float, float, float]]
+    rpy_deg: dict[str, tuple[float, float, float]]
+
+    def as_dict(self) -> dict:
+        return {k: {"initial_offset_mm": list(self.offsets_mm[k]), "initial_rpy_deg": list(self.rpy_deg[k])}
+                for k in self.offsets_mm}
+
+
+def perturbed_starts(scenario, n: int, seed: int = 0, offset_tol_mm: float = OFFSET_TOL_MM,
+                     rpy_tol_deg: float = RPY_TOL_DEG) -> list[Start]:
+    """The starts of an ensemble of n members: member 0 the scenario's own, the others each
+    module's start plus a uniform draw in [-tol, tol] on each axis (6 draws per module, in the
+    order x, y, z, roll, pitch, yaw, modules in `modules_of` order, member after member)."""
+    sections = modules_of(scenario)
+    rng = np.random.default_rng(seed)
+    draws = rng.uniform(-1.0, 1.0, size=(max(n - 1, 0), len(sections), 6))
+    tol = np.array([offset_tol_mm] * 3 + [rpy_tol_deg] * 3)
+    starts = []
+    for i in range(n):
+        offsets, rpys = {}, {}
+        for k, (name, m) in enumerate(sections.items()):
+            d = draws[i - 1, k] * tol if i else np.zeros(6)
+            offsets[name] = tuple(float(x) for x in np.add(m.initial_offset_mm, d[:3]))
+            rpys[name] = tuple(float(x) for x in np.add(m.initial_rpy_deg, d[3:]))
+        starts.append(Start(offsets, rpys))
+    return starts
+
+
+def member_scenario(scenario, start: Start):
+    """The scenario started at `start` (validated again)."""
+    return replace(scenario, **start.as_dict())
+
+
+# ----------------------------------------------------------------------------- one member
+
+
+@dataclass
+class Member:
+    """One member of an ensemble: its start, its status and message, and the summary.json
+    dictionary of its run (None when it did not run: rejected, exception, interrupted)."""
+
+    index: int
+    start: Start
+    status: str
+    message: str
+    summary: dict | None = None
+
+    def grasps(self) -> list[dict]:
+        return self.summary["grasps"] if self.summary else []
+
+
+# What a worker process keeps between members: the nominal scenario and its Model, built once.
+_WORKER: dict = {}
+
+
+def _init_worker(scenario, source: str, model, ignore_sigint: bool) -> None:
+    """A pool worker's start: keep the nominal Model (inherited under fork, built here under
+    spawn); Ctrl-C is the parent's to handle."""
+    if ignore_sigint:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if model is None:
+        from ..build.model import build_model
+
+        model = build_model(scenario, source)
+    _WORKER.update(scenario=scenario, source=source, model=model)
+
+
+def run_member(index: int, start: Start, model=None, source: str = "<ensemble>") -> Member:
+    """Run one member from `start` on the nominal `model` (the worker's when None), with its
+    start swapped in (`build.model.with_start`). Never raises but on the user's Ctrl-C: a
+    rejected start or an exception is the member's status."""
+    from ..build.model import with_start
+    from ..sim.run import check_start, simulate
+
+    if model is None:  # in a pool worker
+        model, source = _WORKER["model"], _WORKER["source"]
+    stage = "the start"
+    try:
+        scenario = member_scenario(model.scenario, start)
+        mine = with_start(model, scenario)
+        check_start(mine, source)
+        stage = "simulate"
+        result = simulate(scenario, model=mine, source=source)
+    except SpotsimError as e:  # the perturbed start's own problem, found before anything ran
+        if stage != "the start":
+            raise
+        return Member(index, start, REJECTED, str(e).replace("\n", "; "))
+    except Exception as e:  # nothing here should raise: the member reports it, the others go on
+        where = traceback.extract_tb(e.__traceback__)[-1]
+        return Member(index, start, EXCEPTION, f"{type(e).__name__} raised by {stage}: {e} "
+                                               f"({Path(where.filename).name}:{where.lineno})")
+    return Member(index, start, result.status, result.summary["message"], result.summary)
+
+
+def _run_task(task) -> Member:
+    return run_member(*task)
+
+
+# ----------------------------------------------------------------------------- the ensemble
+
+
+@dataclass
+class EnsembleResult:
+    """An ensemble's members (in index order; those never run are `interrupted`) and what it
+    was run with. `statistics` and `classes` are computed from the members (see `summarise`)."""
+
+    scenario: object
+    seed: int
+    offset_tol_mm: float
+    rpy_tol_deg: float
+    members: list[Member]
+    interrupted: bool = False
+    wall_time_s: float = math.nan
+    workers: int = 1
+    summary: dict = field(init=False)
+
+    def __post_init__(self):
+        self.summary = summarise(self)
+
+    @property
+    def statuses(self) -> dict[str, int]:
+        return self.summary["statuses"]
+
+    @property
+    def statistics(self) -> dict:
+        return self.summary["statistics"]
+
+    @property
+    def classes(self) -> dict:
+        return self.summary["classes"]
+
+
+def ensemble(scenario, n: int, *, seed: int = 0, offset_tol_mm: float = OFFSET_TOL_MM,
+             rpy_tol_deg: float = RPY_TOL_DEG, workers: int | None = None, progress: bool = False,
+             model=None, source: str = "<scenario>") -> EnsembleResult:
+    """Run `scenario` from n starts, member 0 unperturbed and the others perturbed within the
+    tolerances (`perturbed_starts`), in `workers` processes (default: os.cpu_count(); 1 runs
+    them here, one after the other).
+
+    model: the scenario's Model if already built (each worker process otherwise builds it once).
+    Never raises on a member's physics or failure: each is counted with its status. Ctrl-C
+    stops the ensemble; the members that finished are kept, the others are `interrupted`.
+    """
+    import time
+
+    from ..sim.run import progress_bar
+
+    if not (isinstance(n, int | np.integer) and n >= 1):
+        raise SpotsimError(f"ensemble size n = {n}: must be an integer >= 1")
+    for name, tol in (("offset_tol_mm", offset_tol_mm), ("rpy_tol_deg", rpy_tol_deg)):
+        if not (math.isfinite(tol) and tol >= 0):
+            raise SpotsimError(f"{name} = {tol}: must be finite and >= 0")
+    workers = min(int(workers or os.cpu_count() or 1), n)
+    if workers < 1:
+        raise SpotsimError(f"workers = {workers}: must be >= 1")
+    fork = sys.platform.startswith("linux")  # elsewhere the pool spawns: each worker builds its Model
+    if model is None:  # here too under spawn: a scenario that cannot be built fails before the pool
+        from ..build.model import build_model
+
+        model = build_model(scenario, source)
+    elif model.scenario != scenario:
+        raise SpotsimError("ensemble: `model` was built from another scenario than `scenario`")
+    starts = perturbed_starts(scenario, n, seed, offset_tol_mm, rpy_tol_deg)
+    members: list[Member | None] = [None] * n
+    interrupted = False
+    bar = progress_bar(n, progress, what="ensemble", unit="run")
+    wall0 = time.perf_counter()
+    try:
+        if workers == 1:
+            for i, start in enumerate(starts):
+                members[i] = m = run_member(i, start, model, source)
+                bar.update(1)
+                if m.status == "interrupted":  # Ctrl-C ended this member's run
+                    interrupted = True
+                    break
+        else:
+            interrupted = _in_pool(scenario, source, model, starts, members, workers, bar, fork)
+    except KeyboardInterrupt:
+        interrupted = True
+    finally:
+        bar.close()
+    wall = time.perf_counter() - wall0
+    for i, m in enumerate(members):
+        if m is None:
+            members[i] = Member(i, starts[i], "interrupted", "not run: the ensemble was interrupted")
+    return EnsembleResult(scenario, seed, offset_tol_mm, rpy_tol_deg, members, interrupted, wall, workers)
+
+
+def _in_pool(scenario, source, model, starts, members, workers, bar, fork: bool) -> bool:
+    """Run the members in a pool of `workers` processes into `members`; True if interrupted.
+
+    fork (Linux): the workers inherit the loaded compiled kernels and the Model. Otherwise they
+    are spawned, import spotsim, load the kernels from numba's cache and build the Model once
+    each.
+    """
+    if fork:  # load the compiled loop and start check here once, for every worker to inherit
+        from ..sim.data import make_data
+        from ..sim.run import compile_loop, initial_contacts
+
+        compile_loop(model, make_data(model))
+        initial_contacts(model)
+    ctx = multiprocessing.get_context("fork" if fork else "spawn")
+    pool = ctx.Pool(workers, initializer=_init_worker,
+                    initargs=(scenario, source, model if fork else None, True))
+    closed = False
+    try:
+        for m in pool.imap_unordered(_run_task, [(i, s) for i, s in enumerate(starts)]):
+            members[m.index] = m
+            bar.update(1)
+        pool.close()  # the workers end on their own (terminating spawned ones leaks their semaphores)
+        closed = True
+        return False
+    except KeyboardInterrupt:
+        return True
+    finally:
+        if not closed:  # interrupted, or an error in the pool: stop the workers now
+            pool.terminate()
+        pool.join()
+
+
+# ----------------------------------------------------------------------------- statistics
+
+
+def statistics(values) -> dict:
+    """median, 10th and 90th percentiles (numpy's linear interpolation), min, max and count of
+    the finite values (None, count 0, when there are none)."""
+    x = np.asarray([v for v in values if v is not None and math.isfinite(v)], dtype=float)
+    if not len(x):
+        return {"median": None, "p10": None, "p90": None, "min": None, "max": None, "count": 0}
+    p10, median, p90 = np.percentile(x, [10, 50, 90])
+    return {"median": float(median), "p10": float(p10), "p90": float(p90), "min": float(x.min()),
+            "max": float(x.max()), "count": int(len(x))}
+
+
+def classify(status: str, grasp: dict | None) -> str:
+    """A grasp's outcome class: `seated` or `wedged` when it completed (WEDGED_TILT_DEG,
+    WEDGED_OFFSET_MM), else its member's status (`incomplete`, `diverged`, ...)."""
+    if grasp is None or grasp.get("completed_s") is None:
+        return "incomplete" if status == "completed" else status
+    roll, pitch, _ = grasp["residual_rpy_deg"]
+    wedged = max(abs(roll), abs(pitch)) > WEDGED_TILT_DEG or grasp["residual_offset_norm_mm"] > WEDGED_OFFSET_MM
+    return WEDGED if wedged else SEATED
+
+
+def member_row(m: Member, n_grasps: int, centroid: bool) -> dict:
+    """The members table's row of one member: its start, status and each grasp's headline
+    quantities (None where the grasp did not complete) and class; with `centroid` (a
+    free-floating robot) the robot centroid's displacement over each grasp."""
+    row = {"member": m.index, "status": m.status}
+    for k in m.start.offsets_mm:
+        for axis, x in zip("xyz", m.start.offsets_mm[k], strict=True):
+            row[f"{k}_offset_{axis}_mm"] = x
+        for name, x in zip(("roll", "pitch", "yaw"), m.start.rpy_deg[k], strict=True):
+            row[f"{k}_{name}_deg"] = x
+    grasps = m.grasps()
+    for g in range(n_grasps):
+        entry = grasps[g] if g < len(grasps) else None
+        p = grasp_prefix(g, n_grasps)
+        done = entry is not None and entry["completed_s"] is not None
+        row[f"{p}class"] = classify(m.status, entry)
+        row[f"{p}completed_s"] = entry["completed_s"] if done else None
+        res = entry["residual_offset_mm"] if done else [None] * 3
+        for axis, x in zip("xyz", res, strict=True):
+            row[f"{p}residual_{axis}_mm"] = x
+        row[f"{p}residual_norm_mm"] = entry["residual_offset_norm_mm"] if done else None
+        rpy = entry["residual_rpy_deg"] if done else [None] * 3
+        for name, x in zip(("roll", "pitch", "yaw"), rpy, strict=True):
+            row[f"{p}residual_{name}_deg"] = x
+        row[f"{p}residual_tilt_deg"] = max(abs(rpy[0]), abs(rpy[1])) if done else None
+        row[f"{p}peak_force_norm_N"] = entry["peak_force_norm_N"] if done else None
+        row[f"{p}peak_torque_norm_Nm"] = entry["peak_torque_norm_Nm"] if done else None
+        if centroid:
+            d = entry.get("robot_centroid_displacement_mm") if done else None
+            for axis, x in zip("xyz", d or [None] * 3, strict=True):
+                row[f"{p}centroid_displacement_{axis}_mm"] = x
+            row[f"{p}centroid_displacement_norm_mm"] = float(np.linalg.norm(d)) if d else None
+    s = m.summary or {}
+    row["sim_time_s"] = s.get("sim_time_s")
+    row["wall_time_s"] = s.get("wall_time_s")
+    row["message"] = m.message
+    return row
+
+
+def grasp_prefix(g: int, n_grasps: int) -> str:
+    """Column prefix of grasp g: none for one grasp, `g1_`, `g2_`... for several."""
+    return "" if n_grasps == 1 else f"g{g + 1}_"
+
+
+#: The headline quantities whose statistics an ensemble reports, per grasp (members table
+#: columns without the grasp prefix), over the members whose grasp completed.
+HEADLINE = ("residual_norm_mm", "residual_x_mm", "residual_y_mm", "residual_z_mm", "residual_roll_deg",
+            "residual_pitch_deg", "residual_yaw_deg", "residual_tilt_deg", "peak_force_norm_N",
+            "peak_torque_norm_Nm", "completed_s", "centroid_displacement_x_mm", "centroid_displacement_y_mm",
+            "centroid_displacement_z_mm", "centroid_displacement_norm_mm")
+
+
+def summarise(e: EnsembleResult) -> dict:
+    """What ensemble.json holds besides the members' starts: the status counts; per grasp the
+    statistics of each headline quantity over its completed members and the outcome classes
+    (count and fraction of the members that ran: all but the interrupted)."""
+    n_grasps = len(modules_of(e.scenario))
+    rows = [member_row(m, n_grasps, e.scenario.kind == "dual_arm") for m in e.members]
+    statuses: dict[str, int] = {}
+    for m in e.members:
+        statuses[m.status] = statuses.get(m.status, 0) + 1
+    ran = [r for r in rows if r["status"] not in NOT_RUN]
+    stats, classes = {}, {}
+    for g in range(n_grasps):
+        p = grasp_prefix(g, n_grasps)
+        key = f"grasp_{g + 1}" if n_grasps > 1 else "grasp"
+        stats[key] = {q: statistics(r.get(f"{p}{q}") for r in ran) for q in HEADLINE if f"{p}{q}" in rows[0]}
+        counts: dict[str, int] = {}
+        for r in ran:
+            counts[r[f"{p}class"]] = counts.get(r[f"{p}class"], 0) + 1
+        classes[key] = {c: {"count": k, "fraction": k / len(ran)} for c, k in sorted(counts.items())}
+    return {"statuses": statuses, "statistics": stats, "classes": classes, "rows": rows}
+
+
+# ----------------------------------------------------------------------------- output
+
+
+def classification_rule() -> str:
+    return (f"a completed grasp is wedged when max(|roll|, |pitch|) of its residual exceeds {WEDGED_TILT_DEG:g} "
+            f"deg or its residual offset exceeds {WEDGED_OFFSET_MM:g} mm, else seated; a grasp that did not "
+            f"complete is classed by its member's status")
+
+
+def ensemble_json(e: EnsembleResult) -> dict:
+    """The ensemble.json dictionary."""
+    from ..version import __version__
+
+    s = e.summary
+    return {
+        "scenario": e.scenario.name,
+        "spotsim_version": __version__,
+        "status": "interrupted" if e.interrupted else "completed",
+        "members": len(e.members),
+        "seed": e.seed,
+        "perturbation": {"offset_tol_mm": e.offset_tol_mm, "rpy_tol_deg": e.rpy_tol_deg,
+                         "distribution": "uniform in [-tol, tol] on each of x, y, z and roll, pitch, yaw of "
+                                         "each module's start; member 0 unperturbed"},
+        "classification": {"rule": classification_rule(), "wedged_tilt_deg": WEDGED_TILT_DEG,
+                           "wedged_offset_mm": WEDGED_OFFSET_MM},
+        "statistics_over": "per quantity, the members whose grasp completed (count); classes over the members "
+                           "that ran (all but the interrupted)",
+        "workers": e.workers,
+        "wall_time_s": e.wall_time_s,
+        "statuses": s["statuses"],
+        "classes": s["classes"],
+        "statistics": s["statistics"],
+        "starts": [{"member": m.index, "status": m.status, **m.start.as_dict()} for m in e.members],
+    }
+
+
+def members_csv(e: EnsembleResult) -> str:
+    """The members table: one row per member (`member_row`), floats to 9 significant digits."""
+    rows = e.summary["rows"]
+    columns = list(dict.fromkeys(c for r in rows for c in r))
+    buf = io.StringIO()
+    w = csv.writer(buf)
+    w.writerow(columns)
+    for r in rows:
+        w.writerow(["" if r.get(c) is None else f"{r[c]:.9g}" if isinstance(r[c], float) else r[c] for c in columns])
+    return buf.getvalue()
+
+
+def write_ensemble(e: EnsembleResult, out_dir) -> list[Path]:
+    """Write ensemble.json, members.csv and scenario.yaml (the nominal scenario) into out_dir;
+    ensemble.json last and atomically."""
+    from ..results import _atomic_write
+    from ..scenario import to_yaml
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / ENSEMBLE_JSON).unlink(missing_ok=True)
+    files = [out / "members.csv", out / "scenario.yaml", out / ENSEMBLE_JSON]
+    _atomic_write(files[0], members_csv(e))
+    _atomic_write(files[1], to_yaml(e.scenario))
+    _atomic_write(files[2], json.dumps(ensemble_json(e), indent=2, allow_nan=True) + "\n")
+    return files
+
+
+ENSEMBLE_JSON = "ensemble.json"
+#: The quantities the command line prints, per grasp, with their format.
+PRINTED = (("residual_norm_mm", "residual offset e (mm)", ".3f"), ("residual_tilt_deg", "residual tilt (deg)", ".2f"),
+           ("peak_force_norm_N", "peak force |F| (N)", ".1f"), ("completed_s", "completion time (s)", ".3f"),
+           ("centroid_displacement_norm_mm", "robot centroid displacement |d| (mm)", ".3f"))
+
+
+def report_lines(e: EnsembleResult) -> list[str]:
+    """A short table of the headline quantities (median [p10, p90], count) and the classes."""
+    lines = []
+    for key, stats in e.statistics.items():
+        lines.append(f"  {key.replace('_', ' ')}:")
+        for q, label, f in PRINTED:
+            if q in stats and stats[q]["count"]:
+                st = stats[q]
+                lines.append(f"    {label:<38} {st['median']:{f}} [{st['p10']:{f}}, {st['p90']:{f}}]  "
+                             f"n = {st['count']}")
+        shares = ", ".join(f"{c} {v['fraction']:.0%} ({v['count']})" for c, v in e.classes[key].items())
+        lines.append(f"    {'outcome':<38} {shares or 'none ran'}")
+    return lines
