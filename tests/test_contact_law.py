@@ -248,3 +248,125 @@ def test_carried_deflection_turns_with_the_normal():
     tilted = np.array([np.sin(0.1), 0.0, np.cos(0.1)])
     s, _, _ = bristle((1e-5, 0.0, 0.0), (0.0, 0.0, 0.0), tilted, 100.0, 1e-4, BRISTLE)
     assert abs(np.dot(s, tilted)) < 1e-18 and np.linalg.norm(s) == pytest.approx(1e-5, rel=1e-12)
+
+
+# Friction between mu_k F_n and mu_s F_n, where Eq. (16)'s switch of the cap decides.
+PRESS = 10.0  # N
+STATIC, KINETIC = BRISTLE.mu_s * PRESS, BRISTLE.mu_k * PRESS  # 3.0 N, 2.6 N
+BLOCK_MASS = 0.01  # kg: m x'' + c_b x' + k_b x is overdamped (c_b^2 > 4 m k_b), its slow pole at -394.5 /s
+BLOCK_DT = 1e-5  # s
+#: A held bristle settles to load / k_b to round-off: the slow pole has decayed by e^-40 in 0.1 s.
+HELD_RTOL = 1e-9
+
+
+def pulled_block(load, t_end, F_n=lambda t: PRESS, normal=lambda t: NORMAL, dt=BLOCK_DT, mass=BLOCK_MASS):
+    """A block held on a plane by the normal force F_n(t) (N) and pulled by load(t) (N, 3-vector
+    in the tangent plane of normal(t)), its friction the bristle law; the plane may turn about
+    the contact point, and the block's velocity stays in it. Symplectic Euler steps of dt.
+
+    Returns t (n,), deflection s (n, 3), velocity v (n, 3), friction F_f (n, 3), state (n,).
+    """
+    n_steps = round(t_end / dt)
+    t = np.arange(1, n_steps + 1) * dt
+    S, V, F, state = np.zeros((n_steps, 3)), np.zeros((n_steps, 3)), np.zeros((n_steps, 3)), np.zeros(n_steps, int)
+    s, v = (0.0, 0.0, 0.0), np.zeros(3)
+    for k in range(n_steps):
+        n = normal(t[k])
+        s, F_f, state[k] = bristle(s, v, n, F_n(t[k]), dt, BRISTLE)
+        v = v + dt * (load(t[k]) + np.array(F_f)) / mass
+        v -= np.dot(v, normal(t[k] + dt)) * normal(t[k] + dt)  # the plane holds the block in it
+        S[k], V[k], F[k] = s, v, F_f
+    return t, S, V, F, state
+
+
+def along_x(magnitude):
+    """A load of `magnitude(t)` N along x."""
+    return lambda t: np.array([magnitude(t), 0.0, 0.0])
+
+
+def sticking_block_response(load, t):
+    """x(t), x'(t) of the block while its bristle holds (s = x) under a step `load` from rest:
+    m x'' + c_b x' + k_b x = load, overdamped, poles p1 (slow) and p2."""
+    m, c, k = BLOCK_MASS, BRISTLE.c_b, BRISTLE.k_b
+    root = np.sqrt(c * c - 4 * m * k)
+    p1, p2 = (-c + root) / (2 * m), (-c - root) / (2 * m)
+    x = load / k * (1 - (p2 * np.exp(p1 * t) - p1 * np.exp(p2 * t)) / (p2 - p1))
+    v = load / k * p1 * p2 * (np.exp(p2 * t) - np.exp(p1 * t)) / (p2 - p1)
+    return x, v
+
+
+@pytest.mark.parametrize("load", [2.7, 2.95])
+def test_slowly_ramped_load_between_kinetic_and_static_friction_is_held(load):
+    """A load between mu_k F_n and mu_s F_n, ramped up over 0.5 s, is held: the block creeps at
+    load rate / k_b < v_d, so the cap stays mu_s F_n, and it settles with deflection load / k_b."""
+    t, s, v, F, state = pulled_block(along_x(lambda t: load * min(t / 0.5, 1.0)), 0.7)
+    assert KINETIC < load < STATIC
+    assert np.abs(v[:, 0]).max() < BRISTLE.v_d and (state == STICKING).all()
+    assert BRISTLE.k_b * np.linalg.norm(s, axis=1).max() < STATIC  # never saturated
+    assert s[-1, 0] == pytest.approx(load / BRISTLE.k_b, rel=HELD_RTOL) and abs(v[-1, 0]) < 1e-12
+
+
+@pytest.mark.parametrize("load", [2.65, 2.8])
+def test_step_load_between_kinetic_and_static_friction_slides_if_it_reaches_the_kinetic_cap_fast(load):
+    """A step load between mu_k F_n and mu_s F_n, from rest. While the bristle holds, the block
+    follows m x'' + c_b x' + k_b x = load (s = x) whatever the cap; Eq. (16) makes the cap
+    mu_k F_n / k_b whenever |v| > v_d, which the first microseconds of the step exceed. If x
+    reaches mu_k F_n / k_b while x' > v_d, the bristle saturates at the kinetic cap, friction is
+    mu_k F_n < load, and the block slides for ever (a saturated bristle's speed only grows).
+    Otherwise x' falls below v_d first, the cap is mu_s F_n / k_b > load / k_b, and it sticks.
+    Here x' ~ 394.5/s (load - mu_k F_n) / k_b at the kinetic cap: 2.8 N slides, 2.65 N sticks
+    (the divide is near 2.676 N), where a slow ramp holds both."""
+    x_cap = KINETIC / BRISTLE.k_b
+    t_cap = brentq(lambda t: sticking_block_response(load, t)[0] - x_cap, 1e-9, 1.0)
+    slides = sticking_block_response(load, t_cap)[1] > BRISTLE.v_d
+    assert slides == (load == 2.8)  # both outcomes are exercised
+    t, s, v, F, state = pulled_block(along_x(lambda t: load), 0.1)
+    if not slides:
+        assert s[-1, 0] == pytest.approx(load / BRISTLE.k_b, rel=HELD_RTOL) and state[-1] == STICKING
+        return
+    saturated = np.flatnonzero(np.isclose(BRISTLE.k_b * s[:, 0], KINETIC, rtol=1e-12))
+    assert saturated[0] * BLOCK_DT == pytest.approx(t_cap, abs=2 * BLOCK_DT)  # the closed form's crossing
+    after = saturated[0]
+    assert (state[after:] == SLIPPING).all() and np.allclose(F[after:, 0], -KINETIC, rtol=1e-12, atol=0)
+    accel = (v[-1, 0] - v[after, 0]) / (t[-1] - t[after])
+    assert accel == pytest.approx((load - KINETIC) / BLOCK_MASS, rel=1e-9)
+
+
+def test_falling_normal_force_lets_a_held_block_slip_when_the_load_exceeds_static_friction():
+    """Under a held 2.5 N, a normal force falling at 10 N/s from 12 N holds the block while
+    2.5 N < mu_s F_n(t); the bristle saturates at t* = (12 - 2.5 / mu_s) / 10 = 0.3667 s,
+    within two steps (the cap falls by mu_s 10 N/s dt a step), and the block then slides."""
+    load, t_star = 2.5, (12.0 - 2.5 / BRISTLE.mu_s) / 10.0
+    t, s, v, F, state = pulled_block(along_x(lambda t: load), 0.5, F_n=lambda t: 12.0 - 10.0 * t)
+    held = BRISTLE.k_b * s[:, 0] > load * (1 - HELD_RTOL)
+    onset = t[np.flatnonzero(~held & (t > 0.1))[0]]  # after the step's transient
+    assert onset == pytest.approx(t_star, abs=2 * BLOCK_DT)
+    before = (t > 0.1) & (t < t_star - 2 * BLOCK_DT)
+    assert held[before].all() and (state[before] == STICKING).all() and np.abs(v[before, 0]).max() < 1e-9
+    assert state[-1] == SLIPPING and v[-1, 0] > BRISTLE.v_d
+    assert -F[-1, 0] == pytest.approx(BRISTLE.mu_k * (12.0 - 10.0 * t[-1]), rel=1e-12)
+
+
+#: A plane turning at 1 rad/s under a held load: each step rescales the carried deflection to
+#: its length in the new plane, which turns it by ~(Omega dt)^2 towards the turning axis, and
+#: the block creeps (~1e-10 m/s) to re-bend it. The force out of balance is the block's
+#: inertia in that creep, far below c_b |s| Omega^2 dt = 7e-8 N; measured 5e-10 N.
+TURNING_FORCE_TOL = 1e-8  # N
+
+
+def test_held_deflection_turns_with_a_turning_normal():
+    """The contact plane turns at 1 rad/s about y by 0.5 rad while a 2.5 N load (in the plane,
+    partly along the turning axis) is held under 10 N: the deflection stays in the plane and
+    the friction stays equal and opposite to the load."""
+    omega, load, beta = 1.0, 2.5, 0.6  # rad/s, N, rad: the load's angle from the turning direction
+    angle = lambda t: omega * max(t - 0.1, 0.0)  # held still for 0.1 s first
+    normal = lambda t: np.array([np.sin(angle(t)), 0.0, np.cos(angle(t))])
+    pull = lambda t: load * (np.cos(beta) * np.array([np.cos(angle(t)), 0.0, -np.sin(angle(t))])
+                             + np.sin(beta) * np.array([0.0, 1.0, 0.0]))
+    t, s, v, F, state = pulled_block(pull, 0.6, normal=normal)
+    turning = t > 0.1
+    normals, loads = np.array([normal(x) for x in t[turning]]), np.array([pull(x) for x in t[turning]])
+    assert angle(t[-1]) == pytest.approx(0.5)
+    assert np.abs(np.einsum("ij,ij->i", s[turning], normals)).max() < 1e-12 * np.linalg.norm(s[turning], axis=1).min()
+    assert np.abs(F[turning] + loads).max() < TURNING_FORCE_TOL
+    assert (state[turning] == STICKING).all()
