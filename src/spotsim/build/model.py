@@ -164,6 +164,7 @@ def contact_law(s) -> ContactLaw:
         bristle=BristleParams(f.mu_k, f.mu_s, f.bristle_stiffness_N_m, f.bristle_damping_N_s_m,
                               f.velocity_deadband_m_s),
         common_point=c.force_point == "common",
+        gradient=c.normal_direction == "gradient",
     )
 
 

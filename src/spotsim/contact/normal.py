@@ -27,6 +27,15 @@ def indentation(phi):
 
 
 @njit
+def hertz_potential(phi, K):
+    """The elastic energy a pair stores at penetration phi, J: the integral of the Hertz force
+    K delta^a over phi from 0, with delta = phi / 2 (so dphi = 2 ddelta): 2 K delta^(a+1) / (a+1),
+    0.8 K (phi/2)^2.5. Under `contact.normal_direction: gradient` the pairs' elastic forces are
+    its gradient."""
+    return 2.0 * K * indentation(phi) ** (HERTZ_EXPONENT + 1.0) / (HERTZ_EXPONENT + 1.0)
+
+
+@njit
 def onset_rate(delta_dot, floor):
     """delta_dot_minus of a pair at its first step in contact: its indentation rate then (m/s,
     > 0 approaching), raised to `floor` (m/s, a floor on the indentation rate, not on the
