@@ -150,7 +150,13 @@ class Contact:
     broad_phase: str = key("coal", _choice("coal", "none"), "coal culling, or the paper's all-pairs search")
     skin_mm: float = key(1.0, _non_negative, "extra coal security margin beyond the contact reach")
     restitution: float = key(0.8, _open_unit, "coefficient of restitution c_r (not in the paper)")
-    approach_speed_floor_m_s: float = key(1e-2, _positive, "floor on each pair's onset approach speed")
+    approach_speed_floor_m_s: float = key(1e-2, _positive,
+                                          "floor on each pair's onset normal approach speed (the rate of phi); "
+                                          "the damping's delta_dot_minus is floored at half of it")
+    normal_direction: str = key("common_normal", _choice("common_normal", "gradient"),
+                                "direction of a pair's normal force: the common normal n_c (Eq. 11, the paper), "
+                                "or d / (d . n_c) with d of Eq. 7, the gradient of the pair's Hertz potential "
+                                "(energy-consistent; friction keeps n_c's tangent plane)")
     force_point: str = key("common", _choice("common", "sphere_centres"),
                            "where a pair's force acts: one common point (Eq. 19-21), or each "
                            "body's own sphere centre (a negative control that breaks angular momentum)")

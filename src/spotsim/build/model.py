@@ -23,7 +23,7 @@ from ..contact.detection import cutoff_distance
 from ..contact.forces import ContactLaw
 from ..contact.friction import BristleParams
 from ..contact.layers import FaceTable, MasterSpheres, SlaveSpheres
-from ..contact.normal import damping_factor, hertz_stiffness
+from ..contact.normal import damping_factor, hertz_stiffness, indentation
 from ..errors import ModelError, ScenarioError
 from ..sim.bodies import free_bodies
 from ..sim.integrators import ADAPTIVE, METHODS, tableau
@@ -157,11 +157,14 @@ def contact_law(s) -> ContactLaw:
         K=hertz_stiffness(c.youngs_modulus_finger_Pa, c.poisson_finger, c.youngs_modulus_groove_Pa, c.poisson_groove,
                           r1, r2),
         damping=damping_factor(c.restitution),
-        floor=c.approach_speed_floor_m_s,
+        # the key bounds the normal approach speed; the law's floor is on delta_dot_minus, the
+        # rate of delta = phi / 2 at that speed (the one place the two are converted)
+        floor=indentation(c.approach_speed_floor_m_s),
         cutoff=cutoff_distance(r1, r2, min(r1, r2)),
         bristle=BristleParams(f.mu_k, f.mu_s, f.bristle_stiffness_N_m, f.bristle_damping_N_s_m,
                               f.velocity_deadband_m_s),
         common_point=c.force_point == "common",
+        gradient=c.normal_direction == "gradient",
     )
 
 

@@ -31,6 +31,26 @@ def penetration(c1, n1, r1, c2, n2, r2):
     return (d0, d1, d2), phi, facing and disc >= 0.0 and phi > 0.0
 
 
+@njit
+def force_direction(c1, c2, n_c, phi, gradient):
+    """The direction g of a pair's normal force on the master, scaled so that g . n_c = 1
+    (3-tuple): the force is F_n g, and the pair's indentation rate is -(v . g) / 2.
+
+    gradient False, the paper's law (Eq. 11): g = n_c.
+    gradient True, [variant] g = d / (d . n_c) with d = c1 - c2 + phi n_c (Eq. 7). Moving A
+    by dc changes phi by -g . dc (differentiate |c1 - c2 + phi n_c| = r1 + r2), so the elastic
+    force K delta^1.5 g is the gradient of the pair's Hertz potential, and the pair's normal
+    damping opposes the rate of phi and only dissipates. d . n_c = sqrt(chi^2 - w) >= chi > 0
+    for any pair whose phi stays below r1 + r2, which a run's divergence check ensures.
+    c1, c2: sphere centres; n_c: common normal (3-vectors, world); phi: penetration, m.
+    """
+    if not gradient:
+        return (n_c[0], n_c[1], n_c[2])
+    d0, d1, d2 = c1[0] - c2[0] + phi * n_c[0], c1[1] - c2[1] + phi * n_c[1], c1[2] - c2[2] + phi * n_c[2]  # Eq. (7)
+    dn = d0 * n_c[0] + d1 * n_c[1] + d2 * n_c[2]
+    return (d0 / dn, d1 / dn, d2 / dn)
+
+
 
 @njit
 def contact_point(c1, c2, r1, r2, n_c, phi):

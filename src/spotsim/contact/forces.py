@@ -14,9 +14,9 @@ import numpy as np
 
 from ..jit import njit, njit_inline
 from ..linalg import add3, mv3
-from .detection import contact_point, penetration
+from .detection import contact_point, force_direction, penetration
 from .friction import BristleParams, bristle
-from .normal import indentation, normal_force
+from .normal import indentation, normal_force, onset_rate
 
 
 class ContactLaw(NamedTuple):
@@ -26,10 +26,11 @@ class ContactLaw(NamedTuple):
     r2: float  # slave (groove) sphere radius, m
     K: float  # Hertz stiffness, Eq. (13), N/m^1.5
     damping: float  # Zhang factor of Eq. (12), 6 (1 - c_r) / ((2 c_r - 1)^2 + 3)
-    floor: float  # least onset approach speed (of delta = phi / 2), m/s
+    floor: float  # least delta_dot_minus, the onset rate of delta = phi / 2 (half an approach speed), m/s
     cutoff: float  # largest centre distance of a pair in contact the run allows, m
     bristle: BristleParams
     common_point: bool  # a pair's force acts at one common point (Eq. 19-21), else at each sphere's centre
+    gradient: bool  # normal force along d / (d . n_c) (the gradient of the Hertz potential), else along n_c (Eq. 11)
 
 
 class Contacts(NamedTuple):
@@ -46,7 +47,7 @@ class Contacts(NamedTuple):
     speed: np.ndarray  # (k,) |relative velocity| at the contact point, m/s
     state: np.ndarray  # (k,) friction.SLIPPING or friction.STICKING
     s: np.ndarray  # (k, 3) bristle deflection after the evaluation, m
-    v_minus: np.ndarray  # (k,) onset approach speed, m/s
+    v_minus: np.ndarray  # (k,) onset indentation rate delta_dot_minus, m/s
 
 
 class Memory(NamedTuple):
@@ -54,7 +55,7 @@ class Memory(NamedTuple):
 
     key: np.ndarray  # (k,)
     s: np.ndarray  # (k, 3) bristle deflection, m
-    v_minus: np.ndarray  # (k,) onset approach speed, m/s
+    v_minus: np.ndarray  # (k,) onset indentation rate delta_dot_minus, m/s
 
 
 def no_contacts() -> Contacts:
@@ -88,8 +89,10 @@ def pair_forces(m, d, h):
     candidate pair in contact, at d's kinematics, its bristles bent over h (s) from d.memory.
 
     One pass over the candidates, each pair's arithmetic in scalars. A pair in the memory
-    keeps its onset speed and bristle; a new one starts from its approach speed (floored)
-    and an unbent bristle. The memory is left as it is (`commit_memory`).
+    keeps its onset indentation rate and bristle; a new one starts from its indentation rate
+    (floored) and an unbent bristle. The normal force acts along `force_direction` (n_c in
+    the paper's law); friction's tangent plane is always that of n_c. The memory is left as
+    it is (`commit_memory`).
     """
     k = d.candidates.master.shape[0]
     # the outputs as rows of three blocks: an allocation costs ~25 ns, a step makes dozens
@@ -122,8 +125,9 @@ def pair_forces(m, d, h):
         v_B = _point_velocity(d.vo_W[j2], d.w_W[j2], d.p_W[j2], point)
         v_rel = ((slide[0] * rate + v_A[0]) - v_B[0], (slide[1] * rate + v_A[1]) - v_B[1],
                  (slide[2] * rate + v_A[2]) - v_B[2])
-        # rate of delta = phi / 2
-        delta_dot = -0.5 * (v_rel[0] * n_c[0] + v_rel[1] * n_c[1] + v_rel[2] * n_c[2])
+        g = force_direction(c1, c2, n_c, phi, m.law.gradient)
+        # rate of delta = phi / 2, which is linear: the indentation of phi's rate -(v . g)
+        delta_dot = indentation(-(v_rel[0] * g[0] + v_rel[1] * g[1] + v_rel[2] * g[2]))
         key = d.candidates.key[i]
         while pos < n_mem and d.memory.key[pos] < key:
             pos += 1
@@ -131,7 +135,7 @@ def pair_forces(m, d, h):
             v_minus = d.memory.v_minus[pos]
             s_prev = (d.memory.s[pos, 0], d.memory.s[pos, 1], d.memory.s[pos, 2])
         else:
-            v_minus = max(delta_dot, m.law.floor)
+            v_minus = onset_rate(delta_dot, m.law.floor)
             s_prev = (0.0, 0.0, 0.0)
         F_n = normal_force(indentation(phi), delta_dot, v_minus, m.law.K, m.law.damping)
         s, F_f, state = bristle(s_prev, v_rel, n_c, F_n, h, m.law.bristle)
@@ -139,7 +143,7 @@ def pair_forces(m, d, h):
         phi_out[n], v_minus_out[n], state_out[n] = phi, v_minus, state
         for a in range(3):
             point_out[n, a], c1_out[n, a], c2_out[n, a], s_out[n, a] = point[a], c1[a], c2[a], s[a]
-            force_out[n, a] = F_n * n_c[a] + F_f[a]  # Eq. (18): f_i = F_n,i + F_f,i
+            force_out[n, a] = F_n * g[a] + F_f[a]  # Eq. (18): f_i = F_n,i + F_f,i
         speed_out[n] = math.sqrt(v_rel[0] ** 2 + v_rel[1] ** 2 + v_rel[2] ** 2)
         n += 1
     d.contacts = Contacts(out_m[:n], out_s[:n], out_key[:n], phi_out[:n], point_out[:n], c1_out[:n], c2_out[:n],

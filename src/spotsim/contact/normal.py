@@ -27,11 +27,29 @@ def indentation(phi):
 
 
 @njit
+def hertz_potential(phi, K):
+    """The elastic energy a pair stores at penetration phi, J: the integral of the Hertz force
+    K delta^a over phi from 0, with delta = phi / 2 (so dphi = 2 ddelta): 2 K delta^(a+1) / (a+1),
+    0.8 K (phi/2)^2.5. Under `contact.normal_direction: gradient` the pairs' elastic forces are
+    its gradient."""
+    return 2.0 * K * indentation(phi) ** (HERTZ_EXPONENT + 1.0) / (HERTZ_EXPONENT + 1.0)
+
+
+@njit
+def onset_rate(delta_dot, floor):
+    """delta_dot_minus of a pair at its first step in contact: its indentation rate then (m/s,
+    > 0 approaching), raised to `floor` (m/s, a floor on the indentation rate, not on the
+    approach speed: see `build.model.contact_law`). Zhang's lambda = factor K / delta_dot_minus
+    is singular for pairs that slide into contact at zero normal speed."""
+    return max(delta_dot, floor)
+
+
+@njit
 def normal_force(delta, delta_dot, delta_dot_minus, K, factor):
     """Eq. (11)-(12): magnitude of F_n = K delta^a + lambda delta^a delta_dot, never pulling.
 
     delta: indentation, m.  delta_dot: its rate, m/s (> 0 approaching).
-    delta_dot_minus: approach speed at the pair's contact onset, m/s, already floored.
+    delta_dot_minus: the indentation rate at the pair's contact onset (`onset_rate`), m/s.
     lambda = factor K / delta_dot_minus. Returns N, clamped at 0.
     """
     elastic = K * delta ** HERTZ_EXPONENT

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..contact.normal import hertz_potential
 from ..jit import njit_inline
 from .bodies import kinetic_energy
 from .integrators import ADAPTIVE
@@ -121,9 +122,10 @@ def stability_warnings(model) -> list[str]:
 #: A passive phase (the drive holding, no work done on the bodies) gains no energy physically;
 #: the run is diverged once its mechanical energy exceeds this factor of its value when the
 #: phase began, plus ENERGY_FLOOR_J (so that a phase starting at rest is not judged on
-#: round-off). Not 1: the paper's pair law takes its common normal from the face normals, not
-#: from the spheres' geometry, so it is not exactly conservative when faces rock against each
-#: other. Converged Case I runs gain up to 2.1x in passive phases (12.5 and 6.25 us steps, RK4
+#: round-off). Not 1: the paper's pair law directs each pair's force along the common normal,
+#: while its penetration also depends on the pair's lateral offset, so it is not exactly
+#: conservative when faces slide or rock against each other (`contact.normal_direction:
+#: gradient` is). Converged Case I runs gain up to 2.1x in passive phases (12.5 and 6.25 us steps, RK4
 #: alike), where a step past the stability limit gains hundreds of times (0.5 ms: 0.0026 J ->
 #: 1.9 J); 10x lies between.
 ENERGY_GROWTH = 10.0
@@ -133,11 +135,11 @@ ENERGY_FLOOR_J = 1e-6
 @njit_inline
 def mechanical_energy(bodies, q, v, phi, s, K, k_b):
     """Kinetic energy of the free bodies plus the energy stored in the contacts, J: Hertz
-    0.8 K (phi/2)^2.5 per pair (the integral of K (phi/2)^1.5 dphi) and 1/2 k_b |s|^2 per
+    0.8 K (phi/2)^2.5 per pair (`hertz_potential`) and 1/2 k_b |s|^2 per
     bristle (phi: the pairs' penetrations, m; s: their bristle deflections, m)."""
     E = kinetic_energy(bodies, q, v)
     for i in range(phi.shape[0]):
-        E += 0.8 * K * (0.5 * phi[i]) ** 2.5
+        E += hertz_potential(phi[i], K)
     for i in range(s.shape[0]):
         E += 0.5 * k_b * (s[i, 0] ** 2 + s[i, 1] ** 2 + s[i, 2] ** 2)
     return E
