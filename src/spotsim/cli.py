@@ -30,6 +30,8 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE",
                      help="override a scenario key, validated like the file (repeatable)")
     run.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
+    run.add_argument("--no-error-estimate", action="store_true",
+                     help="skip the companion run that estimates the discretisation error (about half a run)")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
     run.add_argument("--replay", action="store_true", help="replay the run in Meshcat when it ends")
     run.add_argument("--zmq-url", help="with --replay: the Meshcat server to use (default: start one)")
@@ -280,6 +282,14 @@ def _ensemble(args, scenario, model, path: Path, out: Path) -> int:
         return 2
     e = ensemble(scenario, args.ensemble, seed=args.seed, workers=args.workers, progress=not args.quiet,
                  model=model, source=str(path))
+    first = e.members[0] if e.members else None
+    if not args.no_error_estimate and not e.interrupted and first is not None and first.summary:
+        from .studies.estimate import estimate
+
+        try:  # member 0 runs the scenario's own start: its companion estimates the step's share
+            e.error_estimate = estimate(scenario, first.summary, source=str(path))
+        except KeyboardInterrupt:
+            e.interrupted = True
     try:
         files = write_ensemble(e, out)
     except OSError as err:
@@ -291,12 +301,32 @@ def _ensemble(args, scenario, model, path: Path, out: Path) -> int:
     print("  median [p10, p90] over the completed members:")
     for line in report_lines(e):
         print(line)
+    if e.error_estimate is not None:
+        print(estimate_lines(e.error_estimate).replace("a companion run", "member 0 against a companion run"))
     print(f"  wall time {e.wall_time_s:.2f} s on {e.workers} worker{'s' if e.workers > 1 else ''}")
     for f in files:
         print(f"  {f}")
     if e.interrupted:
         print("interrupted: the members that finished are kept", file=sys.stderr)
     return ensemble_exit(e.statuses, e.interrupted)
+
+
+def estimate_lines(entry: dict) -> str:
+    """The error estimate of a run, for the terminal."""
+    if "grasps" not in entry:
+        return f"  discretisation error: {entry['note']}"
+    names = {"residual_offset_norm_mm": ("e", "mm"), "peak_force_norm_N": ("peak |F|", "N"),
+             "peak_torque_norm_Nm": ("peak |T|", "N m"), "robot_centroid_displacement_norm_mm": ("|centroid d|", "mm")}
+    lines = ["  discretisation error (a companion run with twice the step):"]
+    for g, grasp in enumerate(entry["grasps"]):
+        cells = []
+        for name, q in grasp.items():
+            label, unit = names[name]
+            if q["estimate"] is not None:
+                chance = " (or chance: a distribution)" if q["distribution"] else ""
+                cells.append(f"{label} +-{q['estimate']:.3g} {unit}{chance}")
+        lines.append(f"    grasp {g + 1}: " + ("; ".join(cells) or "not estimated (incomplete)"))
+    return "\n".join(lines)
 
 
 def _config_path(arg: str | None) -> Path:
@@ -378,6 +408,13 @@ def main(argv=None) -> int:
         print(f"{out}: cannot write results: {e.strerror}", file=sys.stderr)
         return 2
     result = simulate(scenario, model=model, progress=not args.quiet, source=str(path))
+    if not args.no_error_estimate and result.status != "interrupted":
+        from .studies.estimate import estimate
+
+        try:
+            result.summary["error_estimate"] = estimate(scenario, result.summary, source=str(path))
+        except KeyboardInterrupt:
+            result.summary["error_estimate"] = {"note": "interrupted by the user"}
     try:
         write_results(result, out, figures=not args.no_figures)
     except OSError as e:
@@ -396,6 +433,8 @@ def main(argv=None) -> int:
         if "robot_centroid_displacement_mm" in g:
             print(f"    robot centroid displacement "
                   f"{json.dumps([round(d, 4) for d in g['robot_centroid_displacement_mm']])} mm")
+    if "error_estimate" in s:
+        print(estimate_lines(s["error_estimate"]))
     print(f"  wall time {s['wall_time_s']:.2f} s for {s['sim_time_s']:.3f} s simulated")
     print(f"  results in {out}")
     if args.replay:

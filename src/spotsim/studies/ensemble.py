@@ -180,6 +180,7 @@ class EnsembleResult:
     wall_time_s: float = math.nan
     workers: int = 1
     summary: dict = field(init=False)
+    error_estimate: dict | None = None  # member 0's (`studies.estimate`), when one was made
 
     def __post_init__(self):
         self.summary = summarise(self)
@@ -416,6 +417,7 @@ def ensemble_json(e: EnsembleResult) -> dict:
         "classes": s["classes"],
         "statistics": s["statistics"],
         "starts": [{"member": m.index, "status": m.status, **m.start.as_dict()} for m in e.members],
+        **({"error_estimate": e.error_estimate} if e.error_estimate is not None else {}),
     }
 
 

@@ -1,0 +1,90 @@
+"""A run's discretisation error, estimated from one companion run with steps twice as long.
+
+The default integrator and the paper's step are first order: a quantity's error falls in
+proportion to the step, e(h) ~ C h. A companion run whose steps are twice as long therefore
+differs from the run by about e(2h) - e(h) = e(h), and that difference is the estimate
+(Richardson). For `adaptive_euler` the companion takes four times the velocity tolerance (its
+steps go as tol^(1/2)) and twice the onset depth; for `symplectic_euler` half the substeps.
+Its steps are longer, so it costs about half the run.
+
+A grasp's residual offset is also a distribution over microscopic start perturbations
+(model.md Sec. 9): the companion may seat where the run wedges, so the difference is then
+chance, not discretisation. Such quantities are marked `distribution`; their spread over
+starts is what `spotsim run --ensemble N` measures.
+"""
+
+from __future__ import annotations
+
+import math
+
+from ..scenario import replace, to_dict
+
+#: The quantities estimated, per grasp: summary key -> whether it is a distribution over starts.
+QUANTITIES = {
+    "residual_offset_norm_mm": True,
+    "peak_force_norm_N": False,
+    "peak_torque_norm_Nm": False,
+    "robot_centroid_displacement_norm_mm": False,
+}
+METHOD = ("Richardson, first order: |Q(run) - Q(companion)|, the companion's steps twice as long "
+          "(adaptive_euler: velocity_tol_m_s x4, onset_depth_m x2; symplectic_euler: substeps / 2)")
+
+
+def companion(scenario):
+    """The scenario with steps twice as long, or None when the integrator has none to offer
+    (rk4, dopri5, or symplectic_euler at an odd number of substeps)."""
+    i = scenario.simulation.integrator
+    if i.method == "adaptive_euler":
+        changes = {"velocity_tol_m_s": 4 * i.velocity_tol_m_s, "onset_depth_m": 2 * i.onset_depth_m}
+        return replace(scenario, simulation={"integrator": {**to_dict(i), **changes}})
+    if i.method == "symplectic_euler" and scenario.simulation.substeps % 2 == 0:
+        return replace(scenario, simulation={"substeps": scenario.simulation.substeps // 2})
+    return None
+
+
+def quantities(summary: dict) -> list[dict]:
+    """Each grasp's estimated quantities from a summary (None where a grasp did not complete;
+    the robot centroid's displacement only on a free-floating robot)."""
+    out = []
+    for g in summary["grasps"]:
+        done = g["completed_s"] is not None
+        row = {name: g[name] if done else None for name in QUANTITIES if name in g}
+        if "robot_centroid_displacement_mm" in g:
+            d = g["robot_centroid_displacement_mm"]
+            row["robot_centroid_displacement_norm_mm"] = math.hypot(*d) if done and d is not None else None
+        out.append(row)
+    return out
+
+
+def error_estimate(summary: dict, companion_summary: dict | None) -> dict:
+    """The `error_estimate` entry of a summary: per grasp and quantity, its value, the
+    companion's and the estimate |difference|."""
+    if companion_summary is None:
+        return {"method": METHOD, "companion": None,
+                "note": "no companion with twice the step for this integrator: not estimated"}
+    grasps = []
+    for mine, theirs in zip(quantities(summary), quantities(companion_summary), strict=True):
+        entry = {}
+        for name, value in mine.items():
+            other = theirs.get(name)
+            estimate = None if value is None or other is None else abs(value - other)
+            entry[name] = {"value": value, "companion": other, "estimate": estimate,
+                           "estimate_rel": None if estimate is None or not value else estimate / abs(value),
+                           "distribution": QUANTITIES[name]}
+        grasps.append(entry)
+    c = companion_summary
+    return {"method": METHOD,
+            "companion": {"status": c["status"], "integrator": c["integrator"], "wall_time_s": c["wall_time_s"]},
+            "grasps": grasps,
+            "note": ("a residual offset is one sample of a distribution over starts: where the run and its "
+                     "companion end in different outcome classes (seated, wedged) the difference is chance; "
+                     "`spotsim run --ensemble N` measures the spread")}
+
+
+def estimate(scenario, summary: dict, source: str = "<scenario>") -> dict:
+    """Run the companion of `scenario`, whose run gave `summary`, and return the error
+    estimate entry for that summary."""
+    from ..sim.run import simulate
+
+    s = companion(scenario)
+    return error_estimate(summary, None if s is None else simulate(s, source=source).summary)
