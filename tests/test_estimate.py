@@ -1,5 +1,6 @@
 """A run's discretisation error estimate: its companion, its arithmetic, and the CLI's summary."""
 
+import csv
 import json
 
 import pytest
@@ -69,3 +70,20 @@ def test_run_writes_its_error_estimate_unless_told_not_to(tmp_path):
     out = tmp_path / "b"
     assert main([*args[:2], str(out), *args[3:], "--no-error-estimate"]) == 3
     assert "error_estimate" not in json.loads((out / "summary.json").read_text())
+
+
+def test_estimate_study_compares_each_start_with_the_reference(tmp_path, capsys):
+    """`spotsim study estimate` writes a row per start, grasp and quantity with the true error
+    against the reference and whether it lies within the estimate."""
+    out = tmp_path / "est"
+    code = main(["study", "estimate", "--members", "2", "--workers", "1", "--reference", "symplectic_euler:20",
+                 "--duration", "1.5", "--quiet", "--out", str(out)])
+    assert code == 0
+    rows = list(csv.DictReader((out / "estimate.csv").open()))
+    assert {r["member"] for r in rows} == {"0", "1"}
+    for r in rows:
+        if r["error"]:
+            error, estimate = float(r["error"]), float(r["estimate"])
+            assert error == pytest.approx(abs(float(r["value"]) - float(r["reference"])), abs=1e-12)
+            assert (r["within"] == "True") == (error <= estimate)
+    assert "error within the estimate for" in capsys.readouterr().out

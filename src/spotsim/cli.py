@@ -69,7 +69,8 @@ def _study_parser(sub) -> None:
     verbs = study.add_subparsers(dest="study", required=True)
     acc = verbs.add_parser("accuracy", help="work-precision: a confirmed reference, then integrator x step")
     stab = verbs.add_parser("stability", help="stiff and extreme cases: predicted stable step and verdict")
-    for v in (acc, stab):
+    est = verbs.add_parser("estimate", help="each run's error estimate against a converged reference, over starts")
+    for v in (acc, stab, est):
         v.add_argument("config", nargs="?", help=f"scenario YAML (default: config/{DEFAULT_SCENARIO})")
         v.add_argument("--out", help="output directory (default: results/study/<scenario name>)")
         v.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE",
@@ -89,6 +90,10 @@ def _study_parser(sub) -> None:
                           "refinement confirms it")
     acc.add_argument("--wall-limit", type=float, metavar="S", help="wall-time budget of each run (default: none)")
     acc.add_argument("--no-plot", action="store_true", help="skip the work-precision plot")
+    est.add_argument("--members", type=int, default=8, metavar="N", help="starts compared (default 8)")
+    est.add_argument("--reference", metavar="METHOD:VALUE", default="symplectic_euler:80",
+                     help="the converged setting, e.g. symplectic_euler:160 (default symplectic_euler:80)")
+    est.add_argument("--workers", type=int, metavar="W", help="parallel processes (default: one per core)")
     stab.add_argument("--cases", metavar="NAME,NAME",
                       help="cases or groups (stiff, extreme, baseline); spaces ignored, e.g. 'Ex100,y_a+10mm'")
     stab.add_argument("--quick", action="store_true", help="the suite's cases, each 1.5 s simulated")
@@ -142,6 +147,12 @@ def _study(args) -> int:
                                 reference, scales or grid.sphere_scales,
                                 tols=(tols or grid.tols) if not methods or "adaptive_euler" in methods else ())
             duration = duration or grid.duration_s
+        elif args.study == "estimate":
+            if args.members < 1:
+                raise ValueError(f"--members {args.members}: must be >= 1")
+            if args.workers is not None and args.workers < 1:
+                raise ValueError(f"--workers {args.workers}: must be >= 1")
+            reference = accuracy.parse_setting(args.reference)
         else:
             if args.wall_limit is not None and not args.wall_limit > 0:
                 raise ValueError(f"--wall-limit {args.wall_limit}: must be > 0")
@@ -165,6 +176,8 @@ def _study(args) -> int:
         print(f"{out}: cannot write results: {e.strerror}", file=sys.stderr)
         return 2
     progress = not args.quiet
+    if args.study == "estimate":
+        return _estimate_study(scenario, reference, args, out, progress)
     try:
         if args.study == "accuracy":
             report = accuracy.accuracy_study(scenario, chosen.settings(), chosen.reference, out, source=str(path),
@@ -187,6 +200,36 @@ def _study(args) -> int:
         print("interrupted: the rows written are the runs that finished", file=sys.stderr)
         return 130
     return 1 if args.study == "stability" and report.failures else 0
+
+
+def _estimate_study(scenario, reference, args, out: Path, progress: bool) -> int:
+    """`spotsim study estimate`: estimate.csv, and per quantity how often the true error lay
+    within the estimate. Exit 0, 2 when the integrator has no companion, 130 if interrupted."""
+    import csv
+
+    from .studies.estimate import validate, validation_table
+
+    try:
+        rows = validate(scenario, reference.apply(scenario), args.members, workers=args.workers, progress=progress)
+    except ValueError as e:
+        print(e, file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+    path = out / "estimate.csv"
+    with path.open("w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0]) if rows else ["member"])
+        w.writeheader()
+        w.writerows(rows)
+    print(f"{scenario.name}: error estimate against {reference.label(scenario.simulation.dt_s)}, "
+          f"{args.members} starts")
+    for r in validation_table(rows):
+        kind = " (a distribution)" if r["distribution"] else ""
+        print(f"  grasp {r['grasp']} {r['quantity']}{kind}: error within the estimate for {r['within']} of "
+              f"{r['members']}; median estimate {r['median_estimate']:.3g}, median error {r['median_error']:.3g}")
+    print(f"  {path}")
+    return 0
 
 
 def _replay(result_dir, args, run_code=None) -> int:

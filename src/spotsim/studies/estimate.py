@@ -88,3 +88,54 @@ def estimate(scenario, summary: dict, source: str = "<scenario>") -> dict:
 
     s = companion(scenario)
     return error_estimate(summary, None if s is None else simulate(s, source=source).summary)
+
+
+# ---------------------------------------------------------------------------- validation
+
+
+def validate(scenario, reference, n: int = 8, *, seed: int = 0, workers: int | None = None,
+             progress: bool = False) -> list[dict]:
+    """Check the estimate against a converged reference from n starts (`ensemble`'s, seeded):
+    one row per member, grasp and quantity with the run's value, the companion's, the
+    estimate, the reference's, the true error |run - reference| and whether it lies within
+    the estimate. `reference`: the scenario at a converged setting."""
+    from .ensemble import ensemble
+
+    other = companion(scenario)
+    if other is None:
+        raise ValueError(f"{scenario.simulation.integrator.method}: no companion to estimate with")
+    runs = [ensemble(s, n, seed=seed, workers=workers, progress=progress).members
+            for s in (scenario, other, reference)]
+    rows = []
+    for run, comp, ref in zip(*runs, strict=True):
+        if not (run.summary and comp.summary and ref.summary):
+            continue
+        truth = quantities(ref.summary)
+        for g, entry in enumerate(error_estimate(run.summary, comp.summary)["grasps"]):
+            for name, q in entry.items():
+                r = truth[g].get(name) if g < len(truth) else None
+                error = None if q["value"] is None or r is None else abs(q["value"] - r)
+                rows.append({"member": run.index, "grasp": g + 1, "quantity": name, "value": q["value"],
+                             "companion": q["companion"], "estimate": q["estimate"], "reference": r,
+                             "error": error, "distribution": q["distribution"],
+                             "within": error is not None and q["estimate"] is not None and error <= q["estimate"]})
+    return rows
+
+
+def validation_table(rows: list[dict]) -> list[dict]:
+    """Per grasp and quantity: how many members' true errors lay within their estimates, and
+    the median estimate and error."""
+    import numpy as np
+
+    out = []
+    for key in dict.fromkeys((r["grasp"], r["quantity"]) for r in rows):
+        group = [r for r in rows if (r["grasp"], r["quantity"]) == key and r["error"] is not None
+                 and r["estimate"] is not None]
+        if not group:
+            continue
+        out.append({"grasp": key[0], "quantity": key[1], "members": len(group),
+                    "within": sum(r["within"] for r in group),
+                    "median_estimate": float(np.median([r["estimate"] for r in group])),
+                    "median_error": float(np.median([r["error"] for r in group])),
+                    "distribution": group[0]["distribution"]})
+    return out
