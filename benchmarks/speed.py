@@ -2,19 +2,21 @@
 comparison with another revision alternating in one process.
 
     python benchmarks/speed.py [--cases I II III dual] [--repeat N] [--window STEPS]
-                               [--against REV [--rounds N]]
+                               [--ensemble N] [--against REV [--rounds N]]
 
 In one run of this script, for each scenario:
 
-1. the whole run at its default setting (culled search, symplectic Euler), the fastest of
+1. the whole run at its default setting (culled search, adaptive Euler), the fastest of
    REPEAT runs: wall time of the run, steps per second, the real-time factor (simulated over
    wall time; above 1 is faster than real time);
 2. the contact stage (kinematics -> pairs -> forces -> wrenches, `sim.forces.forces`) with the
    culled and with the paper's literal all-pairs search, on the same WINDOW states from first
    contact, each timed in a compiled loop, and the literal stage against the default run's
    mean step;
-3. (Case I) the force evaluations of RK4 and Dormand-Prince against a symplectic-Euler step:
-   each integrator's whole run at 0.1 ms (dopri5 at rtol 1e-5), wall time over evaluations;
+3. (Case I) the force evaluations of the integrators against a symplectic-Euler step: each
+   integrator's whole run (fixed steps at 0.1 ms, dopri5 at rtol 1e-5, adaptive Euler at its
+   default), wall time over evaluations; and (Case I) an ENSEMBLE-member ensemble's wall time
+   on every core;
 4. with --against REV: the whole default runs of this checkout and of revision REV (its
    src/spotsim imported as `spotsim_base`), alternating, ROUNDS pairs: the median of the
    paired ratios REV / this (above 1: this checkout is faster) and their quartiles.
@@ -100,9 +102,11 @@ def contact_window(scenario, steps: int, calls: int = 200) -> dict:
 
 
 def integrators(scenario) -> list[dict]:
-    """Each integrator's whole run at 0.1 ms (dopri5: rtol 1e-5): wall time per force evaluation."""
+    """Each integrator's whole run at 0.1 ms (dopri5: rtol 1e-5; adaptive_euler: its default):
+    wall time per force evaluation."""
     out = []
-    for method, integrator in (("symplectic_euler", {}), ("rk4", {}), ("dopri5", {"rtol": 1e-5, "atol": 1e-8})):
+    for method, integrator in (("symplectic_euler", {}), ("adaptive_euler", {}), ("rk4", {}),
+                               ("dopri5", {"rtol": 1e-5, "atol": 1e-8})):
         s = spotsim.replace(scenario, simulation={"substeps": 10, "integrator": {"method": method, **integrator}})
         best = fastest(s, spotsim.build_model(s), 3)
         evaluations = best["integrator"]["force_evaluations"]
@@ -147,6 +151,7 @@ def main() -> None:
     parser.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES))
     parser.add_argument("--window", type=int, default=200, help="steps from first contact for the contact stage")
     parser.add_argument("--repeat", type=int, default=7, metavar="N", help="time each default run N times")
+    parser.add_argument("--ensemble", type=int, default=32, metavar="N", help="members of the timed Case I ensemble")
     parser.add_argument("--against", metavar="REV", help="also alternate whole runs with this git revision")
     parser.add_argument("--rounds", type=int, default=15, metavar="N", help="pairs of alternating runs")
     args = parser.parse_args()
@@ -189,6 +194,14 @@ def main() -> None:
         for r in table:
             print(f"| {r['method']} | {r['status']} | {r['wall_s']:.3f} | {r['steps']} | {r['evaluations']} | "
                   f"{r['us_per_evaluation']:.2f} | {r['us_per_evaluation'] / se:.2f} |")
+
+    if "I" in args.cases and args.ensemble:
+        from spotsim.studies.ensemble import ensemble
+
+        scenario = spotsim.load_scenario(ROOT / "config" / CASES["I"])
+        walls = [ensemble(scenario, args.ensemble).wall_time_s for _ in range(3)]
+        print(f"\nCase I ensemble of {args.ensemble} on {len(os.sched_getaffinity(0))} cores (fastest of 3): "
+              f"{min(walls):.2f} s wall ({', '.join(f'{w:.2f}' for w in sorted(walls))})")
 
     if args.against:
         base = import_revision(args.against)

@@ -46,6 +46,7 @@ def test_estimate_is_the_difference_to_the_companion():
     first, second = e["grasps"]
     assert first["residual_offset_norm_mm"]["estimate"] == pytest.approx(0.03, abs=1e-15)
     assert first["peak_force_norm_N"]["estimate"] == 1.0 and first["peak_force_norm_N"]["estimate_rel"] == 0.02
+    assert first["peak_force_norm_N"]["uncertainty"] == 3.0  # Roache's GCI from two steps
     assert first["residual_offset_norm_mm"]["distribution"] and not first["peak_force_norm_N"]["distribution"]
     assert "robot_centroid_displacement_norm_mm" not in first
     assert second["robot_centroid_displacement_norm_mm"]["value"] == pytest.approx(0.5, abs=1e-15)
@@ -86,4 +87,5 @@ def test_estimate_study_compares_each_start_with_the_reference(tmp_path, capsys)
             error, estimate = float(r["error"]), float(r["estimate"])
             assert error == pytest.approx(abs(float(r["value"]) - float(r["reference"])), abs=1e-12)
             assert (r["within"] == "True") == (error <= estimate)
+            assert float(r["uncertainty"]) == pytest.approx(3 * estimate, rel=1e-15)
     assert "error within the estimate for" in capsys.readouterr().out

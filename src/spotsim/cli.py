@@ -227,7 +227,8 @@ def _estimate_study(scenario, reference, args, out: Path, progress: bool) -> int
     for r in validation_table(rows):
         kind = " (a distribution)" if r["distribution"] else ""
         print(f"  grasp {r['grasp']} {r['quantity']}{kind}: error within the estimate for {r['within']} of "
-              f"{r['members']}; median estimate {r['median_estimate']:.3g}, median error {r['median_error']:.3g}")
+              f"{r['members']}, within the uncertainty (3x) for {r['within_uncertainty']}; median estimate "
+              f"{r['median_estimate']:.3g}, median error {r['median_error']:.3g}")
     print(f"  {path}")
     return 0
 
@@ -360,14 +361,14 @@ def estimate_lines(entry: dict) -> str:
         return f"  discretisation error: {entry['note']}"
     names = {"residual_offset_norm_mm": ("e", "mm"), "peak_force_norm_N": ("peak |F|", "N"),
              "peak_torque_norm_Nm": ("peak |T|", "N m"), "robot_centroid_displacement_norm_mm": ("|centroid d|", "mm")}
-    lines = ["  discretisation error (a companion run with twice the step):"]
+    lines = ["  discretisation error, estimate (uncertainty), from a companion run with twice the step:"]
     for g, grasp in enumerate(entry["grasps"]):
         cells = []
         for name, q in grasp.items():
             label, unit = names[name]
             if q["estimate"] is not None:
                 chance = " (or chance: a distribution)" if q["distribution"] else ""
-                cells.append(f"{label} +-{q['estimate']:.3g} {unit}{chance}")
+                cells.append(f"{label} ~{q['estimate']:.3g} (+-{q['uncertainty']:.3g}) {unit}{chance}")
         lines.append(f"    grasp {g + 1}: " + ("; ".join(cells) or "not estimated (incomplete)"))
     return "\n".join(lines)
 

@@ -7,6 +7,13 @@ differs from the run by about e(2h) - e(h) = e(h), and that difference is the es
 steps go as tol^(1/2)) and twice the onset depth; for `symplectic_euler` half the substeps.
 Its steps are longer, so it costs about half the run.
 
+An estimate from two step sizes is itself uncertain: where a quantity does not yet fall
+smoothly with the step, the companion may land nearer the converged value than the run.
+Roache's grid convergence index (Roache 1994, J. Fluids Eng. 116:405; ASME V&V 20-2009) turns
+a two-step estimate into an uncertainty band with a factor of safety of 3: GCI = 3 |Q(h) -
+Q(2h)| / (2^p - 1), here with p = 1. Both are reported; `spotsim study estimate` counts how
+often the true error lies within each.
+
 A grasp's residual offset is also a distribution over microscopic start perturbations
 (model.md Sec. 9): the companion may seat where the run wedges, so the difference is then
 chance, not discretisation. Such quantities are marked `distribution`; their spread over
@@ -26,8 +33,11 @@ QUANTITIES = {
     "peak_torque_norm_Nm": False,
     "robot_centroid_displacement_norm_mm": False,
 }
-METHOD = ("Richardson, first order: |Q(run) - Q(companion)|, the companion's steps twice as long "
-          "(adaptive_euler: velocity_tol_m_s x4, onset_depth_m x2; symplectic_euler: substeps / 2)")
+#: Roache's factor of safety for a grid convergence index from two grids.
+GCI_SAFETY = 3.0
+METHOD = ("estimate: Richardson, first order: |Q(run) - Q(companion)|, the companion's steps twice as long "
+          "(adaptive_euler: velocity_tol_m_s x4, onset_depth_m x2; symplectic_euler: substeps / 2); uncertainty: "
+          "Roache's grid convergence index from two steps, 3 x estimate")
 
 
 def companion(scenario):
@@ -70,6 +80,7 @@ def error_estimate(summary: dict, companion_summary: dict | None) -> dict:
             estimate = None if value is None or other is None else abs(value - other)
             entry[name] = {"value": value, "companion": other, "estimate": estimate,
                            "estimate_rel": None if estimate is None or not value else estimate / abs(value),
+                           "uncertainty": None if estimate is None else GCI_SAFETY * estimate,
                            "distribution": QUANTITIES[name]}
         grasps.append(entry)
     c = companion_summary
@@ -97,8 +108,8 @@ def validate(scenario, reference, n: int = 8, *, seed: int = 0, workers: int | N
              progress: bool = False) -> list[dict]:
     """Check the estimate against a converged reference from n starts (`ensemble`'s, seeded):
     one row per member, grasp and quantity with the run's value, the companion's, the
-    estimate, the reference's, the true error |run - reference| and whether it lies within
-    the estimate. `reference`: the scenario at a converged setting."""
+    estimate and uncertainty, the reference's, the true error |run - reference| and whether it
+    lies within each. `reference`: the scenario at a converged setting."""
     from .ensemble import ensemble
 
     other = companion(scenario)
@@ -115,16 +126,18 @@ def validate(scenario, reference, n: int = 8, *, seed: int = 0, workers: int | N
             for name, q in entry.items():
                 r = truth[g].get(name) if g < len(truth) else None
                 error = None if q["value"] is None or r is None else abs(q["value"] - r)
+                known = error is not None and q["estimate"] is not None
                 rows.append({"member": run.index, "grasp": g + 1, "quantity": name, "value": q["value"],
-                             "companion": q["companion"], "estimate": q["estimate"], "reference": r,
-                             "error": error, "distribution": q["distribution"],
-                             "within": error is not None and q["estimate"] is not None and error <= q["estimate"]})
+                             "companion": q["companion"], "estimate": q["estimate"], "uncertainty": q["uncertainty"],
+                             "reference": r, "error": error, "distribution": q["distribution"],
+                             "within": known and error <= q["estimate"],
+                             "within_uncertainty": known and error <= q["uncertainty"]})
     return rows
 
 
 def validation_table(rows: list[dict]) -> list[dict]:
-    """Per grasp and quantity: how many members' true errors lay within their estimates, and
-    the median estimate and error."""
+    """Per grasp and quantity: how many members' true errors lay within their estimates and
+    their uncertainties, and the median estimate and error."""
     import numpy as np
 
     out = []
@@ -135,6 +148,7 @@ def validation_table(rows: list[dict]) -> list[dict]:
             continue
         out.append({"grasp": key[0], "quantity": key[1], "members": len(group),
                     "within": sum(r["within"] for r in group),
+                    "within_uncertainty": sum(r["within_uncertainty"] for r in group),
                     "median_estimate": float(np.median([r["estimate"] for r in group])),
                     "median_error": float(np.median([r["error"] for r in group])),
                     "distribution": group[0]["distribution"]})
