@@ -201,6 +201,9 @@ def test_ctrl_c_inside_a_compiled_callback_still_stops_the_study():
     (["stability", "--cases", "E x1000"], "valid: groups"),
     (["stability", "--duration", "-1"], "must be > 0"),
     (["accuracy", "--set", "contact.restitution=1.7"], "must be in (0, 1]"),
+    (["accuracy", "--seed", "3"], "only with --ensemble"),
+    (["accuracy", "--ensemble", "0"], "--ensemble 0: must be >= 1"),
+    (["accuracy", "--ensemble", "4", "--wall-limit", "10"], "not with --ensemble"),
 ])
 def test_bad_study_input_is_exit_2(argv, message, capsys, tmp_path):
     """Bad options and bad scenarios are reported before anything runs, exit 2."""
@@ -245,3 +248,92 @@ def test_errors_are_vector_differences():
     assert e["peak_force_err_rel"] == pytest.approx(0.1) and e["max_err_rel"] == pytest.approx(5 / 3)
     diverged = runs.Outcome("diverged", "", offsets=[np.zeros(3)], peaks=[1e9], centroids=[None])
     assert math.isnan(runs.errors(diverged, ref, [""], centroid=False)["max_err_rel"])
+
+
+# ----------------------------------------------------------------------------- over ensembles
+
+
+def member(i, e_mm, force_N, torque_Nm=3.0, cls="seated", roll_deg=-0.4):
+    """A hand-made members-table row of a single-arm ensemble (grasp prefix none)."""
+    return {"member": i, "status": "completed", "class": cls, "residual_norm_mm": e_mm,
+            "residual_roll_deg": roll_deg, "residual_pitch_deg": 0.0, "residual_yaw_deg": 0.0,
+            "peak_force_norm_N": force_N, "peak_torque_norm_Nm": torque_Nm}
+
+
+def test_ensemble_comparison_of_identical_ensembles_meets_every_target():
+    """An ensemble compared with itself: KS p = 1, no median differs, every target met."""
+    from spotsim.studies import accuracy_ensemble as ae
+
+    rows = [member(i, 0.1 + 0.01 * i, 50.0 + i) for i in range(8)]
+    c = ae.compare(rows, rows, 1, dual=False)
+    assert c["residual_ks_p"] == 1.0 and c["residual_median_rel"] == 0.0
+    assert c["peak_force_median_rel"] == 0.0 and c["max_deterministic_rel"] == 0.0
+    assert c["seated"] == 1.0 and c["wedged"] == 0.0 and c["completed"] == 8
+    assert c["meets_targets"]
+
+
+def test_ensemble_comparison_statistics_on_hand_made_samples():
+    """The KS p-value of two disjoint samples of 3 is the exact 2 / C(6, 3) = 0.1; the medians'
+    relative differences and the p10-p90 spread are numpy's; a deterministic median 3 % off
+    fails its 2 % target, a residual median 10 % off its 5 % one, wedged members are counted."""
+    from spotsim.studies import accuracy_ensemble as ae
+
+    assert ae.ks_pvalue([1.0, 2.0, 3.0], [4.0, 5.0, 6.0]) == pytest.approx(0.1)
+    assert math.isnan(ae.ks_pvalue([None], [1.0]))
+    ref = [member(i, 0.10 + 0.001 * i, 50.0, 3.0) for i in range(10)]
+    off = [member(i, 0.11 + 0.001 * i, 51.5, 3.0, cls="wedged" if i < 3 else "seated") for i in range(10)]
+    c = ae.compare(off, ref, 1, dual=False)
+    assert c["peak_force_median_rel"] == pytest.approx(0.03) and not c["deterministic_ok"]
+    assert c["residual_median_rel"] == pytest.approx(0.01 / 0.1045)
+    assert not c["residual_median_ok"] and c["residual_ks_p"] < ae.KS_ALPHA and not c["meets_targets"]
+    assert c["residual_p10_mm"] == pytest.approx(0.1109) and c["residual_p90_mm"] == pytest.approx(0.1181)
+    assert c["wedged"] == pytest.approx(0.3) and c["seated"] == pytest.approx(0.7)
+
+
+def test_a_smaller_ensemble_is_compared_with_the_same_members_of_the_reference():
+    """A confirmation of k members is compared with the reference's first k members only."""
+    from spotsim.studies import accuracy_ensemble as ae
+
+    ref = [member(i, 0.1, 50.0 if i < 4 else 80.0) for i in range(8)]
+    c = ae.compare(ref[:4], ref, 1, dual=False)
+    assert c["peak_force_median_rel"] == 0.0 and c["meets_targets"]
+
+
+@pytest.fixture(scope="module")
+def accuracy_ensembles(tmp_path_factory):
+    """A small ensemble accuracy study of Case I: 3 members, symplectic Euler at 0.1 ms as the
+    reference (0.05 ms its confirmation) and 0.2 ms swept, through the Python API."""
+    out = tmp_path_factory.mktemp("accuracy_ensemble")
+    scenario = spotsim.load_scenario(CASE_I)
+    report = acc.accuracy_study(scenario, [acc.Setting("symplectic_euler", 5)], acc.Setting("symplectic_euler", 10),
+                                out, ensemble=3, seed=7, workers=1)
+    return report, out, read_csv(out / "accuracy_ensemble.csv")
+
+
+def test_every_setting_runs_from_the_same_seeded_starts(accuracy_ensembles):
+    """The reference, its confirmation and the swept setting run from the same starts: those of
+    the seed, member 0 unperturbed."""
+    from spotsim.studies.ensemble import perturbed_starts
+
+    report, _, _ = accuracy_ensembles
+    expected = perturbed_starts(spotsim.load_scenario(CASE_I), 3, seed=7)
+    assert len(report.ensembles) == 3
+    for e in report.ensembles.values():
+        assert [m.start for m in e.members] == expected and e.seed == 7
+
+
+def test_ensemble_accuracy_study_writes_a_row_per_setting(accuracy_ensembles):
+    """One CSV row per setting (reference, confirmation, sweep), every column filled; the
+    reference compared with itself meets every target; a members table per setting, the
+    markdown and the work-precision plot are written."""
+    report, out, rows = accuracy_ensembles
+    assert [r["role"] for r in rows] == ["reference", "confirmation", "sweep"]
+    assert all(v != "" for r in rows for v in r.values())
+    ref = rows[0]
+    assert float(ref["residual_ks_p"]) == 1.0 and float(ref["max_deterministic_rel"]) == 0.0
+    assert ref["meets_targets"] == "yes" and int(ref["members"]) == 3
+    assert float(rows[1]["wall_per_member_s"]) > 0 and rows[2]["step_ms"] == "0.2"
+    assert len(list((out / "members").glob("*.csv"))) == 3
+    text = (out / "accuracy_ensemble.md").read_text()
+    assert report.confirmation_text() in text and "all targets" in text
+    assert (out / "work_precision_ensemble.png").exists()

@@ -91,9 +91,17 @@ def _study_parser(sub) -> None:
     acc.add_argument("--wall-limit", type=float, metavar="S", help="wall-time budget of each run (default: none)")
     acc.add_argument("--no-plot", action="store_true", help="skip the work-precision plot")
     est.add_argument("--members", type=int, default=8, metavar="N", help="starts compared (default 8)")
-    est.add_argument("--reference", metavar="METHOD:VALUE", default="symplectic_euler:80",
-                     help="the converged setting, e.g. symplectic_euler:160 (default symplectic_euler:80)")
+    est.add_argument("--reference", metavar="METHOD:VALUE", default="symplectic_euler:320",
+                     help="the converged setting (default symplectic_euler:320, 3.125 us at dt 1 ms: the accuracy "
+                          "study's converged reference)")
     est.add_argument("--workers", type=int, metavar="W", help="parallel processes (default: one per core)")
+    acc.add_argument("--ensemble", type=int, metavar="N",
+                     help="run every setting as an N-member ensemble from the same perturbed starts and compare "
+                          "distributions (KS test, medians) with the reference's ensemble")
+    acc.add_argument("--seed", type=int, default=0, metavar="S", help="with --ensemble: the starts' seed (default 0)")
+    acc.add_argument("--workers", type=int, metavar="W", help="with --ensemble: processes (default: CPU count)")
+    acc.add_argument("--confirmation-members", type=int, metavar="K",
+                     help="with --ensemble: run the confirmation on the first K starts only (default: N)")
     stab.add_argument("--cases", metavar="NAME,NAME",
                       help="cases or groups (stiff, extreme, baseline); spaces ignored, e.g. 'Ex100,y_a+10mm'")
     stab.add_argument("--quick", action="store_true", help="the suite's cases, each 1.5 s simulated")
@@ -138,6 +146,18 @@ def _study(args) -> int:
             reference = accuracy.parse_setting(args.reference) if args.reference else grid.reference
             if args.wall_limit is not None and not args.wall_limit > 0:
                 raise ValueError(f"--wall-limit {args.wall_limit}: must be > 0")
+            if args.ensemble is None:
+                given = [o for o, v in (("--seed", args.seed != 0), ("--workers", args.workers is not None),
+                                        ("--confirmation-members", args.confirmation_members is not None)) if v]
+                if given:
+                    raise ValueError(f"{', '.join(given)}: only with --ensemble N")
+            else:
+                for option, value in (("--ensemble", args.ensemble), ("--workers", args.workers),
+                                      ("--confirmation-members", args.confirmation_members)):
+                    if value is not None and value < 1:
+                        raise ValueError(f"{option} {value}: must be >= 1")
+                if args.wall_limit is not None:
+                    raise ValueError("--wall-limit: not with --ensemble")
             fixed = {m: substeps or n for m, n in grid.substeps.items()}
             if substeps:  # a method the grid leaves out is swept too when asked for by name
                 fixed.update({m: substeps for m in methods or () if m not in ADAPTIVE})
@@ -181,9 +201,17 @@ def _study(args) -> int:
     try:
         if args.study == "accuracy":
             report = accuracy.accuracy_study(scenario, chosen.settings(), chosen.reference, out, source=str(path),
-                                          progress=progress, wall_limit_s=args.wall_limit, plot=not args.no_plot)
-            print(f"{scenario.name}: accuracy, {len(report.rows)} runs")
-            for line in (report.confirmation_text(), report.sensitivity_text(), report.fastest_text()):
+                                             progress=progress, wall_limit_s=args.wall_limit, plot=not args.no_plot,
+                                             ensemble=args.ensemble, seed=args.seed, workers=args.workers,
+                                             confirmation_members=args.confirmation_members)
+            if args.ensemble is None:
+                print(f"{scenario.name}: accuracy, {len(report.rows)} runs")
+                lines = (report.confirmation_text(), report.sensitivity_text(), report.fastest_text())
+            else:
+                print(f"{scenario.name}: accuracy over ensembles of {args.ensemble} (seed {args.seed}), "
+                      f"{len(report.rows)} settings")
+                lines = (report.confirmation_text(), report.fastest_text())
+            for line in lines:
                 print(f"  {line}")
         else:
             report = stability.stability_study(scenario, cases, out, source=str(path), progress=progress,

@@ -353,9 +353,14 @@ def perturbed(s, d_mm: float = PERTURBATION_MM):
 
 def accuracy_study(scenario, settings: list[Setting], reference: Setting, out_dir, *,
                    source: str = "<study>", progress: bool = False, wall_limit_s: float | None = None,
-                   plot: bool = True) -> AccuracyReport:
+                   plot: bool = True, ensemble: int | None = None, seed: int = 0, workers: int | None = None,
+                   confirmation_members: int | None = None):
     """Run the reference and its confirmation, then every setting; write accuracy.csv (a row per
     run as it ends), accuracy.md and work_precision.png into `out_dir`.
+
+    With `ensemble` = N, every setting is instead an N-member ensemble from the same starts
+    (`seed`), compared with the reference's ensemble (`accuracy_ensemble.accuracy_ensemble_study`,
+    which returns an EnsembleAccuracyReport; `wall_limit_s` does not apply).
 
     Errors are against the reference run. If the confirmation ends with nothing to compare
     (diverged), the setting one refinement coarser is run next (role `coarser check`) and bounds
@@ -364,6 +369,12 @@ def accuracy_study(scenario, settings: list[Setting], reference: Setting, out_di
     (symplectic Euler at dt = 1 ms) and the scenario's own setting are marked in the `role`
     column. Ctrl-C stops the study and keeps the rows written (report.interrupted).
     """
+    if ensemble is not None:
+        from .accuracy_ensemble import accuracy_ensemble_study
+
+        return accuracy_ensemble_study(scenario, settings, reference, out_dir, ensemble, seed=seed, workers=workers,
+                                       confirmation_members=confirmation_members, source=source,
+                                       progress=progress, plot=plot)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     dt = scenario.simulation.dt_s

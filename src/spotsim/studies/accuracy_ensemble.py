@@ -1,0 +1,444 @@
+"""The accuracy study over ensembles: each setting run from the same N perturbed starts.
+
+A run's residual offset and tilt are samples of a distribution over microscopic start
+perturbations (model.md Sec. 9): one run against one reference run says nothing about them.
+Here every setting (the reference, its confirmation, each swept one) is an N-member ensemble
+(`spotsim.ensemble`) with the same seed, hence the same starts, and is compared with the
+reference's ensemble:
+
+- distributions (each grasp's residual offset norm, and its roll, pitch, yaw): the two-sample
+  Kolmogorov-Smirnov p-value (scipy.stats.ks_2samp) and the difference of the medians, and the
+  seated / wedged shares;
+- near-deterministic quantities (each grasp's peak contact force and torque norms; on the
+  free-floating robot its centroid displacement norm): the relative difference of the medians,
+  next to each ensemble's p10-p90 spread, which shows how deterministic they are.
+
+A setting meets the targets when every deterministic median is within DETERMINISTIC_REL of the
+reference's, and every grasp's residual has a KS p-value above KS_ALPHA and a median within
+RESIDUAL_MEDIAN_REL of the reference's.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import textwrap
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .ensemble import (
+    OFFSET_TOL_MM,
+    RPY_TOL_DEG,
+    SEATED,
+    WEDGED,
+    EnsembleResult,
+    ensemble,
+    grasp_prefix,
+    members_csv,
+)
+from .runs import RowWriter, markdown_table, percent, sig, warm_up
+
+#: Targets of a setting against the reference (issue 14): the near-deterministic quantities'
+#: medians within 2 %; the residual offset's distribution not told apart from the reference's
+#: by a KS test at 5 %, and its median within 5 %.
+DETERMINISTIC_REL = 0.02
+KS_ALPHA = 0.05
+RESIDUAL_MEDIAN_REL = 0.05
+
+#: (members-table column without grasp prefix, CSV name, unit) of the compared quantities.
+DISTRIBUTED = (("residual_norm_mm", "residual", "mm"),)
+ANGLES = (("residual_roll_deg", "roll", "deg"), ("residual_pitch_deg", "pitch", "deg"),
+          ("residual_yaw_deg", "yaw", "deg"))
+DETERMINISTIC = (("peak_force_norm_N", "peak_force", "N"), ("peak_torque_norm_Nm", "peak_torque", "Nm"))
+CENTROID = (("centroid_displacement_norm_mm", "centroid", "mm"),)
+
+
+def deterministic_quantities(dual: bool):
+    return DETERMINISTIC + (CENTROID if dual else ())
+
+
+# ----------------------------------------------------------------------------- statistics
+
+
+def ks_pvalue(a, b) -> float:
+    """The two-sample Kolmogorov-Smirnov p-value of samples a and b (nan if either is empty)."""
+    from scipy.stats import ks_2samp
+
+    a, b = _finite(a), _finite(b)
+    if not len(a) or not len(b):
+        return math.nan
+    return float(ks_2samp(a, b).pvalue)
+
+
+def _finite(values) -> np.ndarray:
+    return np.asarray([v for v in values if v is not None and math.isfinite(v)], dtype=float)
+
+
+def quantiles(values) -> tuple[float, float, float]:
+    """(p10, median, p90) of the finite values (numpy's linear interpolation; nan if none)."""
+    x = _finite(values)
+    if not len(x):
+        return math.nan, math.nan, math.nan
+    p10, med, p90 = np.percentile(x, [10, 50, 90])
+    return float(p10), float(med), float(p90)
+
+
+def median_rel(a, b) -> float:
+    """The signed relative difference of the median of a from the median of b."""
+    ma, mb = quantiles(a)[1], quantiles(b)[1]
+    if math.isnan(ma) or math.isnan(mb) or mb == 0:
+        return math.nan
+    return (ma - mb) / abs(mb)
+
+
+def class_share(rows: list[dict], p: str, cls: str) -> float:
+    """The share of `rows` (members that ran) whose grasp `p` ended as `cls`."""
+    ran = [r for r in rows if r["status"] != "interrupted"]
+    return sum(r[f"{p}class"] == cls for r in ran) / len(ran) if ran else math.nan
+
+
+def compare(rows: list[dict], ref_rows: list[dict], n_grasps: int, dual: bool) -> dict:
+    """The comparison of an ensemble's member rows with the reference's: per grasp, for the
+    residual and its angles the KS p-value and the median difference (relative for the offset
+    norm, deg for the angles); for each deterministic quantity the relative difference of the
+    medians; the seated / wedged shares; then the targets (`*_ok`, `meets_targets`) and the
+    worst of each measure over the grasps (`max_deterministic_rel`, `min_residual_ks_p`,
+    `max_residual_median_rel`). The reference is taken over the same members as `rows` (the
+    first k of its starts, when the ensemble has fewer members)."""
+    members = {r["member"] for r in rows}
+    ref_rows = [r for r in ref_rows if r["member"] in members]
+    out: dict = {}
+    det, ks, med = [], [], []
+    for g in range(n_grasps):
+        p = grasp_prefix(g, n_grasps)
+
+        def col(rs, q, p=p):
+            return [r.get(f"{p}{q}") for r in rs]
+
+        for q, name, unit in DISTRIBUTED:
+            a, b = col(rows, q), col(ref_rows, q)
+            out[f"{p}{name}_p10_{unit}"], out[f"{p}{name}_median_{unit}"], out[f"{p}{name}_p90_{unit}"] = quantiles(a)
+            out[f"{p}{name}_ks_p"] = ks_pvalue(a, b)
+            out[f"{p}{name}_median_rel"] = median_rel(a, b)
+            ks.append(out[f"{p}{name}_ks_p"])
+            med.append(abs(out[f"{p}{name}_median_rel"]))
+        for q, name, unit in ANGLES:
+            a, b = col(rows, q), col(ref_rows, q)
+            out[f"{p}{name}_median_{unit}"] = quantiles(a)[1]
+            out[f"{p}{name}_ks_p"] = ks_pvalue(a, b)
+            out[f"{p}{name}_median_diff_{unit}"] = quantiles(a)[1] - quantiles(b)[1]
+        for q, name, unit in deterministic_quantities(dual):
+            a, b = col(rows, q), col(ref_rows, q)
+            out[f"{p}{name}_p10_{unit}"], out[f"{p}{name}_median_{unit}"], out[f"{p}{name}_p90_{unit}"] = quantiles(a)
+            out[f"{p}{name}_median_rel"] = median_rel(a, b)
+            det.append(abs(out[f"{p}{name}_median_rel"]))
+        out[f"{p}completed"] = sum(r[f"{p}class"] in (SEATED, WEDGED) for r in rows)
+        out[f"{p}seated"] = class_share(rows, p, SEATED)
+        out[f"{p}wedged"] = class_share(rows, p, WEDGED)
+
+    def worst(values, best=max):
+        return math.nan if not values or any(math.isnan(v) for v in values) else best(values)
+
+    out["max_deterministic_rel"] = worst(det)
+    out["min_residual_ks_p"] = worst(ks, min)
+    out["max_residual_median_rel"] = worst(med)
+    out["deterministic_ok"] = out["max_deterministic_rel"] <= DETERMINISTIC_REL  # False on nan
+    out["residual_ks_ok"] = out["min_residual_ks_p"] > KS_ALPHA
+    out["residual_median_ok"] = out["max_residual_median_rel"] <= RESIDUAL_MEDIAN_REL
+    out["meets_targets"] = out["deterministic_ok"] and out["residual_ks_ok"] and out["residual_median_ok"]
+    return out
+
+
+# ----------------------------------------------------------------------------- the study
+
+
+@dataclass
+class EnsembleAccuracyReport:
+    """What an ensemble accuracy study found: `rows` as written to its CSV (one per setting),
+    `ensembles` each setting's EnsembleResult by its label."""
+
+    scenario: str
+    dt_s: float
+    members: int
+    seed: int
+    reference: object  # accuracy.Setting
+    confirmation: object
+    confirmation_members: int
+    rows: list[dict]
+    ensembles: dict[str, EnsembleResult] = field(default_factory=dict)
+    interrupted: bool = False
+    files: list[Path] = field(default_factory=list)
+
+    def row(self, role: str) -> dict | None:
+        return next((r for r in self.rows if r["role"] == role), None)
+
+    def fastest_meeting(self, method: str | None = None) -> dict | None:
+        """The swept setting (of `method`, if given) with the least wall time per member that
+        meets every target."""
+        ok = [r for r in self.rows if r["role"] not in ("reference", "confirmation") and r["meets_targets"]
+              and (method is None or r["method"] == method)]
+        return min(ok, key=lambda r: r["wall_per_member_s"]) if ok else None
+
+    def confirmation_text(self) -> str:
+        c = self.row("confirmation")
+        ref = self.reference.label(self.dt_s)
+        if self.row("reference") is None:
+            return "reference not run"
+        if c is None:
+            return "reference not confirmed: the study stopped before its confirmation ran"
+        fewer = (f" ({c['members']} members, against the reference's first {c['members']})"
+                 if c["members"] < self.members else "")
+        return (f"refining the reference {ref} to {self.confirmation.label(self.dt_s)}{fewer} changes the "
+                f"deterministic medians by at most {percent(c['max_deterministic_rel'])} "
+                f"({c['worst_deterministic']}); the residual's KS p = {sig(c['min_residual_ks_p'], 2)}, its "
+                f"median by {percent(c['max_residual_median_rel'])}: "
+                f"{'within' if c['meets_targets'] else 'NOT within'} the targets")
+
+    def fastest_text(self) -> str:
+        best = self.fastest_meeting()
+        text = ("fastest setting meeting every target: none of the settings swept" if best is None else
+                f"fastest setting meeting every target: {best['setting']}, {best['wall_per_member_s']:.3g} s "
+                f"per member")
+        adaptive = self.fastest_meeting("adaptive_euler")
+        if adaptive is not None and adaptive is not best:
+            text += f"; fastest adaptive_euler: tol {adaptive['tol']:g} m/s, {adaptive['wall_per_member_s']:.3g} s"
+        return text
+
+
+def columns(n_grasps: int, dual: bool) -> list[str]:
+    cols = ["role", "setting", "method", "substeps", "step_ms", "tol", "members", "seed", "statuses",
+            "wall_per_member_s", "wall_time_s", "steps_per_member", "force_evaluations_per_member"]
+    for g in range(n_grasps):
+        p = grasp_prefix(g, n_grasps)
+        cols += [f"{p}completed", f"{p}seated", f"{p}wedged"]
+        for _, name, unit in DISTRIBUTED:
+            cols += [f"{p}{name}_median_{unit}", f"{p}{name}_p10_{unit}", f"{p}{name}_p90_{unit}",
+                     f"{p}{name}_ks_p", f"{p}{name}_median_rel"]
+        for _, name, unit in ANGLES:
+            cols += [f"{p}{name}_median_{unit}", f"{p}{name}_ks_p", f"{p}{name}_median_diff_{unit}"]
+        for _, name, unit in deterministic_quantities(dual):
+            cols += [f"{p}{name}_median_{unit}", f"{p}{name}_p10_{unit}", f"{p}{name}_p90_{unit}",
+                     f"{p}{name}_median_rel"]
+    return cols + ["max_deterministic_rel", "worst_deterministic", "min_residual_ks_p", "max_residual_median_rel",
+                   "deterministic_ok", "residual_ks_ok", "residual_median_ok", "meets_targets"]
+
+
+def setting_row(setting, role: str, e: EnsembleResult, ref: EnsembleResult, dt_s: float) -> dict:
+    """The CSV row of one setting's ensemble compared with the reference's."""
+    n_grasps = len(e.statistics)
+    dual = e.scenario.kind == "dual_arm"
+    rows, ref_rows = e.summary["rows"], ref.summary["rows"]
+    ran = [m for m in e.members if m.summary]
+
+    def mean(key):
+        values = [m.summary[key] if key in m.summary else m.summary["integrator"].get(key, m.summary["steps"])
+                  for m in ran]
+        return float(np.mean(values)) if values else math.nan
+
+    row = {"role": role, "setting": setting.label(dt_s), "method": setting.method,
+           "substeps": math.nan if setting.adaptive else setting.substeps, "step_ms": setting.step_s(dt_s) * 1e3,
+           "tol": setting.tol or math.nan, "members": len(e.members), "seed": e.seed,
+           "statuses": " ".join(f"{k}:{v}" for k, v in sorted(e.statuses.items())),
+           "wall_per_member_s": mean("wall_time_s"), "wall_time_s": e.wall_time_s,
+           "steps_per_member": mean("steps"), "force_evaluations_per_member": mean("force_evaluations")}
+    c = compare(rows, ref_rows, n_grasps, dual)
+    det = {f"{grasp_prefix(g, n_grasps)}{name}": abs(c[f"{grasp_prefix(g, n_grasps)}{name}_median_rel"])
+           for g in range(n_grasps) for _, name, _ in deterministic_quantities(dual)}
+    row.update(c)
+    row["worst_deterministic"] = max(det, key=lambda k: -1.0 if math.isnan(det[k]) else det[k]) if det else ""
+    return row
+
+
+def accuracy_ensemble_study(scenario, settings: list, reference, out_dir, n: int, *, seed: int = 0,
+                            workers: int | None = None, confirmation_members: int | None = None,
+                            source: str = "<study>", progress: bool = False, plot: bool = True,
+                            offset_tol_mm: float = OFFSET_TOL_MM,
+                            rpy_tol_deg: float = RPY_TOL_DEG) -> EnsembleAccuracyReport:
+    """Run the reference, its confirmation (its refinement; `confirmation_members`, by default
+    n, of the same starts) and every setting as an n-member ensemble from the same seeded
+    starts; write accuracy_ensemble.csv (a row per setting as it ends), members/<setting>.csv
+    (each ensemble's members table), accuracy_ensemble.md and work_precision_ensemble.png into
+    `out_dir`. Ctrl-C stops the study and keeps the rows written (report.interrupted)."""
+    from .accuracy import setting_of
+
+    out = Path(out_dir)
+    (out / "members").mkdir(parents=True, exist_ok=True)
+    dt = scenario.simulation.dt_s
+    confirmation = reference.refined()
+    k = min(confirmation_members or n, n)
+    n_grasps, dual = len(scenario_modules(scenario)), scenario.kind == "dual_arm"
+    writer = RowWriter(out / "accuracy_ensemble.csv", columns(n_grasps, dual))
+    report = EnsembleAccuracyReport(scenario.name, dt, n, seed, reference, confirmation, k, writer.rows)
+    default = setting_of(scenario)
+    todo = [(reference, "reference", n), (confirmation, "confirmation", k)]
+    todo += [(s, "default" if s == default else "sweep", n) for s in dict.fromkeys(settings)
+             if s not in (reference, confirmation)]
+    ref = None
+    try:
+        warm_up(scenario, sorted({s.method for s, _, _ in todo}))
+        for setting, role, size in todo:
+            label = setting.label(dt)
+            if progress:
+                print(f"{scenario.name}: {label} ({role}), {size} members", flush=True)
+            e = ensemble(setting.apply(scenario), size, seed=seed, offset_tol_mm=offset_tol_mm,
+                         rpy_tol_deg=rpy_tol_deg, workers=workers, progress=progress, source=source)
+            report.ensembles[label] = e
+            (out / "members" / f"{slug(label)}.csv").write_text(members_csv(e))
+            if e.interrupted:
+                report.interrupted = True
+                break
+            ref = ref or e
+            writer.write(setting_row(setting, role, e, ref, dt))
+    except KeyboardInterrupt:
+        report.interrupted = True
+    finally:
+        writer.close()
+    md = out / "accuracy_ensemble.md"
+    md.write_text(ensemble_markdown(scenario, report))
+    report.files = [writer.path, md]
+    if plot and report.rows:
+        work_precision_ensemble_plot(report, out / "work_precision_ensemble.png")
+        report.files.append(out / "work_precision_ensemble.png")
+    return report
+
+
+def scenario_modules(scenario):
+    from ..scenario import modules_of
+
+    return modules_of(scenario)
+
+
+def slug(label: str) -> str:
+    """A file name for a setting's label: `symplectic_euler h 0.0125 ms` -> `symplectic_euler_h_0.0125_ms`."""
+    return re.sub(r"[^A-Za-z0-9.+-]+", "_", label).strip("_")
+
+
+# ----------------------------------------------------------------------------- output
+
+
+def _yes(x) -> str:
+    return "yes" if x else "**no**"
+
+
+def _share(x) -> str:
+    return "–" if math.isnan(x) else f"{100 * x:.0f} %"
+
+
+def _signed(x) -> str:
+    return "–" if math.isnan(x) else f"{100 * x:+.2g} %"
+
+
+def ensemble_markdown(scenario, report: EnsembleAccuracyReport) -> str:
+    """The study's markdown: its findings, then a table of the targets and one of the values."""
+    n_grasps, dual = len(scenario_modules(scenario)), scenario.kind == "dual_arm"
+    ref = report.row("reference")
+    head = [f"# Accuracy study over ensembles: {report.scenario}", "",
+            (f"Every setting run from the same {report.members} starts (seed {report.seed}, each module's start "
+             f"moved uniformly within +-{OFFSET_TOL_MM * 1e3:g} um and +-{RPY_TOL_DEG:g} deg; member 0 "
+             f"unperturbed), compared with the reference's ensemble, {report.reference.label(report.dt_s)}. "
+             f"Targets: the medians of the peak force and torque norms"
+             f"{' and of the robot centroid displacement norm' if dual else ''} within "
+             f"{100 * DETERMINISTIC_REL:g} % of the reference's; the residual offset norm's distribution with a "
+             f"two-sample KS p-value above {KS_ALPHA:g} and its median within {100 * RESIDUAL_MEDIAN_REL:g} %. "
+             f"Wall time: the simulation loop's, per member, with the members run in parallel."), "",
+            f"- {report.confirmation_text()}", f"- {report.fastest_text()}"]
+    if report.interrupted:
+        head.append("- **interrupted**: the study was stopped; the rows below are the settings that finished")
+    targets, values = [], []
+    for r in report.rows:
+        targets.append([r["setting"], r["role"], str(r["members"]), r["statuses"], sig(r["wall_per_member_s"]),
+                        percent(r["max_deterministic_rel"]), _yes(r["deterministic_ok"]),
+                        sig(r["min_residual_ks_p"], 2), _yes(r["residual_ks_ok"]),
+                        percent(r["max_residual_median_rel"]), _yes(r["residual_median_ok"]),
+                        _yes(r["meets_targets"])])
+        for g in range(n_grasps):
+            p = grasp_prefix(g, n_grasps)
+            cells = [r["setting"], f"{p[:-1] or 'grasp'}",
+                     f"{sig(r[f'{p}residual_median_mm'], 3)} [{sig(r[f'{p}residual_p10_mm'], 3)}, "
+                     f"{sig(r[f'{p}residual_p90_mm'], 3)}]",
+                     f"{sig(r[f'{p}residual_ks_p'], 2)} / {_signed(r[f'{p}residual_median_rel'])}",
+                     f"{_share(r[f'{p}seated'])} / {_share(r[f'{p}wedged'])} "
+                     f"({_share(ref[f'{p}seated'])} / {_share(ref[f'{p}wedged'])})" if ref else "–",
+                     f"{sig(r[f'{p}roll_median_deg'], 3)} (p {sig(r[f'{p}roll_ks_p'], 2)}), "
+                     f"{sig(r[f'{p}pitch_ks_p'], 2)}, {sig(r[f'{p}yaw_ks_p'], 2)}"]
+            for _, name, unit in deterministic_quantities(dual):
+                cells.append(f"{sig(r[f'{p}{name}_median_{unit}'], 4)} [{sig(r[f'{p}{name}_p10_{unit}'], 4)}, "
+                             f"{sig(r[f'{p}{name}_p90_{unit}'], 4)}] {_signed(r[f'{p}{name}_median_rel'])}")
+            values.append(cells)
+    target_table = markdown_table(
+        ["setting", "role", "members", "statuses", "wall per member (s)", "deterministic, worst",
+         f"within {100 * DETERMINISTIC_REL:g} %", "residual KS p, least", f"p > {KS_ALPHA:g}",
+         "residual median, worst", f"within {100 * RESIDUAL_MEDIAN_REL:g} %", "all targets"], targets)
+    det_heads = [f"{name.replace('_', ' ')} ({unit}) median [p10, p90], vs ref" for _, name, unit in
+                 deterministic_quantities(dual)]
+    value_table = markdown_table(
+        ["setting", "grasp", "residual e (mm) median [p10, p90]", "residual KS p / median vs ref",
+         "seated / wedged (ref)", "roll median deg (KS p); pitch, yaw KS p", *det_heads], values)
+    return ("\n".join(head) + "\n\nTargets (the worst grasp):\n\n" + target_table
+            + "\nValues per grasp:\n\n" + value_table)
+
+
+def work_precision_ensemble_plot(report: EnsembleAccuracyReport, path: Path) -> None:
+    """Error measures against wall time per member, log-log, one line per integrator: the worst
+    relative difference of the deterministic medians, the residual median's, and the residual's
+    smallest KS p-value (linear-log); the targets dashed, the confirmation a star."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.ticker import NullFormatter
+
+    panels = [("max_deterministic_rel", "deterministic medians: worst relative difference", DETERMINISTIC_REL),
+              ("max_residual_median_rel", "residual offset median: relative difference", RESIDUAL_MEDIAN_REL),
+              ("min_residual_ks_p", "residual offset: KS p-value vs the reference", KS_ALPHA)]
+    fig, axes = plt.subplots(1, 3, figsize=(15.6, 5.2), squeeze=False)
+    rows = [r for r in report.rows if r["role"] != "reference" and not math.isnan(r["wall_per_member_s"])]
+    ref = report.row("reference")
+    for ax, (key, label, target) in zip(axes[0], panels):
+        ks = key.endswith("_p")
+        good = [r[key] for r in rows if not math.isnan(r[key])]
+        # p-values run down to ~1e-18 (two disjoint samples of 32): the floor follows the data
+        floor = max(min([e for e in good if e > 0], default=1e-6) / 3, 1e-30)
+        lines: dict = {}
+        for r in rows:
+            if r["role"] != "confirmation":
+                lines.setdefault(r["method"], []).append(r)
+        for method, group in lines.items():
+            group.sort(key=lambda r: r["wall_per_member_s"])
+            xs = [r["wall_per_member_s"] for r in group if not math.isnan(r[key])]
+            ys = [max(r[key], floor) for r in group if not math.isnan(r[key])]
+            (line,) = ax.plot(xs, ys, "o-", lw=1.2, ms=4, label=method)
+            for r in group:
+                if not math.isnan(r[key]):
+                    short = f"tol {r['tol']:g}" if method == "adaptive_euler" else f"{r['step_ms'] * 1e3:g} us"
+                    ax.annotate(short, (r["wall_per_member_s"], max(r[key], floor)), fontsize=6, xytext=(3, 3),
+                                textcoords="offset points", color=line.get_color())
+                if r["role"] == "default":
+                    ax.plot(r["wall_per_member_s"], max(r[key], floor) if not math.isnan(r[key]) else floor, "s",
+                            ms=11, mfc="none", mec="tab:gray", mew=1.5, label="the scenario's setting")
+        c = report.row("confirmation")
+        if c is not None and not math.isnan(c[key]):
+            ax.plot(c["wall_per_member_s"], max(c[key], floor), "*", ms=12, color="black",
+                    label=f"confirmation: {c['setting']}")
+        if ref is not None:
+            ax.axvline(ref["wall_per_member_s"], ls=":", color="black", lw=1, label=f"reference: {ref['setting']}")
+        ax.axhline(target, ls="--", color="tab:green", lw=1, label="target")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        if ks:
+            ax.set_ylim(floor, 1.5)
+        ax.set_xlabel("wall time per member (s)")
+        ax.set_ylabel(label)
+        ax.xaxis.set_minor_formatter(NullFormatter())
+        ax.grid(alpha=0.3, which="both")
+    handles, labels = axes[0][0].get_legend_handles_labels()
+    seen = dict(zip(labels, handles))
+    fig.legend(seen.values(), seen.keys(), loc="lower center", ncol=4, fontsize=7, frameon=False)
+    fig.suptitle(f"{report.scenario}: ensembles of {report.members} (seed {report.seed}), error against wall time\n"
+                 f"{textwrap.shorten(report.confirmation_text(), 160)}", fontsize=9)
+    fig.tight_layout(rect=(0, 0.1, 1, 1))
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
