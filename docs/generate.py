@@ -378,7 +378,8 @@ def headline(r: Results) -> str:
         return next(x for x in ens[study] if x["role"] == name)
 
     def spread(x, q, unit, digits=3):
-        return f"{num(x[f'{q}_median_{unit}'], digits)} [{num(x[f'{q}_p10_{unit}'], 2)}, {num(x[f'{q}_p90_{unit}'], 2)}]"
+        return (f"{num(x[f'{q}_median_{unit}'], digits)} [{num(x[f'{q}_p10_{unit}'], digits)}, "
+                f"{num(x[f'{q}_p90_{unit}'], digits)}]")
 
     def residual(x, p=""):
         return (f"{spread(x, f'{p}residual', 'mm')}; {fixed(100 * x[f'{p}seated'], 0)} % seated, "
@@ -391,7 +392,8 @@ def headline(r: Results) -> str:
                      residual(d), residual(ref),
                      f"median {signed_rel(d['residual_median_rel'])}, KS p = {num(d['residual_ks_p'], 2)}"])
     d, ref = role("single_arm_case_III", "default"), role("single_arm_case_III", "reference")
-    rows.append(["Case III: peak contact force \\|F\\| (N)", num(norm(PAPER_PEAK_22)), spread(d, "peak_force", "N", 4),
+    rows.append(["Case III: peak contact force |F| (N; the paper: its per-axis peaks' norm)",
+                 num(norm(PAPER_PEAK_22)), spread(d, "peak_force", "N", 4),
                  spread(ref, "peak_force", "N", 4), signed_rel(d["peak_force_median_rel"])])
     c1 = r.runs["single_arm_case_I"]
     rows.append(["Case I: wall time of one run (s)", f"{num(PAPER_CASES['single_arm_case_I']['wall'], 4)} (MATLAB)",
@@ -399,7 +401,7 @@ def headline(r: Results) -> str:
     d, ref = role("dual_arm_sequential", "default"), role("dual_arm_sequential", "reference")
     for g, paper in ((1, PAPER_D1), (2, PAPER_D2)):
         q = f"g{g}_centroid"
-        rows.append([f"Dual arm: robot centroid displacement, grasp {g}, \\|d\\| (mm)", num(norm(paper)),
+        rows.append([f"Dual arm: robot centroid displacement, grasp {g}, |d| (mm)", num(norm(paper)),
                      spread(d, q, "mm"), spread(ref, q, "mm"), signed_rel(d[f"{q}_median_rel"])])
     rows.append(["Dual arm: max contact force, grasp 1 (N)", num(PAPER_FORCE_1, 5), spread(d, "g1_peak_force", "N", 4),
                  spread(ref, "g1_peak_force", "N", 4), signed_rel(d["g1_peak_force_median_rel"])])
@@ -552,7 +554,7 @@ def dual_momentum(r: Results) -> str:
     win = x["momentum_window"]
     by = {(w["method"], round(w["step_ms"], 6), w["force_point"]): w["angular_drift_rel"] for w in win}
     rows = []
-    for method, label in (("symplectic_euler", "symplectic Euler (default)"), ("rk4", "RK4")):
+    for method, label in (("symplectic_euler", "symplectic Euler"), ("rk4", "RK4")):
         a, b = by[(method, 0.1, "common")], by[(method, 0.05, "common")]
         rows.append([label, num(a), num(b), num(a / b, 3)])
     control = by[("symplectic_euler", 0.1, "sphere_centres")]

@@ -13,6 +13,7 @@ import numpy as np
 
 from ..errors import SpotsimError
 from ..scenario import TOLERANCE_DEG, TOLERANCE_OFFSET_MM, modules_of, replace, to_dict
+from ..sim.integrators import ADAPTIVE
 from .runs import (
     COMPARABLE,
     EXCEPTION,
@@ -270,6 +271,8 @@ def stability_row(case: Case, o: Outcome, changed=None, fine: Outcome | None = N
     v = verdict(o)
     if p is None or o.status not in (*COMPARABLE, "diverged"):
         held = "n/a"
+    elif p.integrator in ADAPTIVE:
+        held = "n/a (adaptive step)"  # the prediction bounds a fixed step; an adaptive one finds its own
     elif p.stable and o.status == "diverged" and fine is not None and fine.status == "diverged":
         held = "yes (not the step's divergence)"  # the step was not the cause: nothing to predict
     else:
