@@ -253,9 +253,8 @@ def setting_row(setting, role: str, e: EnsembleResult, ref: EnsembleResult, dt_s
 
 def accuracy_ensemble_study(scenario, settings: list, reference, out_dir, n: int, *, seed: int = 0,
                             workers: int | None = None, confirmation_members: int | None = None,
-                            source: str = "<study>", progress: bool = False, plot: bool = True,
-                            offset_tol_mm: float = OFFSET_TOL_MM,
-                            rpy_tol_deg: float = RPY_TOL_DEG) -> EnsembleAccuracyReport:
+                            source: str = "<study>", progress: bool = False,
+                            plot: bool = True) -> EnsembleAccuracyReport:
     """Run the reference, its confirmation (its refinement; `confirmation_members`, by default
     n, of the same starts) and every setting as an n-member ensemble from the same seeded
     starts; write accuracy_ensemble.csv (a row per setting as it ends), members/<setting>.csv
@@ -282,8 +281,8 @@ def accuracy_ensemble_study(scenario, settings: list, reference, out_dir, n: int
             label = setting.label(dt)
             if progress:
                 print(f"{scenario.name}: {label} ({role}), {size} members", flush=True)
-            e = ensemble(setting.apply(scenario), size, seed=seed, offset_tol_mm=offset_tol_mm,
-                         rpy_tol_deg=rpy_tol_deg, workers=workers, progress=progress, source=source)
+            e = ensemble(setting.apply(scenario), size, seed=seed, workers=workers, progress=progress,
+                         source=source)
             report.ensembles[label] = e
             (out / "members" / f"{slug(label)}.csv").write_text(members_csv(e))
             if e.interrupted:
