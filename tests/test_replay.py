@@ -21,7 +21,7 @@ DUAL = ROOT / "config" / "dual_arm_sequential.yaml"
 #: Case I touches at 0.43 s, has sticking pairs from 0.71 s and completes at 1.03 s: 1 s
 #: holds the approach and self-centring with pairs in both states.
 SINGLE_S = 1.0
-#: The dual-arm run welds TM-1 at 1.72 s and EE-2 touches TM-2 at 2.28 s: 2.4 s holds both.
+#: The dual-arm run welds TM-1 at 1.63 s and EE-2 touches TM-2 at 2.20 s: 2.4 s holds both.
 DUAL_S = 2.4
 RATE_HZ = 100.0
 #: The animation stores float32: key times and positions agree to its round-off.
