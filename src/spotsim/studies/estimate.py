@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import math
 
-from ..scenario import replace, to_dict
+from .runs import step_scaled
 
 #: The quantities estimated, per grasp: summary key -> whether it is a distribution over starts.
 QUANTITIES = {
@@ -41,15 +41,12 @@ METHOD = ("estimate: Richardson, first order: |Q(run) - Q(companion)|, the compa
 
 
 def companion(scenario):
-    """The scenario with steps twice as long, or None when the integrator has none to offer
-    (rk4, dopri5, or symplectic_euler at an odd number of substeps)."""
-    i = scenario.simulation.integrator
-    if i.method == "adaptive_euler":
-        changes = {"velocity_tol_m_s": 4 * i.velocity_tol_m_s, "onset_depth_m": 2 * i.onset_depth_m}
-        return replace(scenario, simulation={"integrator": {**to_dict(i), **changes}})
-    if i.method == "symplectic_euler" and scenario.simulation.substeps % 2 == 0:
-        return replace(scenario, simulation={"substeps": scenario.simulation.substeps // 2})
-    return None
+    """The scenario with steps twice as long (`runs.step_scaled`), or None when the integrator
+    has none to offer: rk4 and dopri5, which are not first order, or symplectic_euler at an odd
+    number of substeps."""
+    if scenario.simulation.integrator.method not in ("symplectic_euler", "adaptive_euler"):
+        return None
+    return step_scaled(scenario, 2.0)
 
 
 def quantities(summary: dict) -> list[dict]:

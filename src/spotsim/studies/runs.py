@@ -262,6 +262,23 @@ def percent(x) -> str:
     return f"{100 * x:.3g} %"
 
 
+def step_scaled(s, factor: float):
+    """`s` with its dynamics steps `factor` times as long, or None where that is not a whole
+    number of substeps. Fixed steps: substeps / factor. adaptive_euler: its steps go as
+    velocity_tol^(1/2) and its onset guard's as onset_depth, so velocity_tol x factor^2 and
+    onset_depth x factor. dopri5: rtol and atol x factor."""
+    i = s.simulation.integrator
+    if i.method == "dopri5":
+        return replace(s, simulation={"integrator": {**to_dict(i), "rtol": i.rtol * factor, "atol": i.atol * factor}})
+    if i.method == "adaptive_euler":
+        return replace(s, simulation={"integrator": {**to_dict(i), "velocity_tol_m_s": i.velocity_tol_m_s * factor**2,
+                                                     "onset_depth_m": i.onset_depth_m * factor}})
+    substeps = s.simulation.substeps / factor
+    if substeps < 1 or not math.isclose(substeps, round(substeps)):
+        return None
+    return replace(s, simulation={"substeps": round(substeps)})
+
+
 def warm_up(scenario, methods, duration_s: float = 0.5) -> None:
     """Run each method briefly (dopri5 at a loose tolerance), so that no timed run pays for
     loading its compiled kernels."""

@@ -24,6 +24,7 @@ from .runs import (
     markdown_table,
     run_once,
     sig,
+    step_scaled,
     warm_up,
 )
 
@@ -254,14 +255,8 @@ FINER = 4
 
 
 def finer(s):
-    """`s` with its dynamics step FINER times smaller (dopri5: its rtol and atol)."""
-    i = s.simulation.integrator
-    if i.method == "dopri5":
-        return replace(s, simulation={"integrator": {**to_dict(i), "rtol": i.rtol / FINER, "atol": i.atol / FINER}})
-    if i.method == "adaptive_euler":  # its step ~ tol^(1/2)
-        return replace(s, simulation={"integrator": {**to_dict(i), "velocity_tol_m_s": i.velocity_tol_m_s / FINER**2,
-                                                     "onset_depth_m": i.onset_depth_m / FINER}})
-    return replace(s, simulation={"substeps": s.simulation.substeps * FINER})
+    """`s` with its dynamics step FINER times smaller (`step_scaled`)."""
+    return step_scaled(s, 1 / FINER)
 
 
 def stability_row(case: Case, o: Outcome, changed=None, fine: Outcome | None = None) -> dict:
