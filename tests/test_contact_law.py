@@ -241,7 +241,7 @@ def settle_bristle(load, F_n=10.0, dt=1e-5, t_end=0.3, mass=0.01):
     """
     s, x_dot, state = (0.0, 0.0, 0.0), 0.0, None
     for _ in range(int(t_end / dt)):
-        s, F_f, state = bristle(s, (x_dot, 0.0, 0.0), NORMAL, F_n, dt, BRISTLE)
+        s, F_f, state, _ = bristle(s, (x_dot, 0.0, 0.0), NORMAL, F_n, dt, BRISTLE)
         x_dot += dt * (load + F_f[0]) / mass
     return np.array(s), x_dot, state
 
@@ -263,7 +263,7 @@ def test_bristle_slides_at_kinetic_friction_above_static():
 def test_carried_deflection_turns_with_the_normal():
     """A deflection carried to a tilted contact stays in the new tangent plane, length kept."""
     tilted = np.array([np.sin(0.1), 0.0, np.cos(0.1)])
-    s, _, _ = bristle((1e-5, 0.0, 0.0), (0.0, 0.0, 0.0), tilted, 100.0, 1e-4, BRISTLE)
+    s, _, _, _ = bristle((1e-5, 0.0, 0.0), (0.0, 0.0, 0.0), tilted, 100.0, 1e-4, BRISTLE)
     assert abs(np.dot(s, tilted)) < 1e-18 and np.linalg.norm(s) == pytest.approx(1e-5, rel=1e-12)
 
 
@@ -289,7 +289,7 @@ def pulled_block(load, t_end, F_n=lambda t: PRESS, normal=lambda t: NORMAL, dt=B
     s, v = (0.0, 0.0, 0.0), np.zeros(3)
     for k in range(n_steps):
         n = normal(t[k])
-        s, F_f, state[k] = bristle(s, v, n, F_n(t[k]), dt, BRISTLE)
+        s, F_f, state[k], _ = bristle(s, v, n, F_n(t[k]), dt, BRISTLE)
         v = v + dt * (load(t[k]) + np.array(F_f)) / mass
         v -= np.dot(v, normal(t[k] + dt)) * normal(t[k] + dt)  # the plane holds the block in it
         S[k], V[k], F[k] = s, v, F_f

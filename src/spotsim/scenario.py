@@ -98,10 +98,19 @@ class Arm:
 
 @dataclass(frozen=True, kw_only=True)
 class EndEffector:
-    closing_speed_m_s: float = key(rule=_positive, doc="finger closing speed (Table 3)")
+    closing_speed_m_s: float = key(rule=_positive, doc="finger closing speed (Table 3), the drive's speed limit")
     grasp_load_N: float = key(20.0, _positive, "mean finger load at which the drive stalls (not in the paper)")
     start_gap_mm: float = key(9.0, _positive, "finger travel from start to touching a centred groove")
-    resume_fraction: float = key(0.5, _fraction, "a stalled drive resumes closing below this share of the grasp load")
+    drive: str = key("actuator", _choice("actuator", "relay"),
+                     "actuator (a current-limited, self-locking motor: slows down along its torque-speed line "
+                     "and presses at the grasp load) or relay (stops dead at the grasp load, resumes at full "
+                     "speed below resume_fraction of it)")
+    slowdown_fraction: float = key(0.5, _fraction, "actuator: the share of the grasp load above which the fingers "
+                                   "slow down (its no-load speed is the closing speed / (1 - this))")
+    resume_fraction: float = key(0.5, _fraction, "relay: a stalled drive resumes closing below this share of the "
+                                 "grasp load")
+    control_period_s: float = key(1e-4, _positive, "the drive's controller reads the load and sets the speed this "
+                                  "often (a digital servo), holding it in between")
 
 
 @dataclass(frozen=True, kw_only=True)

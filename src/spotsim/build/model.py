@@ -26,6 +26,7 @@ from ..contact.layers import FaceTable, MasterSpheres, SlaveSpheres
 from ..contact.normal import damping_factor, hertz_stiffness, indentation
 from ..errors import ModelError, ScenarioError
 from ..sim.bodies import free_bodies
+from ..sim.drive import DRIVES
 from ..sim.integrators import ADAPTIVE, METHODS, tableau
 from ..sim.model import (
     CompletionParams,
@@ -471,9 +472,16 @@ def model_fields(p: _Parts) -> ModelFields:
                                   _error_levers(bodies, master, layers.slave, p.fingers))
     return ModelFields(bodies, np.array(model.gravity.linear), master, layers.slave, layers.faces, law,
                     s.contact.broad_phase == "none", fingers, grasps,
-                    DriveParams(ee.closing_speed_m_s, ee.grasp_load_N, ee.resume_fraction),
+                    drive_params(ee),
                     CompletionParams(c.hold_s, c.max_contact_speed_m_s, c.max_net_force_N, c.phase_timeout_s),
                     limits, _record_frames(p, body_row), integrator, sim.dt_s, sim.substeps, sim.dt_s / sim.substeps)
+
+
+def drive_params(ee) -> DriveParams:
+    """The compiled finger drive of a scenario's end_effector block (`sim.drive`)."""
+    return DriveParams(DRIVES.index(ee.drive), ee.closing_speed_m_s, ee.grasp_load_N,
+                       ee.closing_speed_m_s / (1.0 - ee.slowdown_fraction), ee.resume_fraction,
+                       ee.control_period_s)
 
 
 def _error_levers(bodies, master, slave, fingers) -> np.ndarray:

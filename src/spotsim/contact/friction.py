@@ -38,7 +38,9 @@ def bristle(s_prev, v, n_c, F_n, dt, p):
     s_prev: deflection carried from the last step (zero at onset), m. v: velocity of A's
     contact point relative to B's, m/s. n_c: common normal. (3-vectors.) F_n: normal force
     magnitude, N. dt: step, s. p: BristleParams.
-    Returns the deflection s, the friction force on A (N), both 3-tuples, and the pair state.
+    Returns the deflection s, the friction force on A (N), both 3-tuples, the pair state, and
+    whether the bristle holds (below its s_max: the force then grows with the tangential
+    motion by k_b per metre and c_b per m/s).
     """
     # the carried deflection, kept in the current tangent plane with its length kept
     s = _tangential(s_prev, n_c)
@@ -66,4 +68,4 @@ def bristle(s_prev, v, n_c, F_n, dt, p):
     # c_b * 2 s_max / dt, which grows without bound as dt shrinks.
     s_dot = (0.0, 0.0, 0.0) if saturated else v_t
     F_f = (-p.k_b * s0 - p.c_b * s_dot[0], -p.k_b * s1 - p.c_b * s_dot[1], -p.k_b * s2 - p.c_b * s_dot[2])  # Eq. (14)
-    return (s0, s1, s2), F_f, SLIPPING if slipping else STICKING
+    return (s0, s1, s2), F_f, SLIPPING if slipping else STICKING, not saturated

@@ -54,3 +54,14 @@ def normal_force(delta, delta_dot, delta_dot_minus, K, factor):
     """
     elastic = K * delta ** HERTZ_EXPONENT
     return max(elastic * (1.0 + factor * delta_dot / delta_dot_minus), 0.0)
+
+
+@njit
+def normal_slopes(delta, delta_dot, delta_dot_minus, K, factor):
+    """The partial derivatives of `normal_force` in delta (N/m) and in delta_dot (N s/m) at
+    the same arguments; both 0 where the force is clamped at 0."""
+    rate = 1.0 + factor * delta_dot / delta_dot_minus
+    if rate <= 0.0 or delta <= 0.0:
+        return 0.0, 0.0
+    elastic = K * delta ** HERTZ_EXPONENT
+    return HERTZ_EXPONENT * elastic / delta * rate, elastic * factor / delta_dot_minus

@@ -26,6 +26,8 @@ class Loads(NamedTuple):
     external_force_W: np.ndarray  # (3,) what fixed bodies (joint 0) exert on the free ones, N
     external_torque_O_W: np.ndarray  # (3,) its moment about the world origin, N m
     finger_load: np.ndarray  # (n_fingers,) each finger's load along its opening axis, N (never negative)
+    finger_stiffness: np.ndarray  # (n_fingers,) its growth as the finger closes further, N/m (`Contacts`)
+    finger_damping: np.ndarray  # (n_fingers,) ... and closes faster, N s/m
 
 
 class Summary(NamedTuple):
@@ -41,7 +43,7 @@ class Summary(NamedTuple):
 
 def no_loads(njoints: int, n_fingers: int) -> Loads:
     return Loads(np.zeros((njoints, 6)), np.zeros((njoints, 3)), np.zeros((njoints, 3)), np.zeros(3), np.zeros(3),
-                 np.zeros(n_fingers))
+                 np.zeros(n_fingers), np.zeros(n_fingers), np.zeros(n_fingers))
 
 
 def no_summary() -> Summary:
@@ -81,7 +83,9 @@ def body_wrenches(m, d):
     # allocation costs ~25 ns, a step makes dozens
     block = np.zeros((4, njoints + 1, 3))
     F, T, T_O, ext_f, ext_t = block[0][:njoints], block[1][:njoints], block[2][:njoints], block[3][0], block[3][1]
-    load = np.zeros(m.fingers.parent_joint.shape[0])
+    n_f = m.fingers.parent_joint.shape[0]
+    finger = np.zeros((3, n_f))
+    load, stiffness, damping = finger[0], finger[1], finger[2]
     common_point = m.law.common_point
     for i in range(d.contacts.master.shape[0]):
         mi = d.contacts.master[i]
@@ -96,6 +100,8 @@ def body_wrenches(m, d):
         _add_wrench(F, T, ext_f, ext_t, j2, j1, p2, (d.p_W[j2, 0], d.p_W[j2, 1], d.p_W[j2, 2]), -1.0, f)
         fg = m.master.finger[mi]
         j = m.fingers.parent_joint[fg]
+        stiffness[fg] += d.contacts.axial_stiffness[i]
+        damping[fg] += d.contacts.axial_damping[i]
         for a in range(3):
             load[fg] += f[a] * (d.R_W[j, a, 0] * m.fingers.axis_J[fg, 0] + d.R_W[j, a, 1] * m.fingers.axis_J[fg, 1]
                                 + d.R_W[j, a, 2] * m.fingers.axis_J[fg, 2])
@@ -109,7 +115,7 @@ def body_wrenches(m, d):
         T_O[j, 2] = T[j, 2] + d.p_W[j, 0] * F[j, 1] - d.p_W[j, 1] * F[j, 0]
     for k in range(load.shape[0]):
         load[k] = max(load[k], 0.0)
-    d.loads = Loads(local, F, T_O, ext_f, ext_t, load)
+    d.loads = Loads(local, F, T_O, ext_f, ext_t, load, stiffness, damping)
 
 
 @njit_inline

@@ -7,6 +7,7 @@ import math
 
 from ..jit import njit
 from ..linalg import cross, mv
+from .drive import current_speed
 
 
 @njit
@@ -27,7 +28,7 @@ def bookkeeping(m, d, h):
     """Stage: count the step of h (s), raise the peaks, add the drives' work and the external
     impulse: the fixed bodies' contact forces (a fixed base; between free bodies every contact
     force is internal) and gravity, at the poses of the step's last force evaluation."""
-    if not d.stalled[m.grasps.ee[d.active]]:
+    if current_speed(m, d) != 0.0:
         d.held = False
     n = d.contacts.key.shape[0]
     d.steps += 1

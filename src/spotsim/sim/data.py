@@ -23,7 +23,7 @@ from ..contact.forces import Contacts, Memory, no_contacts, no_memory
 from ..contact.search import Candidates, PairList, empty_pair_list, no_candidates
 from ..contact.wrenches import Loads, Summary, no_loads, no_summary
 from ..structs import StructProxy, StructType, new_struct, register, view
-from .drive import finger_drive
+from .drive import start_drive
 
 #: Record rows the row buffer holds: the compiled loop returns to Python after at most this
 #: many (each return updates the progress bar and lets Ctrl-C in); 250 rows are 0.25 s
@@ -77,7 +77,12 @@ class DataFields(NamedTuple):
     external_torque_O_W: np.ndarray  # (3,) its moment about the world origin, N m
     # the grasps: the active one's drive and phase, and each one's record
     active: int  # the grasp under way
-    stalled: np.ndarray  # (n_ee,) each end-effector's drive holds at the grasp load
+    stalled: np.ndarray  # (n_ee,) the relay: each end-effector's drive holds at the grasp load
+    drive_t: float  # when the active drive's controller next reads the load and sets the speed, s
+    drive_decisions: np.ndarray  # (n_g,) each grasp's drive: its speed decisions
+    drive_stopped: np.ndarray  # (n_g,) ... it has stopped since it last closed at over half its closing speed
+    drive_resumes: np.ndarray  # (n_g,) ... the times it closed again at over half its closing speed after it stopped
+    drive_jump: np.ndarray  # (n_g,) ... its largest change of speed from one step to the next, m/s
     phase: np.ndarray  # (n_g,) APPROACH, SELF_CENTRING or COMPLETE
     held_since: float  # since when the completion criteria hold, s (nan: they do not)
     t_start: np.ndarray  # (n_g,) when each grasp's drive started, s (nan: not yet)
@@ -172,7 +177,9 @@ def make_data(model, rows: int = ROWS_PER_CALL) -> Data:
         near=ints(0), travel=math.inf, pair_list=empty_pair_list(len(sim.faces.master_start)),
         candidates=no_candidates(), contacts=no_contacts(), memory=no_memory(), loads=no_loads(nj, n_f),
         summary=no_summary(), external_force_W=np.zeros(3), external_torque_O_W=np.zeros(3),
-        active=0, stalled=np.zeros(n_ee, dtype=np.bool_), phase=ints(n_g), held_since=math.nan,
+        active=0, stalled=np.zeros(n_ee, dtype=np.bool_), drive_t=0.0, drive_decisions=ints(n_g), drive_stopped=np.zeros(n_g, dtype=np.bool_),
+        drive_resumes=ints(n_g),
+        drive_jump=np.zeros(n_g), phase=ints(n_g), held_since=math.nan,
         t_start=np.r_[0.0, nan(n_g - 1)], t_contact=nan(n_g), t_complete=nan(n_g),
         peak_force=np.zeros((n_g, 3)), peak_torque=np.zeros((n_g, 3)), peak_force_norm=np.zeros(n_g),
         peak_torque_norm=np.zeros(n_g), peak_pairs=ints(n_g),
@@ -190,5 +197,5 @@ def make_data(model, rows: int = ROWS_PER_CALL) -> Data:
                             ints(64)),
         n_snapshots=0, n_snapshot_pairs=0)
     data = new_struct(f)
-    finger_drive(sim, data)  # the first grasp's drive closes from the start (no load yet)
+    start_drive(sim, data)  # the first grasp's drive closes from the start (no load yet)
     return data

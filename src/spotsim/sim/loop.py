@@ -15,6 +15,7 @@ import numpy as np
 
 from ..jit import njit
 from .data import COMPLETE
+from .drive import current_speed
 from .events import RAN, REFRESH, STOPPED, TOO_DEEP, UNDERFLOW
 from .record import close_interval
 from .step import free_flight, step
@@ -81,7 +82,7 @@ def begin_interval(m, d):
         d.left, d.h = 1, m.h
     else:
         d.left, d.h = m.substeps, m.h
-    d.held = d.stalled[m.grasps.ee[d.active]]  # the drive holds through the interval so far
+    d.held = current_speed(m, d) == 0.0  # the drive holds through the interval so far
 
 
 @njit
@@ -90,8 +91,10 @@ def interval_steps(m, d):
     it stopped early (REFRESH, STOPPED, TOO_DEEP, UNDERFLOW)."""
     adaptive = m.integrator.adaptive and not d.flight
     while d.left > 0:
-        # an adaptive step: its last estimate (before any, the interval's step), up to the interval's end
-        h = step(m, d, min(d.h_next if d.h_next > 0.0 else d.h, d.t_end - d.t) if adaptive else d.h)
+        # an adaptive step: its last estimate (before any, the interval's step), up to the
+        # interval's end and the drive's next reading
+        h = step(m, d, min(d.h_next if d.h_next > 0.0 else d.h, d.t_end - d.t, d.drive_t - d.t)
+                 if adaptive else d.h)
         if h == 0.0:
             return UNDERFLOW
         if adaptive:

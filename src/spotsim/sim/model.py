@@ -41,9 +41,12 @@ class Grasps(NamedTuple):
 class DriveParams(NamedTuple):
     """The finger drive (`sim.drive`)."""
 
-    closing_speed: float  # m/s
-    grasp_load: float  # N
-    resume_fraction: float  # a stalled drive closes again below this share of the grasp load
+    law: int  # `drive.DRIVES`
+    closing_speed: float  # the speed limit, m/s
+    grasp_load: float  # the stall force, N
+    no_load_speed: float  # the actuator's torque-speed line at zero load, m/s
+    resume_fraction: float  # the relay: a stalled drive closes again below this share of the grasp load
+    period: float  # the controller's period: it reads the load and sets the speed this often, s
 
 
 class CompletionParams(NamedTuple):

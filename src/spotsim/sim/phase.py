@@ -1,9 +1,11 @@
 """Stage: the grasp phase, approach -> self-centring -> complete (paper Sec. 3.2 step 3).
 
-A grasp is complete when, for `hold_s` without a break, its finger drive has stalled at the
-grasp load and holds, every active contact's relative speed is below the contact speed limit,
-and the net contact force on the module is below the net force limit: the paper's rule (Sec.
-3.2 step 3, Sec. 5.1; model.md Sec. 6).
+A grasp is complete when, for `hold_s` without a break, its finger drive presses at the grasp
+load and has come to rest (its fingers close no faster than the contact speed limit: the
+actuator within that speed's share of its torque-speed line below the grasp load, the relay
+stalled), every active contact's relative speed is below the contact speed limit, and the net
+contact force on the module is below the net force limit: the paper's rule (Sec. 3.2 step 3,
+Sec. 5.1; model.md Sec. 6).
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ import math
 from ..contact.wrenches import net_force
 from ..jit import njit
 from .data import APPROACH, COMPLETE, SELF_CENTRING
+from .drive import current_speed
 
 #: The hold is complete within this of hold_s, s: the steps' times carry round-off.
 HOLD_ROUND_OFF_S = 1e-12
@@ -20,10 +23,10 @@ HOLD_ROUND_OFF_S = 1e-12
 
 @njit
 def completion_checks(m, d):
-    """Whether each completion criterion holds at the last step: the drive stalled, the
-    contact speeds and the net force on the module within their limits."""
+    """Whether each completion criterion holds at the last step: the drive at rest pressing,
+    the contact speeds and the net force on the module within their limits."""
     c = m.completion
-    return (d.stalled[m.grasps.ee[d.active]], d.summary.max_speed <= c.max_contact_speed,
+    return (current_speed(m, d) <= c.max_contact_speed, d.summary.max_speed <= c.max_contact_speed,
             net_force(d.summary) <= c.max_net_force)
 
 
@@ -37,8 +40,8 @@ def grasp_phase(m, d):
         d.t_contact[g] = t
     if d.phase[g] != SELF_CENTRING:
         return
-    stalled, slow, balanced = completion_checks(m, d)
-    if n_pairs > 0 and stalled and slow and balanced:
+    pressing, slow, balanced = completion_checks(m, d)
+    if n_pairs > 0 and pressing and slow and balanced:
         if math.isnan(d.held_since):
             d.held_since = t
         if t - d.held_since >= m.completion.hold_s - HOLD_ROUND_OFF_S:
@@ -52,6 +55,6 @@ def completion_criteria(model, data) -> dict[str, bool]:
     """Each completion criterion, labelled, and whether it holds at data's last step (for
     messages)."""
     c = model.sim.completion
-    labels = ("finger drive stalled at the grasp load", f"contact speeds <= {c.max_contact_speed:g} m/s",
+    labels = (f"finger drive at rest (<= {c.max_contact_speed:g} m/s) at the grasp load", f"contact speeds <= {c.max_contact_speed:g} m/s",
               f"net contact force <= {c.max_net_force:g} N")
     return dict(zip(labels, (bool(x) for x in completion_checks(model.sim, data)), strict=True))

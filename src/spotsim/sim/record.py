@@ -26,6 +26,7 @@ from .bodies import (
     kinetic_energy,
 )
 from .data import Snapshots
+from .drive import current_speed
 from .events import ENERGY, ENERGY_WORK, NONFINITE, RAN
 from .stability import ENERGY_FLOOR_J, ENERGY_GROWTH, mechanical_energy
 
@@ -50,7 +51,7 @@ class Layout:
                 ("module_vel_m_s", 3), ("module_omega_rad_s", 3), ("force_N", 3), ("torque_Nm", 3),
                 ("finger_opening_mm", n_f), ("finger_load_N", n_f), ("pairs_slipping", 1),
                 ("pairs_sticking", 1), ("phase", 1), ("grasp", 1), ("max_penetration_um", 1),
-                ("energy_J", 1), ("drive_work_J", 1)]
+                ("energy_J", 1), ("drive_work_J", 1), ("drive_speed_mm_s", 1)]
         self.free_robot = free_robot
         if free_robot:
             spec += [("robot_centroid_m", 3), ("base_pos_m", 3), ("base_quat_xyzw", 4), ("system_centroid_m", 3)]
@@ -187,7 +188,8 @@ def sample(m, d, row):
         n_slip += d.contacts.state[i] == SLIPPING
         n_stick += d.contacts.state[i] == STICKING
     at = _put(row, at, (float(n_slip), float(n_stick), float(d.phase[g]), float(g),
-                        d.summary.max_penetration * 1e6 if n_pairs else 0.0, d.energy_now, d.drive_work))
+                        d.summary.max_penetration * 1e6 if n_pairs else 0.0, d.energy_now, d.drive_work,
+                        current_speed(m, d) * 1e3))
     if m.record.free_robot:
         at = _put(row, at, bodies_centroid3(m.bodies, m.record.robot_rows, d.q))
         p = _frame(m, d, m.record.row.shape[0] - 1, R_b, work)

@@ -30,7 +30,7 @@ def step(m, d, h):
     h = integrate(m, d, h)  # forces (Eq. 1-21) -> accelerations (Eq. 22-23) -> update
     if h == 0.0:
         return 0.0
-    finger_drive(m, d)  # the active drive sets its fingers' rate for the next step
+    finger_drive(m, d, h)  # when due, the active drive sets its fingers' rate for the coming period
     if m.integrator.method == SYMPLECTIC_EULER:
         move_fingers(d, h)  # at the rate just set: its velocity-first update (the others move them in their steps)
     d.t += h
