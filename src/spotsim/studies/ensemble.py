@@ -337,6 +337,8 @@ def member_row(m: Member, n_grasps: int, centroid: bool) -> dict:
         row[f"{p}residual_tilt_deg"] = max(abs(rpy[0]), abs(rpy[1])) if done else None
         row[f"{p}peak_force_norm_N"] = entry["peak_force_norm_N"] if done else None
         row[f"{p}peak_torque_norm_Nm"] = entry["peak_torque_norm_Nm"] if done else None
+        row[f"{p}drive_resumes"] = entry.get("drive_resumes") if done else None
+        row[f"{p}drive_largest_speed_step_mm_s"] = entry.get("drive_largest_speed_step_mm_s") if done else None
         if centroid:
             d = entry.get("robot_centroid_displacement_mm") if done else None
             for axis, x in zip("xyz", d or [None] * 3, strict=True):
@@ -358,7 +360,8 @@ def grasp_prefix(g: int, n_grasps: int) -> str:
 #: columns without the grasp prefix), over the members whose grasp completed.
 HEADLINE = ("residual_norm_mm", "residual_x_mm", "residual_y_mm", "residual_z_mm", "residual_roll_deg",
             "residual_pitch_deg", "residual_yaw_deg", "residual_tilt_deg", "peak_force_norm_N",
-            "peak_torque_norm_Nm", "completed_s", "centroid_displacement_x_mm", "centroid_displacement_y_mm",
+            "peak_torque_norm_Nm", "completed_s", "drive_resumes", "drive_largest_speed_step_mm_s",
+            "centroid_displacement_x_mm", "centroid_displacement_y_mm",
             "centroid_displacement_z_mm", "centroid_displacement_norm_mm")
 
 
