@@ -2,6 +2,7 @@
 
     python docs/generate.py results   # rerun what the tables need: writes docs/results/
     python docs/generate.py ensembles # rerun only the ensemble accuracy studies (~8 min)
+    python docs/generate.py drives    # rerun only the drive comparison's ensembles (~10 min)
     python docs/generate.py runs      # rerun all but the ensemble studies (~2 min)
     python docs/generate.py pages     # docs/scenarios.md, and the generated blocks of README.md,
                                       # docs/usage.md, docs/validation.md and docs/performance.md,
@@ -69,6 +70,13 @@ ENSEMBLE_STUDIES = [
     for case in ("I", "II", "III")
 ] + [("accuracy_ensemble", "dual_arm_sequential", ["config/dual_arm_sequential.yaml", *ENSEMBLE_ARGS,
                                                    "--substeps", "10,80,160"])]
+#: The drive comparison: each case's 32-member ensemble (seed 0) with each finger drive, at the
+#: default integrator and at the converged setting the ensemble studies confirm (symplectic
+#: Euler at 3.125 us): `spotsim run CONFIG --ensemble 32 --set end_effector.drive=DRIVE ...`.
+DRIVE_CASES = ("single_arm_case_I", "single_arm_case_II", "single_arm_case_III", "dual_arm_sequential")
+DRIVES = ("actuator", "relay")
+DRIVE_SETTINGS = {"default": [], "converged": ["--set", "simulation.integrator.method=symplectic_euler",
+                                               "--set", "simulation.substeps=320"]}
 #: The `spotsim study` verb of each kind of study.
 VERB = {"accuracy": "accuracy", "accuracy_ensemble": "accuracy", "stability": "stability"}
 #: Files of a study's output directory (and of its subdirectories) kept in docs/results/.
@@ -264,9 +272,11 @@ def extras(results: dict) -> dict:
 
 
 def results_command() -> None:
-    """Everything the pages need: the runs and single-run studies, then the ensemble studies."""
+    """Everything the pages need: the runs and single-run studies, then the ensemble studies
+    and the drive comparison."""
     runs_command(keep_ensembles=False)
     ensembles_command()
+    drives_command()
 
 
 def runs_command(keep_ensembles: bool = True) -> None:
@@ -284,7 +294,9 @@ def runs_command(keep_ensembles: bool = True) -> None:
     kept = []
     if keep_ensembles and (RESULTS / "meta.json").exists():
         outs = {str((RESULTS / kind / name).relative_to(ROOT)) for kind, name, _ in ENSEMBLE_STUDIES}
-        kept = [x for x in json.loads((RESULTS / "meta.json").read_text())["studies"] if x.get("out") in outs]
+        drives = str((RESULTS / "drives").relative_to(ROOT))
+        kept = [x for x in json.loads((RESULTS / "meta.json").read_text())["studies"]
+                if x.get("out") in outs or x.get("out", "").startswith(drives)]
     meta = {"spotsim_version": spotsim.__version__, "commit": commit,
             "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
             "machine": machine(), "python": platform.python_version(), "pinocchio": pinocchio.__version__,
@@ -308,6 +320,37 @@ def ensembles_command() -> None:
     entries in docs/results/meta.json, each stamped with its own commit."""
     meta = json.loads((RESULTS / "meta.json").read_text())
     done = [run_study(kind, name, args) for kind, name, args in ENSEMBLE_STUDIES]
+    outs = {d["out"] for d in done}
+    meta["studies"] = [s for s in meta["studies"] if s.get("out") not in outs] + done
+    write_json(RESULTS / "meta.json", meta)
+    print(f"results in {RESULTS.relative_to(ROOT)}; now run `{GENERATE} pages`")
+
+
+def drives_command() -> None:
+    """Rerun the drive comparison (about 10 min on 2 cores): every case's ensemble with each
+    drive at each setting, into docs/results/drives/CASE/DRIVE_SETTING/ (ensemble.json and
+    members.csv), stamped in docs/results/meta.json."""
+    meta = json.loads((RESULTS / "meta.json").read_text())
+    done = []
+    for case in DRIVE_CASES:
+        for drive in DRIVES:
+            for setting, extra in DRIVE_SETTINGS.items():
+                out = RESULTS / "drives" / case / f"{drive}_{setting}"
+                shutil.rmtree(out, ignore_errors=True)
+                args = [f"config/{case}.yaml", "--ensemble", "32", "--seed", "0", "--workers", "2",
+                        "--set", f"end_effector.drive={drive}", *extra, "--no-error-estimate"]
+                cmd = [sys.executable, "-m", "spotsim.cli", "run", *args, "--out", str(out.relative_to(ROOT)),
+                       "--quiet"]
+                t0 = time.perf_counter()
+                proc = subprocess.run(cmd, cwd=ROOT, stdout=subprocess.DEVNULL)
+                wall = time.perf_counter() - t0
+                if proc.returncode not in (0, 1):
+                    raise SystemExit(f"{' '.join(cmd)} exited {proc.returncode}")
+                (out / "scenario.yaml").unlink(missing_ok=True)
+                print(f"  drives {case} {drive} {setting}: {wall:.0f} s", flush=True)
+                done.append({"command": "spotsim run " + " ".join(args), "wall_time_s": round(wall, 1),
+                             "exit_code": proc.returncode, "out": str(out.relative_to(ROOT)),
+                             "commit": git("rev-parse", "--short", "HEAD")})
     outs = {d["out"] for d in done}
     meta["studies"] = [s for s in meta["studies"] if s.get("out") not in outs] + done
     write_json(RESULTS / "meta.json", meta)
@@ -344,6 +387,8 @@ class Results:
         ens = root / "accuracy_ensemble"
         self.accuracy_ensemble = {p.parent.name: read_csv(p) for p in sorted(ens.glob("*/accuracy_ensemble.csv"))}
         self.accuracy_ensemble_md = {p.parent.name: p.read_text() for p in sorted(ens.glob("*/accuracy_ensemble.md"))}
+        self.drives = {(p.parent.parent.name, p.parent.name): json.loads(p.read_text())
+                       for p in sorted((root / "drives").glob("*/*/ensemble.json"))}
         speed = root / "speed.md"
         self.speed = speed.read_text() if speed.exists() else None
 
@@ -752,6 +797,40 @@ def accuracy_ensembles_table(r: Results) -> str:
     return "\n".join(out)
 
 
+def drives_table(r: Results) -> str:
+    """Relay against actuator: each case's 32-member ensemble with each drive, at the default
+    integrator and at the converged setting (docs/results/drives/)."""
+    if not r.drives:
+        return f"No drive comparison in docs/results/drives/: run `{GENERATE} drives`."
+
+    def spread(st, digits=3):
+        if not st or not st["count"]:
+            return "–"
+        return f"{num(st['median'], digits)} [{num(st['p10'], digits)}, {num(st['p90'], digits)}]"
+
+    rows = []
+    for case in DRIVE_CASES:
+        for setting in DRIVE_SETTINGS:
+            for drive in DRIVES:
+                e = r.drives.get((case, f"{drive}_{setting}"))
+                if e is None:
+                    continue
+                for grasp, st in e["statistics"].items():
+                    classes = e["classes"][grasp]
+                    shares = " / ".join(f"{classes.get(c, {}).get('fraction', 0.0) * 100:.0f} %"
+                                        for c in ("seated", "wedged"))
+                    d = st.get("centroid_displacement_norm_mm")
+                    rows.append([case.replace("single_arm_", "").replace("_", " "), setting, drive, grasp,
+                                 spread(st["drive_resumes"]), spread(st["drive_largest_speed_step_mm_s"], 2),
+                                 spread(st["residual_norm_mm"]), shares, spread(st["peak_force_norm_N"]),
+                                 spread(st["completed_s"]), spread(d) if d else "–"])
+    header = ["case", "setting", "drive", "grasp", "resumes", "largest speed step (mm/s)", "residual e (mm)",
+              "seated / wedged", "peak force (N)", "completed (s)", "robot centroid displacement (mm)"]
+    return ("Each cell: median [10th, 90th percentile] over 32 members (seed 0). Resumes: the drive closing "
+            "again at more than half its closing speed after it had stopped. Default: adaptive Euler at its "
+            "default tolerance; converged: symplectic Euler at 3.125 µs.\n\n" + table(header, rows))
+
+
 def _short_message(text: str) -> str:
     """A rejection's reason without the file and key prefix."""
     return re.sub(r"^\S+\.yaml: [\w.\[\]]+ = [^:]*: ", "", text)
@@ -990,6 +1069,7 @@ RENDER = {
     "accuracy-case-I": lambda r: accuracy_table(r, "single_arm_case_I"),
     "accuracy-dual-arm": lambda r: accuracy_table(r, "dual_arm_sequential"),
     "accuracy-ensembles": accuracy_ensembles_table,
+    "drives-table": drives_table,
     "stability-table": stability_table,
     "cli-usage": cli_usage,
     "grids": grids,
@@ -1024,9 +1104,9 @@ def pages_command() -> None:
 
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("command", choices=["results", "runs", "ensembles", "pages"])
+    parser.add_argument("command", choices=["results", "runs", "ensembles", "drives", "pages"])
     args = parser.parse_args(argv)
-    {"results": results_command, "runs": runs_command, "ensembles": ensembles_command,
+    {"results": results_command, "runs": runs_command, "ensembles": ensembles_command, "drives": drives_command,
      "pages": pages_command}[args.command]()
 
 

@@ -252,6 +252,7 @@ def _summary(s, model, v, rec, series, status, message, wall, welds) -> dict:
         "integrator": {"method": sim.integrator.method, "accepted_steps": v.accepted, "rejected_steps": v.rejected,
                        "force_evaluations": v.evaluations},
         "broad_phase": s.contact.broad_phase,
+        "drive": s.end_effector.drive,
         "phases": phases[0] if len(phases) == 1 else phases,
         "welds_s": welds,
         "grasps": grasps,
