@@ -74,9 +74,14 @@ ENSEMBLE_STUDIES = [
 #: default integrator and at the converged setting the ensemble studies confirm (symplectic
 #: Euler at 3.125 us): `spotsim run CONFIG --ensemble 32 --set end_effector.drive=DRIVE ...`.
 DRIVE_CASES = ("single_arm_case_I", "single_arm_case_II", "single_arm_case_III", "dual_arm_sequential")
-DRIVES = ("actuator", "relay")
-DRIVE_SETTINGS = {"default": [], "converged": ["--set", "simulation.integrator.method=symplectic_euler",
-                                               "--set", "simulation.substeps=320"]}
+#: The drives: their `--set`s, and the settings they run at. The relay read at every step (a
+#: controller period below any step: the model before the drive had a controller period) runs at
+#: the converged fixed step only: an adaptive step ends at each reading, so it could not grow.
+DRIVES = {"actuator": (["end_effector.drive=actuator"], ("default", "converged")),
+          "relay": (["end_effector.drive=relay"], ("default", "converged")),
+          "relay_every_step": (["end_effector.drive=relay", "end_effector.control_period_s=1.0e-9"], ("converged",))}
+DRIVE_SETTINGS = {"default": [], "converged": ["simulation.integrator.method=symplectic_euler",
+                                               "simulation.substeps=320"]}
 #: The `spotsim study` verb of each kind of study.
 VERB = {"accuracy": "accuracy", "accuracy_ensemble": "accuracy", "stability": "stability"}
 #: Files of a study's output directory (and of its subdirectories) kept in docs/results/.
@@ -326,19 +331,20 @@ def ensembles_command() -> None:
     print(f"results in {RESULTS.relative_to(ROOT)}; now run `{GENERATE} pages`")
 
 
-def drives_command() -> None:
+def drives_command(only: tuple[str, ...] = tuple(DRIVES)) -> None:
     """Rerun the drive comparison (about 10 min on 2 cores): every case's ensemble with each
     drive at each setting, into docs/results/drives/CASE/DRIVE_SETTING/ (ensemble.json and
     members.csv), stamped in docs/results/meta.json."""
     meta = json.loads((RESULTS / "meta.json").read_text())
     done = []
     for case in DRIVE_CASES:
-        for drive in DRIVES:
-            for setting, extra in DRIVE_SETTINGS.items():
+        for drive, (sets, settings) in DRIVES.items():
+            for setting in settings if drive in only else ():
                 out = RESULTS / "drives" / case / f"{drive}_{setting}"
                 shutil.rmtree(out, ignore_errors=True)
-                args = [f"config/{case}.yaml", "--ensemble", "32", "--seed", "0", "--workers", "2",
-                        "--set", f"end_effector.drive={drive}", *extra, "--no-error-estimate"]
+                keys = [x for k in (*sets, *DRIVE_SETTINGS[setting]) for x in ("--set", k)]
+                args = [f"config/{case}.yaml", "--ensemble", "32", "--seed", "0", "--workers", "2", *keys,
+                        "--no-error-estimate"]
                 cmd = [sys.executable, "-m", "spotsim.cli", "run", *args, "--out", str(out.relative_to(ROOT)),
                        "--quiet"]
                 t0 = time.perf_counter()
@@ -820,7 +826,8 @@ def drives_table(r: Results) -> str:
                     shares = " / ".join(f"{classes.get(c, {}).get('fraction', 0.0) * 100:.0f} %"
                                         for c in ("seated", "wedged"))
                     d = st.get("centroid_displacement_norm_mm")
-                    rows.append([case.replace("single_arm_", "").replace("_", " "), setting, drive, grasp,
+                    rows.append([case.replace("single_arm_", "").replace("_", " "), setting, drive.replace("_", " "),
+                                 grasp,
                                  spread(st["drive_resumes"]), spread(st["drive_largest_speed_step_mm_s"], 2),
                                  spread(st["residual_norm_mm"]), shares, spread(st["peak_force_norm_N"]),
                                  spread(st["completed_s"]), spread(d) if d else "–"])
@@ -828,7 +835,8 @@ def drives_table(r: Results) -> str:
               "seated / wedged", "peak force (N)", "completed (s)", "robot centroid displacement (mm)"]
     return ("Each cell: median [10th, 90th percentile] over 32 members (seed 0). Resumes: the drive closing "
             "again at more than half its closing speed after it had stopped. Default: adaptive Euler at its "
-            "default tolerance; converged: symplectic Euler at 3.125 µs.\n\n" + table(header, rows))
+            "default tolerance; converged: symplectic Euler at 3.125 µs. Relay every step: the relay reading the "
+            "load at every integration step instead of every `control_period_s`.\n\n" + table(header, rows))
 
 
 def _short_message(text: str) -> str:
