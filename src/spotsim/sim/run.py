@@ -129,7 +129,8 @@ class Stepper:
     """Step a scene from Python, one compiled step at a time (for inspection and tests).
 
     Between steps it does what the loop leaves to Python: it refreshes coal's face pairs when
-    the skin is used up. Free flight, records and welds are the loop's (`simulate`).
+    the skin is used up. Free flight, records and welds are the loop's (`simulate`), and so is
+    ending an adaptive step at the drive's next reading: a step here is the integrator's own.
     """
 
     def __init__(self, model: Model, data=None):
