@@ -175,7 +175,8 @@ def main() -> None:
               f"{r['realtime']:.2f}")
         print(f"  contact stage from first contact ({r['pairs']:.1f} pairs on average): culled "
               f"{r['culled_us']:.2f} us, literal {r['literal_us']:.0f} us ({r['literal_us'] / r['culled_us']:.0f}x); "
-              f"the literal stage against the default run's mean step of {step_us:.2f} us: {r['literal_us'] / step_us:.0f}x")
+              f"the literal stage against the default run's mean step of {step_us:.2f} us: "
+              f"{r['literal_us'] / step_us:.0f}x")
     print("\n| case | simulated s | wall s, fastest | steps/s | real-time factor | contact stage, culled us | "
           "literal us | literal / culled | literal stage / default mean step |")
     print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")

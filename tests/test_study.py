@@ -147,7 +147,8 @@ def test_no_stability_case_ends_in_an_exception_or_a_silent_nan(stability):
 def test_a_run_past_its_wall_limit_is_stopped(case_I):
     """A run that outlives its wall-time budget is stopped: no verdict, no hang, its predicted
     step still reported."""
-    slow = spotsim.replace(case_I, simulation={"substeps": 1000, "integrator": {"method": "symplectic_euler"}})  # 1 us steps
+    # 1 us steps
+    slow = spotsim.replace(case_I, simulation={"substeps": 1000, "integrator": {"method": "symplectic_euler"}})
     o = runs.run_once(slow, wall_limit_s=1.0)
     assert o.status == runs.WALL_LIMIT and "wall limit of 1 s" in o.message
     assert stab.verdict(o) == "no verdict: wall limit" and o.prediction.step_s == pytest.approx(1e-6)

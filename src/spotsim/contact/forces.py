@@ -16,7 +16,7 @@ from ..jit import njit, njit_inline
 from ..linalg import add3, mv3
 from .detection import contact_point, force_direction, penetration
 from .friction import BristleParams, bristle
-from .normal import indentation, normal_force, normal_slopes, onset_rate
+from .normal import indentation, normal_law, onset_rate
 
 
 class ContactLaw(NamedTuple):
@@ -49,7 +49,8 @@ class Contacts(NamedTuple):
     s: np.ndarray  # (k, 3) bristle deflection after the evaluation, m
     v_minus: np.ndarray  # (k,) onset indentation rate delta_dot_minus, m/s
     # how the finger's load along its axis grows as the finger closes further (N/m) and
-    # faster (N s/m): the normal force's slopes, along n, projected twice on the axis
+    # faster (N s/m): the normal force's slopes along g and a holding bristle's k_b and c_b,
+    # each projected twice on the axis (the finger drive's linearisation)
     axial_stiffness: np.ndarray  # (k,)
     axial_damping: np.ndarray  # (k,)
 
@@ -141,7 +142,7 @@ def pair_forces(m, d, h):
         else:
             v_minus = onset_rate(delta_dot, m.law.floor)
             s_prev = (0.0, 0.0, 0.0)
-        F_n = normal_force(indentation(phi), delta_dot, v_minus, m.law.K, m.law.damping)
+        F_n, dF_ddelta, dF_drate = normal_law(indentation(phi), delta_dot, v_minus, m.law.K, m.law.damping)
         s, F_f, state, holds = bristle(s_prev, v_rel, n_c, F_n, h, m.law.bristle)
         out_m[n], out_s[n], out_key[n] = mi, sl, key
         phi_out[n], v_minus_out[n], state_out[n] = phi, v_minus, state
@@ -151,7 +152,6 @@ def pair_forces(m, d, h):
         speed_out[n] = math.sqrt(v_rel[0] ** 2 + v_rel[1] ** 2 + v_rel[2] ** 2)
         # the finger closing by dx along its axis indents the pair by (g . axis)^2 dx / 2 along
         # g, and bends a holding bristle by the axis' share in the tangent plane of n_c
-        dF_ddelta, dF_drate = normal_slopes(indentation(phi), delta_dot, v_minus, m.law.K, m.law.damping)
         normal = 0.5 * (g[0] * slide[0] + g[1] * slide[1] + g[2] * slide[2]) ** 2
         tangent = 1.0 - (n_c[0] * slide[0] + n_c[1] * slide[1] + n_c[2] * slide[2]) ** 2 if holds else 0.0
         stiff_out[n] = normal * dF_ddelta + tangent * m.law.bristle.k_b

@@ -45,23 +45,23 @@ def onset_rate(delta_dot, floor):
 
 
 @njit
-def normal_force(delta, delta_dot, delta_dot_minus, K, factor):
-    """Eq. (11)-(12): magnitude of F_n = K delta^a + lambda delta^a delta_dot, never pulling.
+def normal_law(delta, delta_dot, delta_dot_minus, K, factor):
+    """Eq. (11)-(12) with its slopes: the magnitude of F_n = K delta^a + lambda delta^a
+    delta_dot, never pulling (N), and its partial derivatives in delta (N/m) and in delta_dot
+    (N s/m); all three 0 where the force is clamped at 0.
 
     delta: indentation, m.  delta_dot: its rate, m/s (> 0 approaching).
     delta_dot_minus: the indentation rate at the pair's contact onset (`onset_rate`), m/s.
-    lambda = factor K / delta_dot_minus. Returns N, clamped at 0.
+    lambda = factor K / delta_dot_minus.
     """
     elastic = K * delta ** HERTZ_EXPONENT
-    return max(elastic * (1.0 + factor * delta_dot / delta_dot_minus), 0.0)
+    rate = 1.0 + factor * delta_dot / delta_dot_minus
+    if rate <= 0.0 or delta <= 0.0:
+        return 0.0, 0.0, 0.0
+    return elastic * rate, HERTZ_EXPONENT * elastic / delta * rate, elastic * factor / delta_dot_minus
 
 
 @njit
-def normal_slopes(delta, delta_dot, delta_dot_minus, K, factor):
-    """The partial derivatives of `normal_force` in delta (N/m) and in delta_dot (N s/m) at
-    the same arguments; both 0 where the force is clamped at 0."""
-    rate = 1.0 + factor * delta_dot / delta_dot_minus
-    if rate <= 0.0 or delta <= 0.0:
-        return 0.0, 0.0
-    elastic = K * delta ** HERTZ_EXPONENT
-    return HERTZ_EXPONENT * elastic / delta * rate, elastic * factor / delta_dot_minus
+def normal_force(delta, delta_dot, delta_dot_minus, K, factor):
+    """Eq. (11)-(12): the magnitude of F_n (N), clamped at 0 (`normal_law`)."""
+    return normal_law(delta, delta_dot, delta_dot_minus, K, factor)[0]

@@ -93,11 +93,26 @@ def closing_speed(m, d, ee, h):
 
 
 @njit
+def _decide(m, d, t, horizon):
+    """The active drive's decision at time t (s), from the last evaluation's finger loads:
+    its fingers' rates until it is next due, `horizon` (s) later. Returns its speed before
+    and after (m/s)."""
+    d.drive_t = t + horizon
+    ee = m.grasps.ee[d.active]
+    before = current_speed(m, d)
+    speed = closing_speed(m, d, ee, horizon)
+    for i in range(m.fingers.drive.shape[0]):
+        if m.fingers.drive[i] == ee:
+            d.opening_rate[i] = -speed
+    return before, speed
+
+
+@njit
 def finger_drive(m, d, h):
     """Stage, after a step of h (s) from d.t: d.drive_power, the power the drives put in
     during it (at its finger rates); then, if the active drive's controller is due (the step
-    ends at or past d.drive_t), its decision, from the step's finger loads: its fingers'
-    rates until it is next due, a controller period (or the step, if longer) later.
+    ends at or past d.drive_t), its decision (`_decide`) for a controller period, or the
+    step if longer.
 
     The grasp counts the drive's resumes (closing again at more than half its closing speed
     after it had stopped) and its largest speed change from one decision to the next."""
@@ -108,30 +123,21 @@ def finger_drive(m, d, h):
     t = d.t + h
     if t < d.drive_t - DUE_ROUND_OFF * m.drive.period:
         return
-    horizon = max(m.drive.period, h)
-    d.drive_t = t + horizon
+    before, speed = _decide(m, d, t, max(m.drive.period, h))
     g = d.active
-    ee = m.grasps.ee[g]
-    before = current_speed(m, d)
-    speed = closing_speed(m, d, ee, horizon)
-    if d.drive_decisions[g] > 0:  # the grasp's first decision is the drive's start, not a change
-        d.drive_jump[g] = max(d.drive_jump[g], abs(speed - before))
-        if before == 0.0:
-            d.drive_stopped[g] = True
-        if d.drive_stopped[g] and speed > 0.5 * m.drive.closing_speed:
-            d.drive_resumes[g] += 1
-            d.drive_stopped[g] = False
-    d.drive_decisions[g] += 1
-    for i in range(m.fingers.drive.shape[0]):
-        if m.fingers.drive[i] == ee:
-            d.opening_rate[i] = -speed
+    d.drive_jump[g] = max(d.drive_jump[g], abs(speed - before))
+    if before == 0.0:
+        d.drive_stopped[g] = True
+    if d.drive_stopped[g] and speed > 0.5 * m.drive.closing_speed:
+        d.drive_resumes[g] += 1
+        d.drive_stopped[g] = False
 
 
 @njit
 def start_drive(m, d):
-    """The active drive's first decision, now (a run's or a weld's start): due at once."""
-    d.drive_t = d.t
-    finger_drive(m, d, 0.0)
+    """The active drive's first decision, now (a run's or a weld's start): its start, not a
+    change of speed, so nothing is counted."""
+    _decide(m, d, d.t, m.drive.period)
 
 
 @njit

@@ -55,6 +55,6 @@ def completion_criteria(model, data) -> dict[str, bool]:
     """Each completion criterion, labelled, and whether it holds at data's last step (for
     messages)."""
     c = model.sim.completion
-    labels = (f"finger drive at rest (<= {c.max_contact_speed:g} m/s) at the grasp load", f"contact speeds <= {c.max_contact_speed:g} m/s",
-              f"net contact force <= {c.max_net_force:g} N")
+    labels = (f"finger drive at rest (<= {c.max_contact_speed:g} m/s) at the grasp load",
+              f"contact speeds <= {c.max_contact_speed:g} m/s", f"net contact force <= {c.max_net_force:g} N")
     return dict(zip(labels, (bool(x) for x in completion_checks(model.sim, data)), strict=True))

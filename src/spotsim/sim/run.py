@@ -221,8 +221,8 @@ def _summary(s, model, v, rec, series, status, message, wall, welds) -> dict:
             "peak_force_norm_N": float(v.peak_force_norm[g]),
             "peak_torque_norm_Nm": float(v.peak_torque_norm[g]),
             "max_active_pairs": int(v.peak_pairs[g]),
-            # the drive: how often it started closing again after it had stopped, and its
-            # largest change of speed from one step to the next
+            # the drive: how often it closed again at over half its closing speed after it had
+            # stopped, and its largest change of speed from one reading to the next
             "drive_resumes": int(v.drive_resumes[g]),
             "drive_largest_speed_step_mm_s": float(v.drive_jump[g] * 1e3),
             "final_offset_mm": None if last is None else [float(x) for x in series["offset_mm"][last]],

@@ -67,9 +67,9 @@ def weld(model, data, source: str = "<scenario>"):
     t_start[old.active + 1] = old.t
     new_data = make_data(new)
     carried = {name: getattr(old, name) for name in (
-        "t", "stalled", "drive_decisions", "drive_stopped", "drive_resumes", "drive_jump", "phase", "t_contact", "t_complete", "peak_force", "peak_torque", "peak_force_norm",
-        "peak_torque_norm", "peak_pairs", "impulse_W", "impulse_moment_O_W", "drive_work", "steps", "pair_steps",
-        "flights", "evaluations", "accepted", "rejected", "energy_start", "energy_now", "momentum_start",
+        "t", "stalled", "drive_stopped", "drive_resumes", "drive_jump", "phase", "t_contact", "t_complete",
+        "peak_force", "peak_torque", "peak_force_norm", "peak_torque_norm", "peak_pairs", "impulse_W",
+        "impulse_moment_O_W", "drive_work", "steps", "pair_steps", "flights", "evaluations", "accepted", "rejected", "energy_start", "energy_now", "momentum_start",
         "angular_momentum_start", "momentum_max", "angular_momentum_max", "momentum_drift", "angular_momentum_drift",
         "row_index", "last_open")}
     # a new passive phase starts with the new model
