@@ -161,14 +161,18 @@ def adaptive_euler(m, d, h):
     evaluation is the next step's start: one evaluation a try. A rejected one goes back to
     the start (state, fingers, contacts) and tries SAFETY r^(-1/2) of h. The fingers move at
     the drive's rate through the step; a new rate (the drive's decision) re-evaluates the
-    start's loads with the committed bristles, unbent.
+    start's loads, the committed bristles bent over the first try (as symplectic Euler's
+    start bends them over its step).
     """
     p = m.integrator
+    h = min(h, onset_step(m, d))
     if not (d.fsal and d.fsal_t == d.t and np.array_equal(d.fsal_rate, d.opening_rate)):
-        forces(m, d, 0.0)  # the committed memory holds the bristles at this state
+        # the bristles bent over the try from the committed memory, as symplectic Euler bends
+        # them: a new finger rate changes the pairs' normal damping at once, and a sliding
+        # pair's bristle left at its old limit would hold, adding c_b v_t for a whole step
+        forces(m, d, h)
         accelerations(m, d)
         d.evaluations += 1
-    h = min(h, onset_step(m, d))
     n = m.bodies.joint.shape[0]
     acc = np.empty((2, n, 6))
     _centroid_accelerations(m, d, acc[0])
