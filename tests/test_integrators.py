@@ -285,3 +285,38 @@ def test_pressed_block_slides_with_kinetic_friction_above_static():
     _, v = pressed_block(BLOCK_LOAD_SLIDING, 1.0, dt=dt, mass=mass)
     a = np.diff(v[-1000:]) / dt
     assert np.allclose(a, (BLOCK_LOAD_SLIDING - 0.26 * 10.0) / mass, rtol=SLIDE_ACCEL_RTOL)
+
+
+#: A step short enough to end before the drive's next reading in every recorded state.
+FIRST_STEP_S = 2e-6
+
+
+def test_adaptive_euler_start_after_a_new_finger_rate_is_symplectic_eulers(recorded_states, model_I):
+    """When the drive sets a new finger rate, adaptive_euler re-evaluates its start with the
+    bristles bent over the coming step, as symplectic Euler evaluates every start: from a
+    state in contact, with a new finger rate (so that adaptive_euler cannot reuse its last
+    evaluation), one step of each (error control off) ends bit-identical. Unbent, a sliding pair whose limit the new rate raised would hold and add
+    c_b v_t to its friction for the whole step."""
+    models = {}
+    for method in ("symplectic_euler", "adaptive_euler"):
+        s = spotsim.replace(model_I.scenario, simulation={"integrator": {
+            "method": method, "velocity_tol_m_s": 1e3, "onset_depth_m": 1.0}})
+        models[method] = spotsim.build_model(s)
+    checked = 0
+    for state in recorded_states:
+        if state.view().drive_t - state.view().t <= FIRST_STEP_S:
+            continue
+        for scale in (0.9, 0.5):
+            ends = []
+            for method, model in models.items():
+                data = state.copy()
+                # closing a little faster where it held, so that the rate is new everywhere
+                data.opening_rate[:] = scale * state.view().opening_rate - (1.0 - scale) * 1e-3
+                stepper = Stepper(model, data)
+                assert stepper.step(FIRST_STEP_S) == FIRST_STEP_S
+                v = stepper.data.view()
+                ends.append((v.q.copy(), v.v.copy(), v.opening.copy()))
+            for a, b in zip(*ends):
+                assert np.array_equal(a, b)
+            checked += 1
+    assert checked >= 10
