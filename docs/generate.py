@@ -1,7 +1,7 @@
 """The generated parts of spotsim's documentation.
 
     python docs/generate.py results   # rerun what the tables need: writes docs/results/
-    python docs/generate.py ensembles # rerun only the ensemble accuracy studies (~8 min)
+    python docs/generate.py ensembles # rerun only the ensemble accuracy studies (~22 min)
     python docs/generate.py drives    # rerun only the drive comparison's ensembles (~10 min)
     python docs/generate.py runs      # rerun all but the ensemble studies (~2 min)
     python docs/generate.py pages     # docs/scenarios.md, and the generated blocks of README.md,
@@ -321,7 +321,7 @@ def runs_command(keep_ensembles: bool = True) -> None:
 
 
 def ensembles_command() -> None:
-    """Rerun only the ensemble accuracy studies (about 5 min on 2 cores) and replace their
+    """Rerun only the ensemble accuracy studies (about 22 min on 2 cores) and replace their
     entries in docs/results/meta.json, each stamped with its own commit."""
     meta = json.loads((RESULTS / "meta.json").read_text())
     done = [run_study(kind, name, args) for kind, name, args in ENSEMBLE_STUDIES]
