@@ -56,6 +56,10 @@ STUDIES = [
     ("accuracy", "dual_arm_sequential", ["config/dual_arm_sequential.yaml", "--grid", "reduced",
                                          "--reference", "symplectic_euler:80", "--no-plot"]),
     ("stability", "single_arm_case_I", ["config/single_arm_case_I.yaml"]),
+] + [
+    # each run's error estimate against the converged reference, 8 seeded starts per case
+    ("estimate", name, [f"config/{name}.yaml", "--members", "8"])
+    for name in ("single_arm_case_I", "single_arm_case_II", "single_arm_case_III", "dual_arm_sequential")
 ]
 #: The ensemble accuracy studies: 32 members (seed 0) per setting, 2 workers, against symplectic
 #: Euler at 3.125 us confirmed by 1.5625 us. Measured at 37891eb, coarser references do not hold
@@ -83,7 +87,7 @@ DRIVES = {"actuator": (["end_effector.drive=actuator"], ("default", "converged")
 DRIVE_SETTINGS = {"default": [], "converged": ["simulation.integrator.method=symplectic_euler",
                                                "simulation.substeps=320"]}
 #: The `spotsim study` verb of each kind of study.
-VERB = {"accuracy": "accuracy", "accuracy_ensemble": "accuracy", "stability": "stability"}
+VERB = {"accuracy": "accuracy", "accuracy_ensemble": "accuracy", "stability": "stability", "estimate": "estimate"}
 #: Files of a study's output directory (and of its subdirectories) kept in docs/results/.
 KEEP = ("*.csv", "*.md")
 
@@ -803,6 +807,37 @@ def accuracy_ensembles_table(r: Results) -> str:
     return "\n".join(out)
 
 
+ESTIMATE_QUANTITIES = {"peak_force_norm_N": "peak force (N)", "peak_torque_norm_Nm": "peak torque (N m)",
+                       "robot_centroid_displacement_norm_mm": "centroid displacement (mm)",
+                       "residual_offset_norm_mm": "residual e (mm)"}
+
+
+def estimate_table(r: Results) -> str:
+    """Each run's error estimate against its true error (|run - converged reference|, same
+    start), from `spotsim study estimate` (docs/results/estimate/)."""
+    rows = []
+    for name in ("single_arm_case_I", "single_arm_case_II", "single_arm_case_III", "dual_arm_sequential"):
+        path = RESULTS / "estimate" / name / "estimate.csv"
+        if not path.exists():
+            continue
+        data = read_csv(path)
+        label = PAPER_CASES[name]["label"] if name in PAPER_CASES else "dual arm"
+        for (grasp, quantity) in sorted({(str(x["grasp"]), x["quantity"]) for x in data},
+                                        key=lambda k: (k[0], list(ESTIMATE_QUANTITIES).index(k[1]))):
+            xs = [x for x in data if str(x["grasp"]) == grasp and x["quantity"] == quantity]
+            est = sorted(float(x["estimate"]) for x in xs)
+            err = sorted(float(x["error"]) for x in xs)
+            inside = sum(str(x["within"]) == "True" for x in xs)
+            inside3 = sum(str(x["within_uncertainty"]) == "True" for x in xs)
+            rows.append([label + (f", grasp {grasp}" if name == "dual_arm_sequential" else ""),
+                         ESTIMATE_QUANTITIES.get(quantity, quantity), num(est[len(est) // 2]),
+                         num(err[len(err) // 2]), f"{inside} of {len(xs)}", f"{inside3} of {len(xs)}"])
+    if not rows:
+        return f"No error-estimate study in docs/results/estimate/: run `{GENERATE} runs`."
+    return table(["case", "quantity", "median estimate", "median true error", "error within the estimate",
+                  "within the uncertainty (3x)"], rows)
+
+
 def drives_table(r: Results) -> str:
     """Relay against actuator: each case's 32-member ensemble with each drive, at the default
     integrator and at the converged setting (docs/results/drives/)."""
@@ -1078,6 +1113,7 @@ RENDER = {
     "accuracy-dual-arm": lambda r: accuracy_table(r, "dual_arm_sequential"),
     "accuracy-ensembles": accuracy_ensembles_table,
     "drives-table": drives_table,
+    "estimate-table": estimate_table,
     "stability-table": stability_table,
     "cli-usage": cli_usage,
     "grids": grids,
