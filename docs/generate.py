@@ -31,6 +31,7 @@ import os
 import platform
 import re
 import shutil
+import statistics
 import subprocess
 import sys
 import time
@@ -822,16 +823,15 @@ def estimate_table(r: Results) -> str:
             continue
         data = read_csv(path)
         label = PAPER_CASES[name]["label"] if name in PAPER_CASES else "dual arm"
-        for (grasp, quantity) in sorted({(str(x["grasp"]), x["quantity"]) for x in data},
+        for (grasp, quantity) in sorted({(int(x["grasp"]), x["quantity"]) for x in data},
                                         key=lambda k: (k[0], list(ESTIMATE_QUANTITIES).index(k[1]))):
-            xs = [x for x in data if str(x["grasp"]) == grasp and x["quantity"] == quantity]
-            est = sorted(float(x["estimate"]) for x in xs)
-            err = sorted(float(x["error"]) for x in xs)
+            xs = [x for x in data if int(x["grasp"]) == grasp and x["quantity"] == quantity]
+            est = statistics.median(float(x["estimate"]) for x in xs)
+            err = statistics.median(float(x["error"]) for x in xs)
             inside = sum(str(x["within"]) == "True" for x in xs)
             inside3 = sum(str(x["within_uncertainty"]) == "True" for x in xs)
             rows.append([label + (f", grasp {grasp}" if name == "dual_arm_sequential" else ""),
-                         ESTIMATE_QUANTITIES.get(quantity, quantity), num(est[len(est) // 2]),
-                         num(err[len(err) // 2]), f"{inside} of {len(xs)}", f"{inside3} of {len(xs)}"])
+                         ESTIMATE_QUANTITIES.get(quantity, quantity), num(est), num(err), f"{inside} of {len(xs)}", f"{inside3} of {len(xs)}"])
     if not rows:
         return f"No error-estimate study in docs/results/estimate/: run `{GENERATE} runs`."
     return table(["case", "quantity", "median estimate", "median true error", "error within the estimate",
