@@ -161,28 +161,33 @@ def adaptive_euler(m, d, h):
     evaluation is the next step's start: one evaluation a try. A rejected one goes back to
     the start (state, fingers, contacts) and tries SAFETY r^(-1/2) of h. The fingers move at
     the drive's rate through the step; a new rate (the drive's decision) re-evaluates the
-    start's loads, the committed bristles bent over the first try (as symplectic Euler's
-    start bends them over its step).
+    start for each try, the committed bristles bent over it (as symplectic Euler's start
+    bends them over its step), so that a rejected try leaves no trace.
     """
     p = m.integrator
     h = min(h, onset_step(m, d))
-    if not (d.fsal and d.fsal_t == d.t and np.array_equal(d.fsal_rate, d.opening_rate)):
-        # the bristles bent over the try from the committed memory, as symplectic Euler bends
-        # them: a new finger rate changes the pairs' normal damping at once, and a sliding
-        # pair's bristle left at its old limit would hold, adding c_b v_t for a whole step
-        forces(m, d, h)
-        accelerations(m, d)
-        d.evaluations += 1
+    # a new finger rate (or no last evaluation to reuse): the start is evaluated for each try,
+    # its bristles bent over the try from the committed memory, as symplectic Euler bends
+    # them. A new rate changes the pairs' normal damping at once, and a sliding pair's
+    # bristle left at its old limit would hold, adding c_b v_t for a whole step.
+    fresh = not (d.fsal and d.fsal_t == d.t and np.array_equal(d.fsal_rate, d.opening_rate))
     n = m.bodies.joint.shape[0]
     acc = np.empty((2, n, 6))
-    _centroid_accelerations(m, d, acc[0])
     q0, v0, a0, opening0 = d.q.copy(), d.v.copy(), d.a.copy(), d.opening.copy()
     start = (d.candidates, d.contacts, d.loads, d.summary)
     external = np.empty(6)
-    external[:3] = d.loads.external_force_W
-    external[3:] = d.loads.external_torque_O_W
     rejected = False
     while True:
+        if fresh or not rejected:
+            if fresh:
+                forces(m, d, h)
+                accelerations(m, d)
+                d.evaluations += 1
+                a0[:] = d.a
+                start = (d.candidates, d.contacts, d.loads, d.summary)
+            _centroid_accelerations(m, d, acc[0])
+            external[:3] = d.loads.external_force_W
+            external[3:] = d.loads.external_torque_O_W
         _euler_bodies(m, d, d.q, d.v, h)
         for i in range(d.opening.shape[0]):
             d.opening[i] = opening0[i] + h * d.opening_rate[i]
