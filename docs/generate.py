@@ -31,7 +31,6 @@ import os
 import platform
 import re
 import shutil
-import statistics
 import subprocess
 import sys
 import time
@@ -815,23 +814,27 @@ ESTIMATE_QUANTITIES = {"peak_force_norm_N": "peak force (N)", "peak_torque_norm_
 
 def estimate_table(r: Results) -> str:
     """Each run's error estimate against its true error (|run - converged reference|, same
-    start), from `spotsim study estimate` (docs/results/estimate/)."""
+    start), from `spotsim study estimate` (docs/results/estimate/), summed up per quantity as
+    the study does (`studies.estimate.validation_table`)."""
+    from spotsim.studies.estimate import validation_table
+
+    def row(x: dict) -> dict:  # estimate.csv's row as `validate` made it
+        missing = lambda v: None if v == "" else v  # noqa: E731
+        return {**x, "grasp": int(x["grasp"]), "estimate": missing(x["estimate"]), "error": missing(x["error"]),
+                "within": x["within"] == "True", "within_uncertainty": x["within_uncertainty"] == "True"}
+
     rows = []
     for name in ("single_arm_case_I", "single_arm_case_II", "single_arm_case_III", "dual_arm_sequential"):
         path = RESULTS / "estimate" / name / "estimate.csv"
         if not path.exists():
             continue
-        data = read_csv(path)
         label = PAPER_CASES[name]["label"] if name in PAPER_CASES else "dual arm"
-        for (grasp, quantity) in sorted({(int(x["grasp"]), x["quantity"]) for x in data},
-                                        key=lambda k: (k[0], list(ESTIMATE_QUANTITIES).index(k[1]))):
-            xs = [x for x in data if int(x["grasp"]) == grasp and x["quantity"] == quantity]
-            est = statistics.median(float(x["estimate"]) for x in xs)
-            err = statistics.median(float(x["error"]) for x in xs)
-            inside = sum(str(x["within"]) == "True" for x in xs)
-            inside3 = sum(str(x["within_uncertainty"]) == "True" for x in xs)
-            rows.append([label + (f", grasp {grasp}" if name == "dual_arm_sequential" else ""),
-                         ESTIMATE_QUANTITIES.get(quantity, quantity), num(est), num(err), f"{inside} of {len(xs)}", f"{inside3} of {len(xs)}"])
+        found = validation_table([row(x) for x in read_csv(path)])
+        for q in sorted(found, key=lambda q: (q["grasp"], list(ESTIMATE_QUANTITIES).index(q["quantity"]))):
+            rows.append([label + (f", grasp {q['grasp']}" if name == "dual_arm_sequential" else ""),
+                         ESTIMATE_QUANTITIES.get(q["quantity"], q["quantity"]), num(q["median_estimate"]),
+                         num(q["median_error"]), f"{q['within']} of {q['members']}",
+                         f"{q['within_uncertainty']} of {q['members']}"])
     if not rows:
         return f"No error-estimate study in docs/results/estimate/: run `{GENERATE} runs`."
     return table(["case", "quantity", "median estimate", "median true error", "error within the estimate",

@@ -289,29 +289,31 @@ def test_pressed_block_slides_with_kinetic_friction_above_static():
 
 #: A step short enough to end before the drive's next reading in every recorded state.
 FIRST_STEP_S = 2e-6
+#: adaptive_euler's error control off: a velocity tolerance no try reaches (m/s) and an onset
+#: guard no step reaches (m), so that its first try is the step.
+NO_ERROR_CONTROL = {"velocity_tol_m_s": 1e3, "onset_depth_m": 1.0}
+#: The new rates: the recorded one scaled, and closing this much faster (m/s) where it held.
+RATE_SCALES, EXTRA_CLOSING_M_S = (0.9, 0.5), 1e-3
 
 
 def test_adaptive_euler_start_after_a_new_finger_rate_is_symplectic_eulers(recorded_states, model_I):
     """When the drive sets a new finger rate, adaptive_euler re-evaluates its start with the
     bristles bent over the coming step, as symplectic Euler evaluates every start: from a
     state in contact, with a new finger rate (so that adaptive_euler cannot reuse its last
-    evaluation), one step of each (error control off) ends bit-identical. Unbent, a sliding pair whose limit the new rate raised would hold and add
-    c_b v_t to its friction for the whole step."""
-    models = {}
-    for method in ("symplectic_euler", "adaptive_euler"):
-        s = spotsim.replace(model_I.scenario, simulation={"integrator": {
-            "method": method, "velocity_tol_m_s": 1e3, "onset_depth_m": 1.0}})
-        models[method] = spotsim.build_model(s)
+    evaluation), one step of each (error control off) ends bit-identical. Unbent, a sliding
+    pair whose limit the new rate raised would hold and add c_b v_t to its friction for the
+    whole step."""
+    models = {method: spotsim.build_model(spotsim.replace(model_I.scenario, simulation={"integrator": {
+        "method": method, **NO_ERROR_CONTROL}})) for method in ("symplectic_euler", "adaptive_euler")}
     checked = 0
     for state in recorded_states:
         if state.view().drive_t - state.view().t <= FIRST_STEP_S:
             continue
-        for scale in (0.9, 0.5):
+        for scale in RATE_SCALES:
             ends = []
-            for method, model in models.items():
+            for model in models.values():
                 data = state.copy()
-                # closing a little faster where it held, so that the rate is new everywhere
-                data.opening_rate[:] = scale * state.view().opening_rate - (1.0 - scale) * 1e-3
+                data.opening_rate[:] = scale * state.view().opening_rate - (1.0 - scale) * EXTRA_CLOSING_M_S
                 stepper = Stepper(model, data)
                 assert stepper.step(FIRST_STEP_S) == FIRST_STEP_S
                 v = stepper.data.view()

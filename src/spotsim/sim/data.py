@@ -81,7 +81,7 @@ class DataFields(NamedTuple):
     drive_t: float  # when the active drive's controller next reads the load and sets the speed, s
     drive_stopped: np.ndarray  # (n_g,) each grasp's drive has stopped since it last closed at over half speed
     drive_resumes: np.ndarray  # (n_g,) ... the times it closed again at over half its closing speed after it stopped
-    drive_jump: np.ndarray  # (n_g,) ... its largest change of speed from one step to the next, m/s
+    drive_jump: np.ndarray  # (n_g,) ... its largest change of speed from one reading to the next, m/s
     phase: np.ndarray  # (n_g,) APPROACH, SELF_CENTRING or COMPLETE
     held_since: float  # since when the completion criteria hold, s (nan: they do not)
     t_start: np.ndarray  # (n_g,) when each grasp's drive started, s (nan: not yet)
@@ -177,8 +177,7 @@ def make_data(model, rows: int = ROWS_PER_CALL) -> Data:
         candidates=no_candidates(), contacts=no_contacts(), memory=no_memory(), loads=no_loads(nj, n_f),
         summary=no_summary(), external_force_W=np.zeros(3), external_torque_O_W=np.zeros(3),
         active=0, stalled=np.zeros(n_ee, dtype=np.bool_), drive_t=0.0, drive_stopped=np.zeros(n_g, dtype=np.bool_),
-        drive_resumes=ints(n_g),
-        drive_jump=np.zeros(n_g), phase=ints(n_g), held_since=math.nan,
+        drive_resumes=ints(n_g), drive_jump=np.zeros(n_g), phase=ints(n_g), held_since=math.nan,
         t_start=np.r_[0.0, nan(n_g - 1)], t_contact=nan(n_g), t_complete=nan(n_g),
         peak_force=np.zeros((n_g, 3)), peak_torque=np.zeros((n_g, 3)), peak_force_norm=np.zeros(n_g),
         peak_torque_norm=np.zeros(n_g), peak_pairs=ints(n_g),

@@ -174,17 +174,15 @@ def adaptive_euler(m, d, h):
     n = m.bodies.joint.shape[0]
     acc = np.empty((2, n, 6))
     q0, v0, a0, opening0 = d.q.copy(), d.v.copy(), d.a.copy(), d.opening.copy()
-    start = (d.candidates, d.contacts, d.loads, d.summary)
+    start = (d.candidates, d.contacts, d.loads, d.summary)  # a reused start, put back after a rejection
     external = np.empty(6)
     rejected = False
     while True:
+        if fresh:
+            forces(m, d, h)
+            accelerations(m, d)
+            d.evaluations += 1
         if fresh or not rejected:
-            if fresh:
-                forces(m, d, h)
-                accelerations(m, d)
-                d.evaluations += 1
-                a0[:] = d.a
-                start = (d.candidates, d.contacts, d.loads, d.summary)
             _centroid_accelerations(m, d, acc[0])
             external[:3] = d.loads.external_force_W
             external[3:] = d.loads.external_torque_O_W
@@ -203,9 +201,11 @@ def adaptive_euler(m, d, h):
             break
         rejected = True
         d.rejected += 1
-        d.q[:], d.v[:], d.a[:], d.opening[:] = q0, v0, a0, opening0
-        kinematics(m, d)
-        d.candidates, d.contacts, d.loads, d.summary = start
+        d.q[:], d.v[:], d.opening[:] = q0, v0, opening0
+        if not fresh:  # a fresh start is evaluated again for the next try
+            d.a[:] = a0
+            kinematics(m, d)
+            d.candidates, d.contacts, d.loads, d.summary = start
         h *= max(SHRINK_MIN, SAFETY / math.sqrt(ratio))
         if h < p.h_min:
             return 0.0

@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..scenario import modules_of
 from .ensemble import (
     OFFSET_TOL_MM,
     RPY_TOL_DEG,
@@ -35,8 +36,10 @@ from .ensemble import (
     WEDGED,
     EnsembleResult,
     ensemble,
+    finite,
     grasp_prefix,
     members_csv,
+    statistics,
 )
 from .runs import RowWriter, markdown_table, percent, sig, warm_up
 
@@ -66,23 +69,16 @@ def ks_pvalue(a, b) -> float:
     """The two-sample Kolmogorov-Smirnov p-value of samples a and b (nan if either is empty)."""
     from scipy.stats import ks_2samp
 
-    a, b = _finite(a), _finite(b)
+    a, b = finite(a), finite(b)
     if not len(a) or not len(b):
         return math.nan
     return float(ks_2samp(a, b).pvalue)
 
 
-def _finite(values) -> np.ndarray:
-    return np.asarray([v for v in values if v is not None and math.isfinite(v)], dtype=float)
-
-
 def quantiles(values) -> tuple[float, float, float]:
-    """(p10, median, p90) of the finite values (numpy's linear interpolation; nan if none)."""
-    x = _finite(values)
-    if not len(x):
-        return math.nan, math.nan, math.nan
-    p10, med, p90 = np.percentile(x, [10, 50, 90])
-    return float(p10), float(med), float(p90)
+    """(p10, median, p90) of the finite values (`ensemble.statistics`; nan if none)."""
+    st = statistics(values)
+    return (math.nan,) * 3 if not st["count"] else (st["p10"], st["median"], st["p90"])
 
 
 def median_rel(a, b) -> float:
@@ -267,7 +263,7 @@ def accuracy_ensemble_study(scenario, settings: list, reference, out_dir, n: int
     dt = scenario.simulation.dt_s
     confirmation = reference.refined()
     k = min(confirmation_members or n, n)
-    n_grasps, dual = len(scenario_modules(scenario)), scenario.kind == "dual_arm"
+    n_grasps, dual = len(modules_of(scenario)), scenario.kind == "dual_arm"
     writer = RowWriter(out / "accuracy_ensemble.csv", columns(n_grasps, dual))
     report = EnsembleAccuracyReport(scenario.name, dt, n, seed, reference, confirmation, k, writer.rows)
     default = setting_of(scenario)
@@ -303,12 +299,6 @@ def accuracy_ensemble_study(scenario, settings: list, reference, out_dir, n: int
     return report
 
 
-def scenario_modules(scenario):
-    from ..scenario import modules_of
-
-    return modules_of(scenario)
-
-
 def slug(label: str) -> str:
     """A file name for a setting's label: `symplectic_euler h 0.0125 ms` -> `symplectic_euler_h_0.0125_ms`."""
     return re.sub(r"[^A-Za-z0-9.+-]+", "_", label).strip("_")
@@ -331,7 +321,7 @@ def _signed(x) -> str:
 
 def ensemble_markdown(scenario, report: EnsembleAccuracyReport) -> str:
     """The study's markdown: its findings, then a table of the targets and one of the values."""
-    n_grasps, dual = len(scenario_modules(scenario)), scenario.kind == "dual_arm"
+    n_grasps, dual = len(modules_of(scenario)), scenario.kind == "dual_arm"
     ref = report.row("reference")
     head = [f"# Accuracy study over ensembles: {report.scenario}", "",
             (f"Every setting run from the same {report.members} starts (seed {report.seed}, each module's start "

@@ -289,10 +289,15 @@ def _in_pool(scenario, source, model, starts, members, workers, bar, fork: bool)
 # ----------------------------------------------------------------------------- statistics
 
 
+def finite(values) -> np.ndarray:
+    """The values that are neither None nor nan nor infinite, as an array."""
+    return np.asarray([v for v in values if v is not None and math.isfinite(v)], dtype=float)
+
+
 def statistics(values) -> dict:
     """median, 10th and 90th percentiles (numpy's linear interpolation), min, max and count of
     the finite values (None, count 0, when there are none)."""
-    x = np.asarray([v for v in values if v is not None and math.isfinite(v)], dtype=float)
+    x = finite(values)
     if not len(x):
         return {"median": None, "p10": None, "p90": None, "min": None, "max": None, "count": 0}
     p10, median, p90 = np.percentile(x, [10, 50, 90])
