@@ -87,32 +87,40 @@ def body_wrenches(m, d):
     finger = np.zeros((3, n_f))
     load, stiffness, damping = finger[0], finger[1], finger[2]
     common_point = m.law.common_point
-    for i in range(d.contacts.master.shape[0]):
-        mi = d.contacts.master[i]
-        j1, j2 = m.master.joint[mi], m.slave.joint[d.contacts.slave[i]]
-        f = (d.contacts.force_W[i, 0], d.contacts.force_W[i, 1], d.contacts.force_W[i, 2])
+    # the pair loop reads its arrays through locals: read through the structures inside it,
+    # it takes twice as long (measured with 37 pairs: 1.69 us against 0.75 us a call)
+    R_W, p_W = d.R_W, d.p_W
+    c = d.contacts
+    master, slave, force_W, point_W, c1_W, c2_W = c.master, c.slave, c.force_W, c.point_W, c.c1_W, c.c2_W
+    axial_stiffness, axial_damping = c.axial_stiffness, c.axial_damping
+    master_joint, slave_joint, master_finger = m.master.joint, m.slave.joint, m.master.finger
+    finger_joint, finger_axis = m.fingers.parent_joint, m.fingers.axis_J
+    for i in range(master.shape[0]):
+        mi = master[i]
+        j1, j2 = master_joint[mi], slave_joint[slave[i]]
+        f = (force_W[i, 0], force_W[i, 1], force_W[i, 2])
         if common_point:
-            p1 = p2 = (d.contacts.point_W[i, 0], d.contacts.point_W[i, 1], d.contacts.point_W[i, 2])
+            p1 = p2 = (point_W[i, 0], point_W[i, 1], point_W[i, 2])
         else:
-            p1 = (d.contacts.c1_W[i, 0], d.contacts.c1_W[i, 1], d.contacts.c1_W[i, 2])
-            p2 = (d.contacts.c2_W[i, 0], d.contacts.c2_W[i, 1], d.contacts.c2_W[i, 2])
-        _add_wrench(F, T, ext_f, ext_t, j1, j2, p1, (d.p_W[j1, 0], d.p_W[j1, 1], d.p_W[j1, 2]), 1.0, f)
-        _add_wrench(F, T, ext_f, ext_t, j2, j1, p2, (d.p_W[j2, 0], d.p_W[j2, 1], d.p_W[j2, 2]), -1.0, f)
-        fg = m.master.finger[mi]
-        j = m.fingers.parent_joint[fg]
-        stiffness[fg] += d.contacts.axial_stiffness[i]
-        damping[fg] += d.contacts.axial_damping[i]
+            p1 = (c1_W[i, 0], c1_W[i, 1], c1_W[i, 2])
+            p2 = (c2_W[i, 0], c2_W[i, 1], c2_W[i, 2])
+        _add_wrench(F, T, ext_f, ext_t, j1, j2, p1, (p_W[j1, 0], p_W[j1, 1], p_W[j1, 2]), 1.0, f)
+        _add_wrench(F, T, ext_f, ext_t, j2, j1, p2, (p_W[j2, 0], p_W[j2, 1], p_W[j2, 2]), -1.0, f)
+        fg = master_finger[mi]
+        j = finger_joint[fg]
+        stiffness[fg] += axial_stiffness[i]
+        damping[fg] += axial_damping[i]
         for a in range(3):
-            load[fg] += f[a] * (d.R_W[j, a, 0] * m.fingers.axis_J[fg, 0] + d.R_W[j, a, 1] * m.fingers.axis_J[fg, 1]
-                                + d.R_W[j, a, 2] * m.fingers.axis_J[fg, 2])
+            load[fg] += f[a] * (R_W[j, a, 0] * finger_axis[fg, 0] + R_W[j, a, 1] * finger_axis[fg, 1]
+                                + R_W[j, a, 2] * finger_axis[fg, 2])
     local = np.empty((njoints, 6))
     for j in range(njoints):
         for a in range(3):
-            local[j, a] = d.R_W[j, 0, a] * F[j, 0] + d.R_W[j, 1, a] * F[j, 1] + d.R_W[j, 2, a] * F[j, 2]
-            local[j, 3 + a] = d.R_W[j, 0, a] * T[j, 0] + d.R_W[j, 1, a] * T[j, 1] + d.R_W[j, 2, a] * T[j, 2]
-        T_O[j, 0] = T[j, 0] + d.p_W[j, 1] * F[j, 2] - d.p_W[j, 2] * F[j, 1]
-        T_O[j, 1] = T[j, 1] + d.p_W[j, 2] * F[j, 0] - d.p_W[j, 0] * F[j, 2]
-        T_O[j, 2] = T[j, 2] + d.p_W[j, 0] * F[j, 1] - d.p_W[j, 1] * F[j, 0]
+            local[j, a] = R_W[j, 0, a] * F[j, 0] + R_W[j, 1, a] * F[j, 1] + R_W[j, 2, a] * F[j, 2]
+            local[j, 3 + a] = R_W[j, 0, a] * T[j, 0] + R_W[j, 1, a] * T[j, 1] + R_W[j, 2, a] * T[j, 2]
+        T_O[j, 0] = T[j, 0] + p_W[j, 1] * F[j, 2] - p_W[j, 2] * F[j, 1]
+        T_O[j, 1] = T[j, 1] + p_W[j, 2] * F[j, 0] - p_W[j, 0] * F[j, 2]
+        T_O[j, 2] = T[j, 2] + p_W[j, 0] * F[j, 1] - p_W[j, 1] * F[j, 0]
     for k in range(load.shape[0]):
         load[k] = max(load[k], 0.0)
     d.loads = Loads(local, F, T_O, ext_f, ext_t, load, stiffness, damping)
