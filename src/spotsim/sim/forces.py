@@ -1,7 +1,9 @@
 """One force evaluation: the contact stages of the paper's Fig. 5, in order.
 
 kinematics -> sphere pairs -> pair forces -> wrenches (-> what the step watches). Every
-integrator evaluates the forces through this one function (`sim.integrators`).
+integrator evaluates the forces through `forces` (`sim.integrators`); at a state whose pairs
+were just found, with only the finger rates changed, through its last stages alone
+(`contact_forces`): the pairs depend on the poses alone.
 """
 
 from __future__ import annotations
@@ -19,6 +21,13 @@ def forces(m, d, h):
     bent over h (s) from d.memory, which is left as it is."""
     kinematics(m, d)  # Eq. (1): the bodies' poses and velocities
     find_pairs(m, d)  # Eq. (6)-(10): culled, or the paper's literal all-pairs search
+    contact_forces(m, d, h)
+
+
+@njit
+def contact_forces(m, d, h):
+    """`forces`' stages after the search: the wrenches of d.candidates at d's kinematics and
+    finger rates, the bristles bent over h (s) from d.memory."""
     pair_forces(m, d, h)  # Eq. (11)-(17), per pair
     body_wrenches(m, d)  # Eq. (18)-(21), one wrench per body
     contact_summary(m, d)  # the active module's wrench in O_a, the fastest and deepest pair

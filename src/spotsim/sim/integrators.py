@@ -38,7 +38,7 @@ from .bodies import (
 )
 from .data import RK_STATE
 from .dynamics import accelerations
-from .forces import forces
+from .forces import contact_forces, forces
 
 #: The integrators, by their scenario names; a Model names its own by its index here.
 METHODS = ("symplectic_euler", "rk4", "dopri5", "adaptive_euler")
@@ -162,7 +162,8 @@ def adaptive_euler(m, d, h):
     the start (state, fingers, contacts) and tries SAFETY r^(-1/2) of h. The fingers move at
     the drive's rate through the step; a new rate (the drive's decision) re-evaluates the
     start for each try, the committed bristles bent over it (as symplectic Euler's start
-    bends them over its step), so that a rejected try leaves no trace.
+    bends them over its step), so that a rejected try leaves no trace. Its pairs are those
+    the last evaluation found at the same poses (`contact_forces`).
     """
     p = m.integrator
     h = min(h, onset_step(m, d))
@@ -170,16 +171,22 @@ def adaptive_euler(m, d, h):
     # its bristles bent over the try from the committed memory, as symplectic Euler bends
     # them. A new rate changes the pairs' normal damping at once, and a sliding pair's
     # bristle left at its old limit would hold, adding c_b v_t for a whole step.
-    fresh = not (d.fsal and d.fsal_t == d.t and np.array_equal(d.fsal_rate, d.opening_rate))
+    here = d.fsal and d.fsal_t == d.t  # the last evaluation was made at this state
+    fresh = not (here and np.array_equal(d.fsal_rate, d.opening_rate))
     n = m.bodies.joint.shape[0]
     acc = np.empty((2, n, 6))
     q0, v0, a0, opening0 = d.q.copy(), d.v.copy(), d.a.copy(), d.opening.copy()
-    start = (d.candidates, d.contacts, d.loads, d.summary)  # a reused start, put back after a rejection
+    start = (d.candidates, d.contacts, d.loads, d.summary)  # put back after a rejection (a fresh start: its pairs)
     external = np.empty(6)
     rejected = False
     while True:
         if fresh:
-            forces(m, d, h)
+            if here:  # only the finger rates changed: the pairs found at this state stand
+                kinematics(m, d)
+                d.candidates = start[0]
+                contact_forces(m, d, h)
+            else:
+                forces(m, d, h)
             accelerations(m, d)
             d.evaluations += 1
         if fresh or not rejected:
