@@ -62,30 +62,30 @@ STUDIES = [
     for name in ("single_arm_case_I", "single_arm_case_II", "single_arm_case_III", "dual_arm_sequential")
 ]
 #: The ensemble accuracy studies: 32 members (seed 0) per setting, 2 workers, against symplectic
-#: Euler at 3.125 us confirmed by 1.5625 us. Measured at 37891eb, coarser references do not hold
-#: the residual's distribution: from 12.5 to 6.25 us Case III's wedged share goes from 6 % to
-#: 31 % and its median residual by 14 % (KS p 5e-9), and the dual arm's grasp-2 centroid
-#: displacement moves 3.7 % from 6.25 to 3.125 us.
+#: Euler at 0.78125 us confirmed by 0.390625 us (the dual arm's confirmation on its first 16
+#: members). Measured at 927a7d2, 3.125 us does not hold Case II's peak force: its median goes
+#: 105.4, 103.1, 100.4, 99.9 N at 3.125, 1.5625, 0.78125 and 0.390625 us (rk4 from below: 96.2,
+#: 98.4, 99.5 N at 25, 12.5, 6.25 us); at 37891eb, from 12.5 to 6.25 us Case III's wedged share
+#: went from 6 % to 31 %.
 ENSEMBLE_ARGS = ["--ensemble", "32", "--seed", "0", "--workers", "2", "--methods", "symplectic_euler,adaptive_euler",
-                 "--tols", "4e-5,1e-5,2.5e-6,6.25e-7", "--reference", "symplectic_euler:320", "--no-plot"]
+                 "--tols", "4e-5,1e-5,2.5e-6,6.25e-7,1.5625e-7", "--reference", "symplectic_euler:1280", "--no-plot"]
 ENSEMBLE_STUDIES = [
     ("accuracy_ensemble", f"single_arm_case_{case}", [f"config/single_arm_case_{case}.yaml", *ENSEMBLE_ARGS,
-                                                      "--substeps", "10,40,80,160"])
+                                                      "--substeps", "10,40,80,160,320"])
     for case in ("I", "II", "III")
 ] + [("accuracy_ensemble", "dual_arm_sequential", ["config/dual_arm_sequential.yaml", *ENSEMBLE_ARGS,
-                                                   "--substeps", "10,80,160"])]
+                                                   "--substeps", "10,80,160,320", "--confirmation-members", "16"])]
 #: The drive comparison: each case's 32-member ensemble (seed 0) with each finger drive, at the
-#: default integrator and at the converged setting the ensemble studies confirm (symplectic
-#: Euler at 3.125 us): `spotsim run CONFIG --ensemble 32 --set end_effector.drive=DRIVE ...`.
+#: default integrator and at a fine fixed step (symplectic Euler at 3.125 us; the ensemble
+#: studies' reference is four times finer): `spotsim run CONFIG --ensemble 32 --set end_effector.drive=DRIVE ...`.
 DRIVE_CASES = ("single_arm_case_I", "single_arm_case_II", "single_arm_case_III", "dual_arm_sequential")
 #: The drives: their `--set`s, and the settings they run at. The relay read at every step (a
 #: controller period below any step: the model before the drive had a controller period) runs at
-#: the converged fixed step only: an adaptive step ends at each reading, so it could not grow.
-DRIVES = {"actuator": (["end_effector.drive=actuator"], ("default", "converged")),
-          "relay": (["end_effector.drive=relay"], ("default", "converged")),
-          "relay_every_step": (["end_effector.drive=relay", "end_effector.control_period_s=1.0e-9"], ("converged",))}
-DRIVE_SETTINGS = {"default": [], "converged": ["simulation.integrator.method=symplectic_euler",
-                                               "simulation.substeps=320"]}
+#: the fine fixed step only: an adaptive step ends at each reading, so it could not grow.
+DRIVES = {"actuator": (["end_effector.drive=actuator"], ("default", "fine")),
+          "relay": (["end_effector.drive=relay"], ("default", "fine")),
+          "relay_every_step": (["end_effector.drive=relay", "end_effector.control_period_s=1.0e-9"], ("fine",))}
+DRIVE_SETTINGS = {"default": [], "fine": ["simulation.integrator.method=symplectic_euler", "simulation.substeps=320"]}
 #: The `spotsim study` verb of each kind of study.
 VERB = {"accuracy": "accuracy", "accuracy_ensemble": "accuracy", "stability": "stability", "estimate": "estimate"}
 #: Files of a study's output directory (and of its subdirectories) kept in docs/results/.
@@ -445,11 +445,11 @@ def headline(r: Results) -> str:
         d, ref = role(study, "default"), role(study, "reference")
         rows.append([f"{PAPER_CASES[study]['label']}: residual offset e (mm)", num(PAPER_CASES[study]["e"]),
                      residual(d), residual(ref),
-                     f"median {signed_rel(d['residual_median_rel'])}, KS p = {num(d['residual_ks_p'], 2)}"])
+                     f"median {rel_error(d, 'residual_median_rel')}, KS p = {num(d['residual_ks_p'], 2)}"])
     d, ref = role("single_arm_case_III", "default"), role("single_arm_case_III", "reference")
     rows.append(["Case III: peak contact force |F| (N; the paper: its per-axis peaks' norm)",
                  num(norm(PAPER_PEAK_22)), spread(d, "peak_force", "N", 4),
-                 spread(ref, "peak_force", "N", 4), signed_rel(d["peak_force_median_rel"])])
+                 spread(ref, "peak_force", "N", 4), rel_error(d, "peak_force_median_rel")])
     c1 = r.runs["single_arm_case_I"]
     rows.append(["Case I: wall time of one run (s)", f"{num(PAPER_CASES['single_arm_case_I']['wall'], 4)} (MATLAB)",
                  num(c1["wall_time_s"], 2), num(role("single_arm_case_I", "reference")["wall_per_member_s"], 2), ""])
@@ -457,11 +457,11 @@ def headline(r: Results) -> str:
     for g, paper in ((1, PAPER_D1), (2, PAPER_D2)):
         q = f"g{g}_centroid"
         rows.append([f"Dual arm: robot centroid displacement, grasp {g}, |d| (mm)", num(norm(paper)),
-                     spread(d, q, "mm"), spread(ref, q, "mm"), signed_rel(d[f"{q}_median_rel"])])
+                     spread(d, q, "mm"), spread(ref, q, "mm"), rel_error(d, f"{q}_median_rel")])
     rows.append(["Dual arm: max contact force, grasp 1 (N)", num(PAPER_FORCE_1, 5), spread(d, "g1_peak_force", "N", 4),
-                 spread(ref, "g1_peak_force", "N", 4), signed_rel(d["g1_peak_force_median_rel"])])
+                 spread(ref, "g1_peak_force", "N", 4), rel_error(d, "g1_peak_force_median_rel")])
     rows.append(["Dual arm: max contact torque, grasp 1 (N m)", num(PAPER_TORQUE_1), spread(d, "g1_peak_torque", "Nm"),
-                 spread(ref, "g1_peak_torque", "Nm"), signed_rel(d["g1_peak_torque_median_rel"])])
+                 spread(ref, "g1_peak_torque", "Nm"), rel_error(d, "g1_peak_torque_median_rel")])
     dual = r.runs["dual_arm_sequential"]
     rows.append(["Dual arm: wall time of one run (s)", "–",
                  f"{num(dual['wall_time_s'], 2)} for {num(dual['sim_time_s'], 3)} s simulated",
@@ -748,6 +748,15 @@ def signed_rel(x) -> str:
     return (f"{d:+.2g}" if abs(d) < 10 else f"{d:+.0f}").replace("-", MINUS) + " %"
 
 
+def rel_error(x: dict, key: str) -> str:
+    """x[key], a relative difference of two ensembles' medians, with its sampling error
+    (x[key + '_error'], the bootstrap's) as per cent: '+2.3 ± 1.2 %'."""
+    error = x.get(f"{key}_error")
+    if error is None or math.isnan(error) or math.isnan(x[key]):
+        return signed_rel(x[key])
+    return f"{signed_rel(x[key])[:-2]} ± {100 * error:.2g} %"
+
+
 def _yes(x) -> str:
     return "yes" if x == "yes" else "**no**"
 
@@ -773,13 +782,13 @@ def accuracy_ensembles_table(r: Results) -> str:
             return f"{fixed(100 * x[f'{p}seated'], 0)} / {fixed(100 * x[f'{p}wedged'], 0)}"
 
         def ks(x, p):
-            return f"{num(x[f'{p}residual_ks_p'], 2)}, {signed_rel(x[f'{p}residual_median_rel'])}"
+            return f"{num(x[f'{p}residual_ks_p'], 2)}, {rel_error(x, f'{p}residual_median_rel')}"
 
         def deterministic(name, unit):
             def cell(x, p):
                 q = f"{p}{name}"
                 return (f"{num(x[f'{q}_median_{unit}'], 4)} [{num(x[f'{q}_p10_{unit}'], 3)}, "
-                        f"{num(x[f'{q}_p90_{unit}'], 3)}], {signed_rel(x[f'{q}_median_rel'])}")
+                        f"{num(x[f'{q}_p90_{unit}'], 3)}], {rel_error(x, f'{q}_median_rel')}")
             return cell
 
         body = []
@@ -843,7 +852,7 @@ def estimate_table(r: Results) -> str:
 
 def drives_table(r: Results) -> str:
     """Relay against actuator: each case's 32-member ensemble with each drive, at the default
-    integrator and at the converged setting (docs/results/drives/)."""
+    integrator and at a fine fixed step (docs/results/drives/)."""
     if not r.drives:
         return f"No drive comparison in docs/results/drives/: run `{GENERATE} drives`."
 
@@ -873,7 +882,7 @@ def drives_table(r: Results) -> str:
               "seated / wedged", "peak force (N)", "completed (s)", "robot centroid displacement (mm)"]
     return ("Each cell: median [10th, 90th percentile] over 32 members (seed 0). Resumes: the drive closing "
             "again at more than half its closing speed after it had stopped. Default: adaptive Euler at its "
-            "default tolerance; converged: symplectic Euler at 3.125 µs. Relay every step: the relay reading the "
+            "default tolerance; fine: symplectic Euler at 3.125 µs. Relay every step: the relay reading the "
             "load at every integration step instead of every `control_period_s`.\n\n" + table(header, rows))
 
 

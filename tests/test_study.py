@@ -4,6 +4,7 @@ their runs bounded."""
 import csv
 import math
 
+import numpy as np
 import pytest
 from conftest import CASE_I
 
@@ -289,6 +290,23 @@ def test_ensemble_comparison_statistics_on_hand_made_samples():
     assert not c["residual_median_ok"] and c["residual_ks_p"] < ae.KS_ALPHA and not c["meets_targets"]
     assert c["residual_p10_mm"] == pytest.approx(0.1109) and c["residual_p90_mm"] == pytest.approx(0.1181)
     assert c["wedged"] == pytest.approx(0.3) and c["seated"] == pytest.approx(0.7)
+
+
+def test_a_median_difference_carries_the_sampling_error_of_two_medians():
+    """Constant samples: no sampling error. Two normal samples of n with spread sigma: the
+    median's standard error is sqrt(pi / 2) sigma / sqrt(n) each (asymptotically), so their
+    difference's, relative to a median of 100, is sqrt(pi / n) sigma / 100."""
+    from spotsim.studies import accuracy_ensemble as ae
+
+    assert ae.median_rel_error([5.0] * 8, [4.0] * 8) == 0.0
+    assert math.isnan(ae.median_rel_error([1.0], [1.0, 2.0]))
+    rng = np.random.default_rng(1)
+    n, sigma = 400, 1.0
+    a, b = 100.0 + sigma * rng.standard_normal(n), 100.0 + sigma * rng.standard_normal(n)
+    assert ae.median_rel_error(a, b) == pytest.approx(math.sqrt(math.pi / n) * sigma / 100.0, rel=0.15)
+    c = ae.compare([member(i, 0.1, 50.0 + i) for i in range(8)], [member(i, 0.1, 50.0) for i in range(8)], 1,
+                   dual=False)
+    assert c["peak_force_median_rel_error"] > 0.0 and c["residual_median_rel_error"] == 0.0
 
 
 def test_a_smaller_ensemble_is_compared_with_the_same_members_of_the_reference():

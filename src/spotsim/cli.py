@@ -91,9 +91,9 @@ def _study_parser(sub) -> None:
     acc.add_argument("--wall-limit", type=float, metavar="S", help="wall-time budget of each run (default: none)")
     acc.add_argument("--no-plot", action="store_true", help="skip the work-precision plot")
     est.add_argument("--members", type=int, default=8, metavar="N", help="starts compared (default 8)")
-    est.add_argument("--reference", metavar="METHOD:VALUE", default="symplectic_euler:320",
-                     help="the converged setting (default symplectic_euler:320, 3.125 us at dt 1 ms: the accuracy "
-                          "study's converged reference)")
+    est.add_argument("--reference", metavar="METHOD:VALUE", default="symplectic_euler:1280",
+                     help="the converged setting (default symplectic_euler:1280, 0.78125 us at dt 1 ms: the "
+                          "ensemble accuracy studies' confirmed reference)")
     est.add_argument("--workers", type=int, metavar="W", help="parallel processes (default: one per core)")
     acc.add_argument("--ensemble", type=int, metavar="N",
                      help="run every setting as an N-member ensemble from the same perturbed starts and compare "

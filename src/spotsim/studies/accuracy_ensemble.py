@@ -13,6 +13,10 @@ reference's ensemble:
   free-floating robot its centroid displacement norm): the relative difference of the medians,
   next to each ensemble's p10-p90 spread, which shows how deterministic they are.
 
+Each difference of medians comes with its sampling error (`median_rel_error`): two ensembles'
+medians differ by chance as well as by accuracy, and a difference within about two of these
+errors is not resolved by N members.
+
 A setting meets the targets when every deterministic median is within DETERMINISTIC_REL of the
 reference's, and every grasp's residual has a KS p-value above KS_ALPHA and a median within
 RESIDUAL_MEDIAN_REL of the reference's.
@@ -49,6 +53,8 @@ from .runs import RowWriter, markdown_table, percent, sig, warm_up
 DETERMINISTIC_REL = 0.02
 KS_ALPHA = 0.05
 RESIDUAL_MEDIAN_REL = 0.05
+#: Resamples of the bootstrap that gives a difference of medians its sampling error.
+BOOTSTRAP = 2000
 
 #: (members-table column without grasp prefix, CSV name, unit) of the compared quantities.
 DISTRIBUTED = (("residual_norm_mm", "residual", "mm"),)
@@ -89,6 +95,21 @@ def median_rel(a, b) -> float:
     return (ma - mb) / abs(mb)
 
 
+def median_rel_error(a, b, seed: int = 0) -> float:
+    """The sampling error of `median_rel(a, b)`: the standard deviation of the relative
+    difference of the medians over BOOTSTRAP resamples, with replacement, of each sample
+    (seeded; nan if either has fewer than two finite values). The samples are resampled
+    independently: the members of two settings start alike but their bounces decorrelate
+    them, so that pairing them would claim a precision the medians do not have."""
+    a, b = finite(a), finite(b)
+    if len(a) < 2 or len(b) < 2:
+        return math.nan
+    rng = np.random.default_rng(seed)
+    ma = np.median(rng.choice(a, (BOOTSTRAP, len(a))), axis=1)
+    mb = np.median(rng.choice(b, (BOOTSTRAP, len(b))), axis=1)
+    return float(np.std((ma - mb) / np.abs(mb)))
+
+
 def class_share(rows: list[dict], p: str, cls: str) -> float:
     """The share of `rows` (members that ran) whose grasp `p` ended as `cls`."""
     ran = [r for r in rows if r["status"] != "interrupted"]
@@ -99,9 +120,10 @@ def compare(rows: list[dict], ref_rows: list[dict], n_grasps: int, dual: bool) -
     """The comparison of an ensemble's member rows with the reference's: per grasp, for the
     residual and its angles the KS p-value and the median difference (relative for the offset
     norm, deg for the angles); for each deterministic quantity the relative difference of the
-    medians; the seated / wedged shares; then the targets (`*_ok`, `meets_targets`) and the
-    worst of each measure over the grasps (`max_deterministic_rel`, `min_residual_ks_p`,
-    `max_residual_median_rel`). The reference is taken over the same members as `rows` (the
+    medians; each relative difference's sampling error (`*_median_rel_error`); the seated /
+    wedged shares; then the targets (`*_ok`, `meets_targets`) and the worst of each measure
+    over the grasps (`max_deterministic_rel`, `min_residual_ks_p`, `max_residual_median_rel`).
+    The reference is taken over the same members as `rows` (the
     first k of its starts, when the ensemble has fewer members)."""
     members = {r["member"] for r in rows}
     ref_rows = [r for r in ref_rows if r["member"] in members]
@@ -118,6 +140,7 @@ def compare(rows: list[dict], ref_rows: list[dict], n_grasps: int, dual: bool) -
             out[f"{p}{name}_p10_{unit}"], out[f"{p}{name}_median_{unit}"], out[f"{p}{name}_p90_{unit}"] = quantiles(a)
             out[f"{p}{name}_ks_p"] = ks_pvalue(a, b)
             out[f"{p}{name}_median_rel"] = median_rel(a, b)
+            out[f"{p}{name}_median_rel_error"] = median_rel_error(a, b)
             ks.append(out[f"{p}{name}_ks_p"])
             med.append(abs(out[f"{p}{name}_median_rel"]))
         for q, name, unit in ANGLES:
@@ -129,6 +152,7 @@ def compare(rows: list[dict], ref_rows: list[dict], n_grasps: int, dual: bool) -
             a, b = col(rows, q), col(ref_rows, q)
             out[f"{p}{name}_p10_{unit}"], out[f"{p}{name}_median_{unit}"], out[f"{p}{name}_p90_{unit}"] = quantiles(a)
             out[f"{p}{name}_median_rel"] = median_rel(a, b)
+            out[f"{p}{name}_median_rel_error"] = median_rel_error(a, b)
             det.append(abs(out[f"{p}{name}_median_rel"]))
         out[f"{p}completed"] = sum(r[f"{p}class"] in (SEATED, WEDGED) for r in rows)
         out[f"{p}seated"] = class_share(rows, p, SEATED)
@@ -211,12 +235,12 @@ def columns(n_grasps: int, dual: bool) -> list[str]:
         cols += [f"{p}completed", f"{p}seated", f"{p}wedged"]
         for _, name, unit in DISTRIBUTED:
             cols += [f"{p}{name}_median_{unit}", f"{p}{name}_p10_{unit}", f"{p}{name}_p90_{unit}",
-                     f"{p}{name}_ks_p", f"{p}{name}_median_rel"]
+                     f"{p}{name}_ks_p", f"{p}{name}_median_rel", f"{p}{name}_median_rel_error"]
         for _, name, unit in ANGLES:
             cols += [f"{p}{name}_median_{unit}", f"{p}{name}_ks_p", f"{p}{name}_median_diff_{unit}"]
         for _, name, unit in deterministic_quantities(dual):
             cols += [f"{p}{name}_median_{unit}", f"{p}{name}_p10_{unit}", f"{p}{name}_p90_{unit}",
-                     f"{p}{name}_median_rel"]
+                     f"{p}{name}_median_rel", f"{p}{name}_median_rel_error"]
     return cols + ["max_deterministic_rel", "worst_deterministic", "min_residual_ks_p", "max_residual_median_rel",
                    "deterministic_ok", "residual_ks_ok", "residual_median_ok", "meets_targets"]
 
@@ -319,6 +343,10 @@ def _signed(x) -> str:
     return "–" if math.isnan(x) else f"{100 * x:+.2g} %"
 
 
+def _error(x) -> str:
+    return "" if math.isnan(x) else f"± {100 * x:.2g} %"
+
+
 def ensemble_markdown(scenario, report: EnsembleAccuracyReport) -> str:
     """The study's markdown: its findings, then a table of the targets and one of the values."""
     n_grasps, dual = len(modules_of(scenario)), scenario.kind == "dual_arm"
@@ -331,6 +359,7 @@ def ensemble_markdown(scenario, report: EnsembleAccuracyReport) -> str:
              f"{' and of the robot centroid displacement norm' if dual else ''} within "
              f"{100 * DETERMINISTIC_REL:g} % of the reference's; the residual offset norm's distribution with a "
              f"two-sample KS p-value above {KS_ALPHA:g} and its median within {100 * RESIDUAL_MEDIAN_REL:g} %. "
+             f"Each difference of medians is followed by its sampling error (bootstrap). "
              f"Wall time: the simulation loop's, per member, with the members run in parallel."), "",
             f"- {report.confirmation_text()}", f"- {report.fastest_text()}"]
     if report.interrupted:
@@ -347,14 +376,16 @@ def ensemble_markdown(scenario, report: EnsembleAccuracyReport) -> str:
             cells = [r["setting"], f"{p[:-1] or 'grasp'}",
                      f"{sig(r[f'{p}residual_median_mm'], 3)} [{sig(r[f'{p}residual_p10_mm'], 3)}, "
                      f"{sig(r[f'{p}residual_p90_mm'], 3)}]",
-                     f"{sig(r[f'{p}residual_ks_p'], 2)} / {_signed(r[f'{p}residual_median_rel'])}",
+                     f"{sig(r[f'{p}residual_ks_p'], 2)} / {_signed(r[f'{p}residual_median_rel'])} "
+                     f"{_error(r[f'{p}residual_median_rel_error'])}",
                      f"{_share(r[f'{p}seated'])} / {_share(r[f'{p}wedged'])} "
                      f"({_share(ref[f'{p}seated'])} / {_share(ref[f'{p}wedged'])})" if ref else "–",
                      f"{sig(r[f'{p}roll_median_deg'], 3)} (p {sig(r[f'{p}roll_ks_p'], 2)}), "
                      f"{sig(r[f'{p}pitch_ks_p'], 2)}, {sig(r[f'{p}yaw_ks_p'], 2)}"]
             for _, name, unit in deterministic_quantities(dual):
                 cells.append(f"{sig(r[f'{p}{name}_median_{unit}'], 4)} [{sig(r[f'{p}{name}_p10_{unit}'], 4)}, "
-                             f"{sig(r[f'{p}{name}_p90_{unit}'], 4)}] {_signed(r[f'{p}{name}_median_rel'])}")
+                             f"{sig(r[f'{p}{name}_p90_{unit}'], 4)}] {_signed(r[f'{p}{name}_median_rel'])} "
+                             f"{_error(r[f'{p}{name}_median_rel_error'])}")
             values.append(cells)
     target_table = markdown_table(
         ["setting", "role", "members", "statuses", "wall per member (s)", "deterministic, worst",
