@@ -58,7 +58,61 @@ def _parser() -> argparse.ArgumentParser:
     rep.add_argument("--no-loop", action="store_true", help="play once instead of looping")
     rep.add_argument("--no-browser", action="store_true", help="do not open a browser")
     _study_parser(sub)
+    _sweep_parser(sub)
     return p
+
+
+def _sweep_parser(sub) -> None:
+    from .studies.sweep import PRECISION_MM, WALL_LIMIT_S
+
+    sw = sub.add_parser("sweep", help="run a scenario over variations of its keys on Dask, resumable")
+    sw.add_argument("config", help="scenario YAML")
+    sw.add_argument("--vary", action="append", default=[], metavar="KEY.PATH=LO:HI:N|A,B,C",
+                    help="an axis of a grid: N values from LO to HI, or the values listed (repeatable; "
+                         "module.initial_offset_mm.1 is one component)")
+    sw.add_argument("--spec", metavar="FILE", help="a YAML spec of the points: a grid, a Sobol or Latin "
+                                                    "hypercube sample over ranges, or a list (docs/usage.md)")
+    sw.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE",
+                    help="override a scenario key at every point (repeatable)")
+    sw.add_argument("--out", help="output directory (default results/<scenario name>/sweep); a sweep started "
+                                  "again over it runs only the points it lacks")
+    sw.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="an existing Dask scheduler (default: a "
+                                                                     "local cluster)")
+    sw.add_argument("--workers", type=int, metavar="W", help="local cluster: worker processes (default: one "
+                                                             "per core)")
+    sw.add_argument("--wall-limit", type=float, default=WALL_LIMIT_S, metavar="S",
+                    help=f"wall-time budget of each point (default {WALL_LIMIT_S:g} s)")
+    sw.add_argument("--precision-mm", type=float, default=PRECISION_MM, metavar="MM",
+                    help=f"a complete grasp within it is converged, else off centre (default {PRECISION_MM:g})")
+    sw.add_argument("--no-error-estimate", action="store_true", help="skip each point's companion run")
+    sw.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def _sweep(args) -> int:
+    """`spotsim sweep`: exit 0 when every point has a row (whatever its status), 2 on bad
+    input, 130 if interrupted."""
+    from .scenario import load_scenario
+    from .studies.sweep import run_sweep, spec_of
+
+    path = Path(args.config)
+    try:
+        spec = spec_of(args.vary, args.spec, args.set)
+        out = Path(args.out) if args.out else Path("results") / load_scenario(path, spec.sets).name / "sweep"
+        if args.wall_limit is not None and not args.wall_limit > 0:
+            raise ScenarioError([f"--wall-limit = {args.wall_limit}: must be positive"])
+        report = run_sweep(path, spec, out, scheduler=args.scheduler, workers=args.workers,
+                           wall_limit_s=args.wall_limit, precision_mm=args.precision_mm,
+                           error_estimate=not args.no_error_estimate, progress=not args.quiet)
+    except ScenarioError as e:
+        for line in e.problems:
+            print(line, file=sys.stderr)
+        return 2
+    except SpotsimError as e:
+        print(e, file=sys.stderr)
+        return 2
+    for line in report.lines():
+        print(line)
+    return 130 if report.interrupted else 0
 
 
 def _study_parser(sub) -> None:
@@ -436,6 +490,8 @@ def main(argv=None) -> int:
         return _replay(args.result_dir, args)
     if args.command == "study":
         return _study(args)
+    if args.command == "sweep":
+        return _sweep(args)
     if args.command == "plot":
         from .results import replot
 
