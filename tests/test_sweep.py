@@ -2,6 +2,7 @@
 scheduler with two workers), through a killed worker, an interruption and a killed sweep."""
 
 import json
+import math
 import os
 import signal
 import subprocess
@@ -250,3 +251,57 @@ def test_a_sweep_killed_with_sigkill_resumes_and_keeps_each_point_once(tmp_path)
     import pandas as pd
 
     assert len(pd.read_parquet(out / "sweep.parquet")) == 5
+
+
+# ----------------------------------------------------------------------------- the envelope
+
+
+def fake_run(boundary: dict):
+    """A stand-in for a run: captured (complete, residual 0.01 mm) while each axis' start lies
+    inside its `boundary`, else not captured; no simulation."""
+    def run(point):
+        inside = all(abs(point.values[sw_axis(a)]) < b for a, b in boundary.items())
+        summary = {"grasps": [{"residual_offset_norm_mm": 0.01 if inside else None}]}
+        return {"key": point.key, "index": point.index, "values": point.values, "summary": summary,
+                "status": "completed" if inside else "incomplete", "message": "", "wall_time_s": 0.0,
+                "worker": None, "start_gap_mm": None}
+    return run
+
+
+def sw_axis(a):
+    from spotsim.studies.envelope import AXES
+
+    return AXES[a][0]
+
+
+def test_bisection_finds_a_known_boundary_in_log_runs(tmp_path):
+    """A boundary at x = +3.7 / -2.2 mm and roll 12.3 deg: each ray brackets it within its
+    resolution in 1 + ceil(log2(limit / resolution)) runs; a resumed envelope runs nothing."""
+    from spotsim.studies import envelope as env
+
+    run = fake_run({"x": 3.7, "roll": 12.3})
+    asym = lambda point: run(point) if point.values[sw_axis("x")] >= 0 else fake_run({"x": 2.2})(point)  # noqa: E731
+    report = env.envelope(CASE_I, tmp_path, axes=("x", "roll"), planes=(), run=asym)
+    by = {r.name: r for r in report.rays}
+    for name, true in (("x+", 3.7), ("x-", 2.2), ("roll+", 12.3), ("roll-", 12.3)):
+        r = by[name]
+        assert r.lo < true <= r.hi and r.hi - r.lo <= r.resolution
+        assert len(r.probes) == 1 + math.ceil(math.log2(r.limit / r.resolution))
+        assert r.beyond == sw.NOT_CAPTURED
+    again = env.envelope(CASE_I, tmp_path, axes=("x", "roll"), planes=(), run=asym)
+    assert again.runs == 0 and [r.boundary for r in again.rays] == [r.boundary for r in report.rays]
+    text = (tmp_path / "envelope.md").read_text()
+    assert "| x (mm) | ±10 |" in text
+
+
+def test_a_ray_captured_at_its_limit_has_its_boundary_beyond(tmp_path):
+    from spotsim.studies import envelope as env
+
+    report = env.envelope(CASE_I, tmp_path, axes=("y",), planes=(), run=fake_run({"y": 100.0}))
+    assert all(r.boundary == math.inf and len(r.probes) == 1 for r in report.rays)
+
+
+def test_bad_envelopes_are_refused(tmp_path):
+    assert main(["envelope", str(CASE_I), "--axes", "q", "--out", str(tmp_path)]) == 2
+    assert main(["envelope", str(CASE_I), "--resolution-mm", "0", "--out", str(tmp_path)]) == 2
+    assert main(["envelope", str(CASE_I.parent / "dual_arm_sequential.yaml"), "--out", str(tmp_path)]) == 2
