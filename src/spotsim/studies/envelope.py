@@ -266,7 +266,8 @@ def write_envelope(report: EnvelopeReport) -> None:
         for r in report.rays:
             w.writerow([r.name, *(r.direction.get(a, 0.0) for a in AXES), r.resolution, r.limit, r.lo,
                         "" if r.hi is None else r.hi, r.boundary, r.beyond, len(r.probes)])
-    lines = ["| axis | claimed | measured + | measured − | beyond + / − | runs |", "| --- | --- | --- | --- | --- | --- |"]
+    lines = ["| axis | claimed | measured + | measured − | beyond + / − | runs |",
+             "| --- | --- | --- | --- | --- | --- |"]
     for row in report.axis_table():
         def fmt(s):
             lo, hi = row[f"bracket{s}"]
