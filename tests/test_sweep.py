@@ -305,3 +305,13 @@ def test_bad_envelopes_are_refused(tmp_path):
     assert main(["envelope", str(CASE_I), "--axes", "q", "--out", str(tmp_path)]) == 2
     assert main(["envelope", str(CASE_I), "--resolution-mm", "0", "--out", str(tmp_path)]) == 2
     assert main(["envelope", str(CASE_I.parent / "dual_arm_sequential.yaml"), "--out", str(tmp_path)]) == 2
+
+
+def test_near_the_boundary_the_capture_fraction_is_counted_over_perturbed_starts(tmp_path):
+    """Ensembles at each ray's bracket: the stand-in captures every member inside, none outside."""
+    from spotsim.studies import envelope as env
+
+    report = env.envelope(CASE_I, tmp_path, axes=("x",), planes=(), members=4, run=fake_run({"x": 3.7}))
+    for r in report.rays:
+        assert r.chance[r.lo] == (4, 4) and r.chance[r.hi] == (0, 4)
+    assert "capture_fraction_at_captured" in (tmp_path / "envelope.csv").read_text()

@@ -10,7 +10,11 @@ beyond it), then bisects between its largest captured and smallest uncaptured ma
 until they are `resolution` apart: about log2(limit / resolution) + 1 runs a ray, where a grid
 of the same resolution along the ray takes limit / resolution, and a plane's grid the square.
 
-Bisection takes the captured set along a ray to be an interval from the centre.
+Bisection takes the captured set along a ray to be an interval from the centre. Near the
+boundary the outcome is also a matter of chance (model.md Sec. 9): with `members` > 1, each
+ray's last captured and first uncaptured probes are run again as ensembles of `members`
+starts perturbed as `spotsim run --ensemble` perturbs them, and the capture fraction at each
+is reported (`Ray.chance`).
 
 Probes are sweep points (the same keys, files and resumption: `points.jsonl` in the output
 directory), run on the same Dask cluster.
@@ -71,6 +75,7 @@ class Ray:
     hi: float | None = None
     probes: list = field(default_factory=list)
     beyond: str = ""  # the verdict of the first probe not captured
+    chance: dict = field(default_factory=dict)  # magnitude -> (captured, members) near the boundary
 
     def next_probe(self) -> float | None:
         """The next magnitude to probe, or None when the boundary is found (or lies beyond the
@@ -158,7 +163,7 @@ class EnvelopeReport:
 def envelope(config, out_dir, *, axes=tuple(AXES), planes=PLANES, plane_rays: int = PLANE_RAYS,
              resolution: dict | None = None, limit: dict | None = None, precision_mm: float = PRECISION_MM,
              scheduler: str | None = None, workers: int | None = None, wall_limit_s: float = WALL_LIMIT_S,
-             progress: bool = False, run=None) -> EnvelopeReport:
+             progress: bool = False, members: int = 1, seed: int = 0, run=None) -> EnvelopeReport:
     """Find the capture boundary along every ray (`rays`) of a single-arm scenario, its probes
     run on Dask (or by `run(point) -> record` in this process, for tests). Probes found in
     `out_dir`'s points file are not run again."""
@@ -208,11 +213,52 @@ def envelope(config, out_dir, *, axes=tuple(AXES), planes=PLANES, plane_rays: in
                     settle(ray, p[0], run(p[1]))
         else:
             _on_dask(todo, probe, settle, scheduler, workers, wall_limit_s, str(config), progress, scenario)
+        if members > 1:
+            state["runs"] += _chances(todo, raw0, members, seed, done, out, precision_mm, scheduler, workers,
+                                      wall_limit_s, str(config), progress, run)
     except KeyboardInterrupt:
         interrupted = True
     report = EnvelopeReport(todo, done, state["runs"], interrupted, out)
     write_envelope(report)
     return report
+
+
+def _chances(todo, raw0, members, seed, done, out, precision_mm, scheduler, workers, wall_limit_s, source,
+             progress, run) -> int:
+    """Each ray's bracket run as ensembles: `members` perturbed starts (seeded; member 0 the
+    probe itself) at its last captured and first uncaptured magnitudes, their capture
+    fractions into `Ray.chance`. Returns the runs made."""
+    from .ensemble import member_scenario, perturbed_starts
+    from .sweep import _run_on_dask
+
+    plan = []  # (ray, magnitude, point)
+    for ray in todo:
+        for m in (ray.lo, ray.hi):
+            if m is None or m == 0.0:
+                continue
+            base = probe_point(raw0, ray, m, 0, source)
+            if base.scenario is None:
+                continue
+            for i, start in enumerate(perturbed_starts(base.scenario, members, seed)):
+                s = member_scenario(base.scenario, start)
+                plan.append((ray, m, Point(i, base.values, scenario_key(s), s)))
+    missing = list({p.key: p for _, _, p in plan if p.key not in done}.values())
+    before = len(done)
+    if run is not None:
+        for p in missing:
+            record = run(p)
+            _append(out / POINTS_FILE, record)
+            done[p.key] = record
+    elif missing:
+        _run_on_dask(missing, out, done, scheduler, workers, wall_limit_s, False, progress, None, source,
+                     grow_gap=True)
+    for ray, m, p in plan:
+        rec = done.get(p.key)
+        if rec is None:
+            continue
+        captured, n = ray.chance.get(m, (0, 0))
+        ray.chance[m] = (captured + (verdict(rec["status"], rec.get("summary"), precision_mm) == CONVERGED), n + 1)
+    return len(done) - before
 
 
 def _on_dask(todo, probe, settle, scheduler, workers, wall_limit_s, source, progress, scenario) -> None:
@@ -262,10 +308,11 @@ def write_envelope(report: EnvelopeReport) -> None:
     with (out / "envelope.csv").open("w", newline="") as f:
         w = csv.writer(f)
         w.writerow(["ray", *(f"dir_{a}" for a in AXES), "resolution", "limit", "captured_up_to", "not_captured_from",
-                    "boundary", "beyond", "runs"])
+                    "boundary", "beyond", "runs", "capture_fraction_at_captured", "capture_fraction_at_not_captured"])
         for r in report.rays:
             w.writerow([r.name, *(r.direction.get(a, 0.0) for a in AXES), r.resolution, r.limit, r.lo,
-                        "" if r.hi is None else r.hi, r.boundary, r.beyond, len(r.probes)])
+                        "" if r.hi is None else r.hi, r.boundary, r.beyond, len(r.probes),
+                        *(_fraction(r.chance.get(m)) for m in (r.lo, r.hi))])
     lines = ["| axis | claimed | measured + | measured − | beyond + / − | runs |",
              "| --- | --- | --- | --- | --- | --- |"]
     for row in report.axis_table():
@@ -279,6 +326,10 @@ def write_envelope(report: EnvelopeReport) -> None:
         plot_envelope(report, out / "envelope.png")
     except Exception:  # noqa: BLE001 - a figure never costs the envelope's results
         pass
+
+
+def _fraction(chance) -> str:
+    return "" if not chance else f"{chance[0] / chance[1]:.3g}"
 
 
 def plot_envelope(report: EnvelopeReport, path: Path) -> None:

@@ -614,7 +614,7 @@ def failed_record(point: Point, error: BaseException) -> dict:
 
 
 def _run_on_dask(todo, out, done, scheduler, workers, wall_limit_s, error_estimate, progress, on_record,
-                 source) -> int:
+                 source, grow_gap: bool = False) -> int:
     from distributed import as_completed
     from distributed.client import FutureCancelledError
     from tqdm import tqdm
@@ -626,8 +626,8 @@ def _run_on_dask(todo, out, done, scheduler, workers, wall_limit_s, error_estima
             first = next((p.scenario for p in todo if p.scenario is not None), None)
             if first is not None:
                 client.run(warm_worker, first, source)
-            futures = {client.submit(run_point, p, wall_limit_s, error_estimate, source, key=f"point-{p.key}",
-                                     pure=False): p for p in todo}
+            futures = {client.submit(run_point, p, wall_limit_s, error_estimate, source, grow_gap,
+                                     key=f"point-{p.key}", pure=False): p for p in todo}
             for fut in as_completed(futures):
                 p = futures[fut]
                 try:
