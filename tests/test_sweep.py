@@ -22,7 +22,7 @@ from spotsim.studies import sweep as sw
 #: Three short Case I points, x_a offset -1, 0 and 1 mm (each ~0.2 s and its companion).
 VARY = ["module.initial_offset_mm.0=-1:1:3"]
 #: Columns that depend on the machine or the worker, not on the physics.
-NOT_PHYSICS = ("wall_time_s", "run_wall_time_s", "worker")
+NOT_PHYSICS = ("wall_time_s", "run_wall_time_s", "companion_wall_time_s", "worker")
 
 
 def physics(table):

@@ -410,6 +410,7 @@ def table_row(record: dict, scenario, keys: list[str], precision_mm: float = PRE
     row["start_gap_mm"] = record.get("start_gap_mm")
     row["sim_time_s"] = (summary or {}).get("sim_time_s")
     row["run_wall_time_s"] = (summary or {}).get("wall_time_s")
+    row["companion_wall_time_s"] = (estimate.get("companion") or {}).get("wall_time_s")
     row["wall_time_s"] = record["wall_time_s"]
     row["worker"] = record.get("worker")
     row["message"] = record["message"]
