@@ -85,6 +85,8 @@ def _envelope_parser(sub) -> None:
     en.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="an existing Dask scheduler")
     en.add_argument("--workers", type=int, metavar="W", help="local cluster: worker processes")
     en.add_argument("--wall-limit", type=float, default=WALL_LIMIT_S, metavar="S", help="budget of each probe")
+    en.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE",
+                    help="override a scenario key for every probe (repeatable)")
     en.add_argument("--members", type=int, default=1, metavar="N",
                     help="near each boundary, run its bracket as ensembles of N perturbed starts and report the "
                          "capture fraction (default 1: the bisection alone)")
@@ -109,12 +111,12 @@ def _envelope(args) -> int:
         for name in ("rays", "members", "resolution_mm", "resolution_deg", "limit_mm", "limit_deg", "wall_limit"):
             if not getattr(args, name) > 0:
                 raise ScenarioError([f"--{name.replace('_', '-')} = {getattr(args, name)}: must be positive"])
-        out = Path(args.out) if args.out else Path("results") / load_scenario(path).name / "envelope"
+        out = Path(args.out) if args.out else Path("results") / load_scenario(path, args.set).name / "envelope"
         report = envelope(path, out, axes=axes, planes=planes, plane_rays=args.rays,
                           resolution={"mm": args.resolution_mm, "deg": args.resolution_deg},
                           limit={"mm": args.limit_mm, "deg": args.limit_deg}, precision_mm=args.precision_mm,
                           scheduler=args.scheduler, workers=args.workers, wall_limit_s=args.wall_limit,
-                          progress=not args.quiet, members=args.members, seed=args.seed)
+                          progress=not args.quiet, members=args.members, seed=args.seed, sets=args.set)
     except ScenarioError as e:
         for line in e.problems:
             print(line, file=sys.stderr)

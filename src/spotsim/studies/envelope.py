@@ -163,16 +163,16 @@ class EnvelopeReport:
 def envelope(config, out_dir, *, axes=tuple(AXES), planes=PLANES, plane_rays: int = PLANE_RAYS,
              resolution: dict | None = None, limit: dict | None = None, precision_mm: float = PRECISION_MM,
              scheduler: str | None = None, workers: int | None = None, wall_limit_s: float = WALL_LIMIT_S,
-             progress: bool = False, members: int = 1, seed: int = 0, run=None) -> EnvelopeReport:
-    """Find the capture boundary along every ray (`rays`) of a single-arm scenario, its probes
-    run on Dask (or by `run(point) -> record` in this process, for tests). Probes found in
-    `out_dir`'s points file are not run again."""
+             progress: bool = False, members: int = 1, seed: int = 0, sets=(), run=None) -> EnvelopeReport:
+    """Find the capture boundary along every ray (`rays`) of a single-arm scenario (with the
+    overrides `sets`, as `--set`), its probes run on Dask (or by `run(point) -> record` in
+    this process, for tests). Probes found in `out_dir`'s points file are not run again."""
     import yaml
 
     from .sweep import base_raw
 
     config, out = Path(config), Path(out_dir)
-    raw0 = base_raw(config, [])
+    raw0 = base_raw(config, list(sets))
     scenario = from_dict(raw0, str(config))
     if scenario.kind != "single_arm":
         raise ScenarioError([f"{config}: kind = {scenario.kind}: the envelope is of a single-arm scenario's module"])
@@ -181,7 +181,8 @@ def envelope(config, out_dir, *, axes=tuple(AXES), planes=PLANES, plane_rays: in
     todo = rays(axes, planes, plane_rays, resolution, limit)
     out.mkdir(parents=True, exist_ok=True)
     done = read_records(out / POINTS_FILE)
-    (out / "envelope.yaml").write_text(yaml.safe_dump({"scenario": str(config), "precision_mm": precision_mm,
+    (out / "envelope.yaml").write_text(yaml.safe_dump({"scenario": str(config), "set": list(sets),
+                                                       "precision_mm": precision_mm,
                                                        "rays": [{"name": r.name, "direction": r.direction,
                                                                  "resolution": r.resolution, "limit": r.limit}
                                                                 for r in todo]}, sort_keys=False))
