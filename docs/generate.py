@@ -928,14 +928,14 @@ def envelope_table(r: Results) -> str:
         return f"≥ {num(lo)}" if hi in ("", None) else f"{num(lo)}–{num(hi)}"
 
     by = {x["ray"]: x for x in rays}
-    rows, runs = [], 0
+    rows = []
     for axis, (_, unit) in AXES.items():
         plus, minus = by.get(f"{axis}+"), by.get(f"{axis}-")
         if plus is None or minus is None:
             continue
-        runs += int(plus["runs"]) + int(minus["runs"])
+        runs = int(plus["runs"]) + int(minus["runs"])
         rows.append([f"{axis} ({unit})", f"±{num(CLAIMED[axis])}", bracket(plus), bracket(minus),
-                     f"{plus['beyond'] or '–'} / {minus['beyond'] or '–'}", str(int(plus["runs"]) + int(minus["runs"]))])
+                     f"{plus['beyond'] or '–'} / {minus['beyond'] or '–'}", str(runs)])
     plane = [x for x in rays if x["ray"] not in {f"{a}{s}" for a in AXES for s in "+-"}]
     total = sum(int(x["runs"]) for x in rays)
     text = table(["axis", "claimed (paper Sec. 2.3)", "converged up to, + way", "converged up to, − way",
