@@ -545,8 +545,9 @@ def run_sweep(config, spec: SweepSpec, out_dir, *, scheduler: str | None = None,
         except KeyboardInterrupt:
             interrupted = True
             ran = sum(1 for p in todo if p.key in done)
-    by_key = {p.key: p for p in points}
-    rows = [table_row(done[p.key], by_key[p.key].scenario, keys, precision_mm) for p in points if p.key in done]
+    # a record may come from an earlier sweep over the directory: this spec's index and values
+    rows = [table_row({**done[p.key], "index": p.index, "values": p.values}, p.scenario, keys, precision_mm)
+            for p in points if p.key in done]
     table = write_table(rows, out)
     return SweepReport(table, ran, reused, interrupted, time.perf_counter() - t0, out)
 
