@@ -315,3 +315,20 @@ def test_near_the_boundary_the_capture_fraction_is_counted_over_perturbed_starts
     for r in report.rays:
         assert r.chance[r.lo] == (4, 4) and r.chance[r.hi] == (0, 4)
     assert "capture_fraction_at_captured" in (tmp_path / "envelope.csv").read_text()
+
+
+def test_a_worker_reuses_a_model_across_starts_and_a_compiled_scene_across_contact_parameters():
+    """Models from the worker's caches are those built from scratch."""
+    from spotsim.build.model import build_model
+
+    sw._MODELS.clear()
+    sw._SCENES.clear()
+    a = load_scenario(CASE_I)
+    b = load_scenario(CASE_I, ["module.initial_offset_mm.1=-2.0"])
+    c = load_scenario(CASE_I, ["friction.mu_k=0.3", "contact.restitution=0.6"])
+    ma, mb, mc = sw.model_for(a), sw.model_for(b), sw.model_for(c)
+    assert mb.pin_model is ma.pin_model  # with_start: the Pinocchio model shared
+    assert mc.urdf is ma.urdf and len(sw._SCENES) == 1 and len(sw._MODELS) == 2
+    for cached, scenario in ((mb, b), (mc, c)):
+        fresh = build_model(scenario)
+        assert np.array_equal(cached.q0, fresh.q0) and cached.law == fresh.law

@@ -22,8 +22,9 @@ The output directory holds:
 The points run on `dask.distributed`: a local cluster of one single-threaded worker process per
 core by default, or an existing scheduler (`scheduler=`, `--scheduler tcp://HOST:PORT`). A
 worker keeps the models it built by their scene (the scenario without the modules' starts), so
-points that change only the starts share one model, and loads numba's kernels once. A point
-that raises, diverges or spends its wall-time budget is a row with its status; one whose worker
+points that change only the starts share one model, and points that change no more than the
+contact, friction, drive or integrator parameters share one compiled scene; it loads numba's
+kernels once. A point that raises, diverges or spends its wall-time budget is a row with its status; one whose worker
 died is tried once more (the local cluster's `allowed-failures`; an existing scheduler's own
 setting rules there) and is then recorded as `worker died`.
 """
@@ -272,8 +273,10 @@ def _has_path(tree, path: str) -> bool:
 
 # ----------------------------------------------------------------------------- one point (worker)
 
-#: A worker process's models by scene key, the least recently used first.
+#: A worker process's models by scene key, and compiled scenes (URDF and contact faces) by
+#: the XACRO's inputs, the least recently used first.
 _MODELS: OrderedDict = OrderedDict()
+_SCENES: OrderedDict = OrderedDict()
 
 
 def scene_key(scenario) -> str:
@@ -286,17 +289,34 @@ def scene_key(scenario) -> str:
     return hashlib.sha256(json.dumps(raw, sort_keys=True, default=str).encode()).hexdigest()
 
 
+def _kept(cache: OrderedDict, key, value):
+    cache[key] = value
+    cache.move_to_end(key)
+    while len(cache) > MODELS_KEPT:
+        cache.popitem(last=False)
+    return value
+
+
 def model_for(scenario, source: str = "<sweep>"):
-    """The Model of `scenario`, from the worker's kept models when one shares its scene."""
+    """The Model of `scenario`, from the worker's kept models when one shares its scene (only
+    the starts differ), else built on the compiled scene of one that shares its XACRO's
+    inputs (the geometry and the modules' mass properties: the contact law, friction, drive,
+    integrator may differ), else built whole."""
     from ..build.model import build_model, with_start
+    from ..build.scene import scene_spec
 
     k = scene_key(scenario)
     nominal = _MODELS.get(k)
     if nominal is None:
-        nominal = build_model(scenario, source)
-        _MODELS[k] = nominal
-        while len(_MODELS) > MODELS_KEPT:
-            _MODELS.popitem(last=False)
+        spec = scene_spec(scenario)
+        xacro = hashlib.sha256(json.dumps([str(spec.xacro), sorted(spec.args.items())], default=str).encode()).digest()
+        compiled = _SCENES.get(xacro)
+        if compiled is None:
+            nominal = build_model(scenario, source)
+        else:
+            nominal = build_model(scenario, source, urdf=compiled[0], faces=compiled[1])
+        _kept(_SCENES, xacro, (nominal.urdf, nominal.faces))
+        _kept(_MODELS, k, nominal)
     else:
         _MODELS.move_to_end(k)
     return nominal if nominal.scenario == scenario else with_start(nominal, scenario)
