@@ -24,9 +24,9 @@ core by default, or an existing scheduler (`scheduler=`, `--scheduler tcp://HOST
 worker keeps the models it built by their scene (the scenario without the modules' starts), so
 points that change only the starts share one model, and points that change no more than the
 contact, friction, drive or integrator parameters share one compiled scene; it loads numba's
-kernels once. A point that raises, diverges or spends its wall-time budget is a row with its status; one whose worker
-died is tried once more (the local cluster's `allowed-failures`; an existing scheduler's own
-setting rules there) and is then recorded as `worker died`.
+kernels once. A point that raises, diverges or spends its wall-time budget is a row with its
+status; one whose worker died is tried once more (the local cluster's `allowed-failures`; an
+existing scheduler's own setting rules there) and is then recorded as `worker died`.
 """
 
 from __future__ import annotations
