@@ -3,6 +3,7 @@
     python docs/generate.py results   # rerun what the tables need: writes docs/results/
     python docs/generate.py ensembles # rerun only the ensemble accuracy studies (~22 min)
     python docs/generate.py drives    # rerun only the drive comparison's ensembles (~10 min)
+    python docs/generate.py envelope  # rerun only Case I's capture envelope (a few minutes)
     python docs/generate.py runs      # rerun all but the ensemble studies (~2 min)
     python docs/generate.py pages     # docs/scenarios.md, and the generated blocks of README.md,
                                       # docs/usage.md, docs/validation.md and docs/performance.md,
@@ -363,6 +364,33 @@ def drives_command(only: tuple[str, ...] = tuple(DRIVES)) -> None:
                              "commit": git("rev-parse", "--short", "HEAD")})
     outs = {d["out"] for d in done}
     meta["studies"] = [s for s in meta["studies"] if s.get("out") not in outs] + done
+    write_json(RESULTS / "meta.json", meta)
+    print(f"results in {RESULTS.relative_to(ROOT)}; now run `{GENERATE} pages`")
+
+
+#: The capture envelope of the default geometry: Case I's scenario, every axis and plane.
+ENVELOPE = ("single_arm_case_I", ["config/single_arm_case_I.yaml", "--workers", "2", "--quiet"])
+
+
+def envelope_command() -> None:
+    """Rerun Case I's capture envelope into docs/results/envelope/CASE/ (envelope.csv and .md;
+    its probes' points.jsonl is not kept), stamped in docs/results/meta.json."""
+    meta = json.loads((RESULTS / "meta.json").read_text())
+    name, args = ENVELOPE
+    out = RESULTS / "envelope" / name
+    shutil.rmtree(out, ignore_errors=True)
+    cmd = [sys.executable, "-m", "spotsim.cli", "envelope", *args, "--out", str(out.relative_to(ROOT))]
+    t0 = time.perf_counter()
+    proc = subprocess.run(cmd, cwd=ROOT, stdout=subprocess.DEVNULL)
+    wall = time.perf_counter() - t0
+    if proc.returncode != 0:
+        raise SystemExit(f"{' '.join(cmd)} exited {proc.returncode}")
+    for f in ("points.jsonl", "envelope.png"):
+        (out / f).unlink(missing_ok=True)
+    print(f"  envelope {name}: {wall:.0f} s", flush=True)
+    done = {"command": "spotsim envelope " + " ".join(args), "wall_time_s": round(wall, 1), "exit_code": 0,
+            "out": str(out.relative_to(ROOT)), "commit": git("rev-parse", "--short", "HEAD")}
+    meta["studies"] = [s for s in meta["studies"] if s.get("out") != done["out"]] + [done]
     write_json(RESULTS / "meta.json", meta)
     print(f"results in {RESULTS.relative_to(ROOT)}; now run `{GENERATE} pages`")
 
@@ -886,6 +914,40 @@ def drives_table(r: Results) -> str:
             "load at every integration step instead of every `control_period_s`.\n\n" + table(header, rows))
 
 
+def envelope_table(r: Results) -> str:
+    """Claimed against measured capture tolerance per axis, and the planes' rays, from
+    docs/results/envelope/ (`spotsim envelope`)."""
+    path = RESULTS / "envelope" / ENVELOPE[0] / "envelope.csv"
+    if not path.exists():
+        return f"Not measured yet: run `{GENERATE} envelope`, then `{GENERATE} pages`."
+    from spotsim.studies.envelope import AXES, CLAIMED
+
+    rays = read_csv(path)
+    def bracket(x):
+        lo, hi = x["captured_up_to"], x["not_captured_from"]
+        return f"≥ {num(lo)}" if hi in ("", None) else f"{num(lo)}–{num(hi)}"
+
+    by = {x["ray"]: x for x in rays}
+    rows = []
+    for axis, (_, unit) in AXES.items():
+        plus, minus = by.get(f"{axis}+"), by.get(f"{axis}-")
+        if plus is None or minus is None:
+            continue
+        runs = int(plus["runs"]) + int(minus["runs"])
+        rows.append([f"{axis} ({unit})", f"±{num(CLAIMED[axis])}", bracket(plus), bracket(minus),
+                     f"{plus['beyond'] or '–'} / {minus['beyond'] or '–'}", str(runs)])
+    plane = [x for x in rays if x["ray"] not in {f"{a}{s}" for a in AXES for s in "+-"}]
+    total = sum(int(x["runs"]) for x in rays)
+    text = table(["axis", "claimed (paper Sec. 2.3)", "converged up to, + way", "converged up to, − way",
+                  "beyond: + / −", "runs"], rows)
+    if plane:
+        text += "\n\n" + table(["ray", "converged up to", "beyond", "runs"],
+                                 [[x["ray"], bracket(x), x["beyond"] or "–", str(int(x["runs"]))] for x in plane])
+    made = next((x for x in r.meta["studies"] if x.get("out", "").startswith("docs/results/envelope/")), {})
+    return (text + f"\n\n{total} runs in all, made by `{GENERATE} envelope` (`{made.get('command', '')}`) at "
+            f"commit `{made.get('commit', '?')}` in {num(made.get('wall_time_s'))} s.")
+
+
 def _short_message(text: str) -> str:
     """A rejection's reason without the file and key prefix."""
     return re.sub(r"^\S+\.yaml: [\w.\[\]]+ = [^:]*: ", "", text)
@@ -1127,6 +1189,7 @@ RENDER = {
     "drives-table": drives_table,
     "estimate-table": estimate_table,
     "stability-table": stability_table,
+    "envelope-table": envelope_table,
     "cli-usage": cli_usage,
     "grids": grids,
     "speed": speed,
@@ -1160,10 +1223,10 @@ def pages_command() -> None:
 
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("command", choices=["results", "runs", "ensembles", "drives", "pages"])
+    parser.add_argument("command", choices=["results", "runs", "ensembles", "drives", "envelope", "pages"])
     args = parser.parse_args(argv)
     {"results": results_command, "runs": runs_command, "ensembles": ensembles_command, "drives": drives_command,
-     "pages": pages_command}[args.command]()
+     "envelope": envelope_command, "pages": pages_command}[args.command]()
 
 
 if __name__ == "__main__":

@@ -31,7 +31,8 @@ def numbers(text):
 
 def test_every_example_is_tested():
     """Each example has a test below that runs it (and opens with a docstring saying how)."""
-    tested = {"case_I_from_python.py", "compare_searches.py", "dual_arm_sequential.py", "sphere_layers.py"}
+    tested = {"case_I_from_python.py", "compare_searches.py", "design_sweep.py", "dual_arm_sequential.py",
+              "sphere_layers.py"}
     assert {p.name for p in EXAMPLES} == tested
     for path in EXAMPLES:
         assert path.read_text().startswith('"""'), path.name
@@ -89,3 +90,18 @@ def test_dual_arm_example_prints_the_runs_displacements_and_forces():
     force, torque = numbers(lines[at + 2])[:2]
     assert force == pytest.approx(first["peak_force_norm_N"], abs=PRINTED["N2"])
     assert torque == pytest.approx(first["peak_torque_norm_Nm"], abs=PRINTED["N2"])
+
+
+def test_design_sweep_example_prints_each_geometrys_envelope_and_run(tmp_path):
+    """The quick design sweep: a line per geometry whose y_a bracket is one resolution wide, and
+    whose Case I run is the scenario's with that geometry simulated here."""
+    out = run(ROOT / "examples" / "design_sweep.py", "--quick", "--out", str(tmp_path), "--workers", "2")
+    lines = [x for x in out.splitlines() if x.startswith("bevel ")]
+    assert len(lines) == 2 and (tmp_path / "design_sweep.png").exists()
+    for line, bevel in zip(lines, (40, 50), strict=True):
+        lo, hi = (float(m) for m in re.search(r"y\+ captured to ([\d.]+) \(not at ([\d.]+)\)", line).groups())
+        assert hi - lo == pytest.approx(1.0)
+        sets = [f"geometry.{k}={v}" for k, v in (("upper_bevel_deg", bevel), ("lower_bevel_deg", bevel))]
+        grasp = spotsim.simulate(spotsim.load_scenario(CASE_I, sets)).grasp
+        residual = float(re.search(r"residual ([\d.]+) mm", line).group(1))
+        assert residual == pytest.approx(grasp["residual_offset_norm_mm"], abs=PRINTED["mm4"])

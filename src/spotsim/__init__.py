@@ -12,6 +12,7 @@ from .results import write_results
 from .scenario import Scenario, from_dict, load_scenario, replace, to_yaml
 from .sim.run import Result, simulate
 from .studies.ensemble import EnsembleResult, ensemble
+from .studies.sweep import sweep
 from .version import __version__
 
 __all__ = [
@@ -29,6 +30,7 @@ __all__ = [
     "load_scenario",
     "replace",
     "simulate",
+    "sweep",
     "to_yaml",
     "write_results",
     "__version__",

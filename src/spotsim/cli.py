@@ -58,7 +58,128 @@ def _parser() -> argparse.ArgumentParser:
     rep.add_argument("--no-loop", action="store_true", help="play once instead of looping")
     rep.add_argument("--no-browser", action="store_true", help="do not open a browser")
     _study_parser(sub)
+    _sweep_parser(sub)
+    _envelope_parser(sub)
     return p
+
+
+def _envelope_parser(sub) -> None:
+    from .studies.envelope import AXES, LIMIT, PLANE_RAYS, RESOLUTION
+    from .studies.sweep import PRECISION_MM, WALL_LIMIT_S
+
+    en = sub.add_parser("envelope", help="the capture envelope of a single-arm scenario, by bisection along rays")
+    en.add_argument("config", help="scenario YAML (single arm)")
+    en.add_argument("--axes", default=",".join(AXES), help=f"axes searched both ways (default {','.join(AXES)})")
+    en.add_argument("--planes", default="x-y,roll-yaw", help="planes fanned with rays, or 'none' (default "
+                                                             "x-y,roll-yaw)")
+    en.add_argument("--rays", type=int, default=PLANE_RAYS, metavar="N",
+                    help=f"rays around each plane (default {PLANE_RAYS})")
+    en.add_argument("--resolution-mm", type=float, default=RESOLUTION["mm"], metavar="MM")
+    en.add_argument("--resolution-deg", type=float, default=RESOLUTION["deg"], metavar="DEG")
+    en.add_argument("--limit-mm", type=float, default=LIMIT["mm"], metavar="MM", help="farthest offset searched")
+    en.add_argument("--limit-deg", type=float, default=LIMIT["deg"], metavar="DEG", help="farthest angle searched")
+    en.add_argument("--precision-mm", type=float, default=PRECISION_MM, metavar="MM",
+                    help=f"a grasp within it is captured (converged; default {PRECISION_MM:g})")
+    en.add_argument("--out", help="output directory (default results/<scenario name>/envelope); started again "
+                                  "over it, probes already run are not run again")
+    en.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="an existing Dask scheduler")
+    en.add_argument("--workers", type=int, metavar="W", help="local cluster: worker processes")
+    en.add_argument("--wall-limit", type=float, default=WALL_LIMIT_S, metavar="S", help="budget of each probe")
+    en.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE",
+                    help="override a scenario key for every probe (repeatable)")
+    en.add_argument("--members", type=int, default=1, metavar="N",
+                    help="near each boundary, run its bracket as ensembles of N perturbed starts and report the "
+                         "capture fraction (default 1: the bisection alone)")
+    en.add_argument("--seed", type=int, default=0, metavar="S", help="with --members: the perturbations' seed")
+    en.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def _envelope(args) -> int:
+    """`spotsim envelope`: exit 0, 2 on bad input, 130 if interrupted."""
+    from .scenario import load_scenario
+    from .studies.envelope import AXES, PLANES, envelope
+
+    path = Path(args.config)
+    try:
+        axes = tuple(a for a in args.axes.split(",") if a) if args.axes != "none" else ()
+        bad = [a for a in axes if a not in AXES]
+        planes = () if args.planes == "none" else tuple(tuple(p.split("-")) for p in args.planes.split(","))
+        bad += [f"-".join(p) for p in planes if p not in PLANES]
+        if bad:
+            raise ScenarioError([f"--axes/--planes: {', '.join(bad)}: not one of {', '.join(AXES)} / "
+                                 f"{', '.join('-'.join(p) for p in PLANES)}"])
+        for name in ("rays", "members", "resolution_mm", "resolution_deg", "limit_mm", "limit_deg", "wall_limit"):
+            if not getattr(args, name) > 0:
+                raise ScenarioError([f"--{name.replace('_', '-')} = {getattr(args, name)}: must be positive"])
+        out = Path(args.out) if args.out else Path("results") / load_scenario(path, args.set).name / "envelope"
+        report = envelope(path, out, axes=axes, planes=planes, plane_rays=args.rays,
+                          resolution={"mm": args.resolution_mm, "deg": args.resolution_deg},
+                          limit={"mm": args.limit_mm, "deg": args.limit_deg}, precision_mm=args.precision_mm,
+                          scheduler=args.scheduler, workers=args.workers, wall_limit_s=args.wall_limit,
+                          progress=not args.quiet, members=args.members, seed=args.seed, sets=args.set)
+    except ScenarioError as e:
+        for line in e.problems:
+            print(line, file=sys.stderr)
+        return 2
+    except SpotsimError as e:
+        print(e, file=sys.stderr)
+        return 2
+    print((out / "envelope.md").read_text(), end="")
+    print(f"{report.runs} probes run now, {sum(len(r.probes) for r in report.rays)} in all; results in {out}")
+    return 130 if report.interrupted else 0
+
+
+def _sweep_parser(sub) -> None:
+    from .studies.sweep import PRECISION_MM, WALL_LIMIT_S
+
+    sw = sub.add_parser("sweep", help="run a scenario over variations of its keys on Dask, resumable")
+    sw.add_argument("config", help="scenario YAML")
+    sw.add_argument("--vary", action="append", default=[], metavar="KEY.PATH=LO:HI:N|A,B,C",
+                    help="an axis of a grid: N values from LO to HI, or the values listed (repeatable; "
+                         "module.initial_offset_mm.1 is one component)")
+    sw.add_argument("--spec", metavar="FILE", help="a YAML spec of the points: a grid, a Sobol or Latin "
+                                                    "hypercube sample over ranges, or a list (docs/usage.md)")
+    sw.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE",
+                    help="override a scenario key at every point (repeatable)")
+    sw.add_argument("--out", help="output directory (default results/<scenario name>/sweep); a sweep started "
+                                  "again over it runs only the points it lacks")
+    sw.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="an existing Dask scheduler (default: a "
+                                                                     "local cluster)")
+    sw.add_argument("--workers", type=int, metavar="W", help="local cluster: worker processes (default: one "
+                                                             "per core)")
+    sw.add_argument("--wall-limit", type=float, default=WALL_LIMIT_S, metavar="S",
+                    help=f"wall-time budget of each point (default {WALL_LIMIT_S:g} s)")
+    sw.add_argument("--precision-mm", type=float, default=PRECISION_MM, metavar="MM",
+                    help=f"a complete grasp within it is converged, else off centre (default {PRECISION_MM:g})")
+    sw.add_argument("--no-error-estimate", action="store_true", help="skip each point's companion run")
+    sw.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def _sweep(args) -> int:
+    """`spotsim sweep`: exit 0 when every point has a row (whatever its status), 2 on bad
+    input, 130 if interrupted."""
+    from .scenario import load_scenario
+    from .studies.sweep import run_sweep, spec_of
+
+    path = Path(args.config)
+    try:
+        spec = spec_of(args.vary, args.spec, args.set)
+        out = Path(args.out) if args.out else Path("results") / load_scenario(path, spec.sets).name / "sweep"
+        if args.wall_limit is not None and not args.wall_limit > 0:
+            raise ScenarioError([f"--wall-limit = {args.wall_limit}: must be positive"])
+        report = run_sweep(path, spec, out, scheduler=args.scheduler, workers=args.workers,
+                           wall_limit_s=args.wall_limit, precision_mm=args.precision_mm,
+                           error_estimate=not args.no_error_estimate, progress=not args.quiet)
+    except ScenarioError as e:
+        for line in e.problems:
+            print(line, file=sys.stderr)
+        return 2
+    except SpotsimError as e:
+        print(e, file=sys.stderr)
+        return 2
+    for line in report.lines():
+        print(line)
+    return 130 if report.interrupted else 0
 
 
 def _study_parser(sub) -> None:
@@ -436,6 +557,10 @@ def main(argv=None) -> int:
         return _replay(args.result_dir, args)
     if args.command == "study":
         return _study(args)
+    if args.command == "sweep":
+        return _sweep(args)
+    if args.command == "envelope":
+        return _envelope(args)
     if args.command == "plot":
         from .results import replot
 

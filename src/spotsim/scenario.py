@@ -361,17 +361,59 @@ def set_override(raw: dict, assignment: str) -> None:
     if "=" not in assignment:
         raise ScenarioError([f"--set: {assignment}: must read key.path=value"])
     path, text = assignment.split("=", 1)
-    parts = path.strip().split(".")
     try:
         value = yaml.safe_load(text)
     except yaml.YAMLError as e:
         raise ScenarioError([f"--set: {path} = {text}: not a YAML value ({e})"]) from e
+    set_value(raw, path.strip(), value)
+
+
+def set_value(raw: dict, path: str, value) -> None:
+    """Set `key.path` of a raw scenario mapping to `value`, making the mappings on the way; a
+    whole-number part after a sequence picks one of its items (`module.initial_offset_mm.1`,
+    the second component; the sequence is taken from the scenario's defaults when the
+    mapping does not have it)."""
+    parts = path.split(".")
     node = raw
-    for part in parts[:-1]:
-        if not isinstance(node.get(part), dict):
+    for i, part in enumerate(parts[:-1]):
+        nxt = parts[i + 1]
+        if isinstance(node, list):
+            node = node[_index(node, part, parts[:i + 1], path)]
+            continue
+        if nxt.isdigit() and not isinstance(node.get(part), list):
+            node[part] = _default_sequence(raw, parts[:i + 1], path)
+        elif not nxt.isdigit() and not isinstance(node.get(part), dict):
             node[part] = {}
         node = node[part]
-    node[parts[-1]] = value
+    if isinstance(node, list):
+        node[_index(node, parts[-1], parts, path)] = value
+    else:
+        node[parts[-1]] = value
+
+
+def _index(sequence: list, part: str, parts: list[str], path: str) -> int:
+    if not part.isdigit() or int(part) >= len(sequence):
+        raise ScenarioError([f"--set: {path}: {'.'.join(parts[:-1])} has {len(sequence)} items: "
+                             f"{part} is not one of 0..{len(sequence) - 1}"])
+    return int(part)
+
+
+def _default_sequence(raw: dict, parts: list[str], path: str) -> list:
+    """The default of the sequence at key path `parts` for a scenario of raw's kind, as a list."""
+    kind = raw.get("kind", "single_arm") if isinstance(raw, dict) else "single_arm"
+    cls, value = SCENARIO_KINDS.get(kind, Scenario), None
+    for part in parts:
+        fields = {f.name: f for f in dataclasses.fields(cls)} if cls is not None else {}
+        if part not in fields:
+            raise ScenarioError([f"--set: {path}: {'.'.join(parts)} is not a sequence of the scenario"])
+        f = fields[part]
+        value = (f.default if f.default is not dataclasses.MISSING else
+                 f.default_factory() if f.default_factory is not dataclasses.MISSING else None)
+        hint = typing.get_type_hints(cls).get(part)
+        cls = hint if isinstance(hint, type) and dataclasses.is_dataclass(hint) else None
+    if not isinstance(value, (tuple, list)):
+        raise ScenarioError([f"--set: {path}: {'.'.join(parts)} is not a sequence of the scenario"])
+    return list(value)
 
 
 def from_dict(raw: Any, where: str = "<scenario>"):

@@ -32,6 +32,8 @@ from .step import step
 from .weld import weld
 
 COMPLETED, INCOMPLETE, DIVERGED, INTERRUPTED = "completed", "incomplete", "diverged", "interrupted"
+#: A run stopped when its wall-time budget was spent (`simulate(wall_limit_s=...)`): no verdict.
+WALL_LIMIT = "wall limit"
 
 
 @dataclass
@@ -55,11 +57,13 @@ class Result:
 
 
 def simulate(scenario, *, model: Model | None = None, progress: bool = False,
-             source: str = "<scenario>") -> Result:
+             source: str = "<scenario>", wall_limit_s: float | None = None) -> Result:
     """Run a scenario's grasps in sequence to completion, divergence or time-out.
 
     Never raises on physics. progress: a progress bar (tqdm) on stderr. Ctrl-C ends the run
-    with status `interrupted` and keeps what was recorded.
+    with status `interrupted` and keeps what was recorded; so does a wall-time budget spent
+    (`wall_limit_s`, checked each time the compiled loop returns, about every 0.25 s
+    simulated), with status `wall limit`.
     """
     model = model or build_model(scenario, source)
     check_start(model, source)
@@ -106,6 +110,9 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
                 welds.append(out.t)
             elif out.elapsed > model.sim.completion.phase_timeout:
                 message = _why_incomplete(model, data, "the phase time-out")
+                break
+            if wall_limit_s is not None and time.perf_counter() - wall0 > wall_limit_s:
+                status, message = WALL_LIMIT, f"wall-time budget of {wall_limit_s:g} s spent at t = {out.t:.4f} s"
                 break
         else:
             message = _why_incomplete(model, data, "the time-out")

@@ -18,9 +18,10 @@ import numpy as np
 
 from ..errors import SpotsimError
 from ..scenario import modules_of, replace, to_dict
+from ..sim.run import WALL_LIMIT
 
 #: What a run ended as, besides the simulator's statuses.
-WALL_LIMIT, REJECTED, EXCEPTION = "wall limit", "rejected", "exception"
+REJECTED, EXCEPTION = "rejected", "exception"
 #: Statuses whose record may be compared with the reference's.
 COMPARABLE = ("completed", "incomplete")
 

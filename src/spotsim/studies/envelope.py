@@ -1,0 +1,380 @@
+"""The capture envelope of a single-arm scenario's mechanism, by bisection along rays.
+
+From the centred start, a ray is a direction in the module's misalignment (x_a, y_a in mm;
+roll, pitch, yaw in degrees): along each axis both ways, and fanned over the (x_a, y_a) plane
+and the roll-yaw plane. Along a ray the start is moved by a magnitude r; a probe at r runs the
+scenario from there (`sweep.run_point`, the start gap grown where the misaligned start would
+interpenetrate) and is captured when its verdict is `converged` (every grasp complete within
+the precision). Each ray probes its search limit first (a ray captured there has its boundary
+beyond it), then bisects between its largest captured and smallest uncaptured magnitudes
+until they are `resolution` apart: about log2(limit / resolution) + 1 runs a ray, where a grid
+of the same resolution along the ray takes limit / resolution, and a plane's grid the square.
+
+Bisection takes the captured set along a ray to be an interval from the centre. Near the
+boundary the outcome is also a matter of chance (model.md Sec. 9): with `members` > 1, each
+ray's last captured and first uncaptured probes are run again as ensembles of `members`
+starts perturbed as `spotsim run --ensemble` perturbs them, and the capture fraction at each
+is reported (`Ray.chance`).
+
+Probes are sweep points (the same keys, files and resumption: `points.jsonl` in the output
+directory), run on the same Dask cluster.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import ScenarioError
+from ..scenario import TOLERANCE_DEG, TOLERANCE_OFFSET_MM, from_dict, set_value, to_dict
+from .sweep import (
+    CONVERGED,
+    POINTS_FILE,
+    PRECISION_MM,
+    WALL_LIMIT_S,
+    Point,
+    _append,
+    dask_client,
+    failed_record,
+    read_records,
+    run_point,
+    scenario_key,
+    verdict,
+    warm_worker,
+)
+
+#: The misalignment axes: key path of the module's start, unit.
+AXES = {"x": ("module.initial_offset_mm.0", "mm"), "y": ("module.initial_offset_mm.1", "mm"),
+        "roll": ("module.initial_rpy_deg.0", "deg"), "pitch": ("module.initial_rpy_deg.1", "deg"),
+        "yaw": ("module.initial_rpy_deg.2", "deg")}
+#: The paper's claimed tolerance per axis (Sec. 2.3).
+CLAIMED = {"x": TOLERANCE_OFFSET_MM, "y": TOLERANCE_OFFSET_MM, **TOLERANCE_DEG}
+#: Default resolution and search limit per unit.
+RESOLUTION = {"mm": 0.25, "deg": 1.0}
+LIMIT = {"mm": 16.0, "deg": 90.0}
+#: The planes fanned with rays, and how many rays each (evenly spaced around the full circle).
+PLANES = (("x", "y"), ("roll", "yaw"))
+PLANE_RAYS = 12
+
+
+@dataclass
+class Ray:
+    """A ray from the centred start: unit components per axis (in the axes' own units), its
+    resolution and search limit, and what its probes found: the largest captured magnitude
+    `lo` and the smallest not captured `hi` (None: none yet), each probe as (magnitude,
+    verdict, key)."""
+
+    name: str
+    direction: dict
+    resolution: float
+    limit: float
+    lo: float = 0.0
+    hi: float | None = None
+    probes: list = field(default_factory=list)
+    beyond: str = ""  # the verdict of the first probe not captured
+    chance: dict = field(default_factory=dict)  # magnitude -> (captured, members) near the boundary
+
+    def next_probe(self) -> float | None:
+        """The next magnitude to probe, or None when the boundary is found (or lies beyond the
+        limit)."""
+        if not self.probes:
+            return self.limit
+        if self.hi is None or self.hi - self.lo <= self.resolution:
+            return None
+        return 0.5 * (self.lo + self.hi)
+
+    def record(self, magnitude: float, verdict_: str, key: str) -> None:
+        self.probes.append((magnitude, verdict_, key))
+        if verdict_ == CONVERGED:
+            self.lo = max(self.lo, magnitude)
+        elif self.hi is None or magnitude < self.hi:
+            self.hi, self.beyond = magnitude, verdict_
+
+    @property
+    def boundary(self) -> float:
+        """The capture boundary's magnitude: the midpoint of its bracket (inf beyond the limit)."""
+        return math.inf if self.hi is None else 0.5 * (self.lo + self.hi)
+
+
+def rays(axes=tuple(AXES), planes=PLANES, plane_rays: int = PLANE_RAYS, resolution=None, limit=None) -> list[Ray]:
+    """Both ways along each axis, and `plane_rays` evenly around each plane (the axes' own
+    rays among them are not repeated). In a plane of two units (none here) the magnitude is
+    in the first's."""
+    res, lim = {**RESOLUTION, **(resolution or {})}, {**LIMIT, **(limit or {})}
+    out = []
+    for a in axes:
+        unit = AXES[a][1]
+        for sign, tag in ((1.0, "+"), (-1.0, "-")):
+            out.append(Ray(f"{a}{tag}", {a: sign}, res[unit], lim[unit]))
+    for a, b in planes:
+        unit = AXES[a][1]
+        for k in range(plane_rays):
+            angle = 2 * math.pi * k / plane_rays
+            c, s = math.cos(angle), math.sin(angle)
+            if abs(c) < 1e-12 or abs(s) < 1e-12:
+                continue  # on an axis: that axis' own ray
+            out.append(Ray(f"{a}-{b} {math.degrees(angle):.0f} deg", {a: c, b: s}, res[unit], lim[unit]))
+    return out
+
+
+def probe_point(raw0: dict, ray: Ray, magnitude: float, index: int, where: str) -> Point:
+    """The sweep point of a probe: the module started `magnitude` along `ray` from centred."""
+    import json
+
+    raw = json.loads(json.dumps(raw0))
+    values = {}
+    for axis in AXES:
+        values[AXES[axis][0]] = round(magnitude * ray.direction.get(axis, 0.0), 9) + 0.0
+    for k, v in values.items():
+        set_value(raw, k, v)
+    try:
+        scenario = from_dict(raw, where)
+    except ScenarioError as e:
+        return Point(index, values, f"invalid-{ray.name}-{magnitude}", problems=list(e.problems))
+    return Point(index, values, scenario_key(scenario), scenario)
+
+
+@dataclass
+class EnvelopeReport:
+    rays: list
+    records: dict
+    runs: int
+    interrupted: bool
+    out: Path
+
+    def axis_table(self) -> list[dict]:
+        """Claimed against measured per axis: each way's boundary and its bracket."""
+        rows = []
+        for axis, (_, unit) in AXES.items():
+            ways = {r.name[-1]: r for r in self.rays if r.name in (f"{axis}+", f"{axis}-")}
+            if not ways:
+                continue
+            rows.append({"axis": axis, "unit": unit, "claimed": CLAIMED[axis],
+                         **{f"boundary{s}": ways[s].boundary for s in ways},
+                         **{f"bracket{s}": (ways[s].lo, ways[s].hi) for s in ways},
+                         **{f"beyond{s}": ways[s].beyond for s in ways},
+                         "runs": sum(len(r.probes) for r in ways.values())})
+        return rows
+
+
+def envelope(config, out_dir, *, axes=tuple(AXES), planes=PLANES, plane_rays: int = PLANE_RAYS,
+             resolution: dict | None = None, limit: dict | None = None, precision_mm: float = PRECISION_MM,
+             scheduler: str | None = None, workers: int | None = None, wall_limit_s: float = WALL_LIMIT_S,
+             progress: bool = False, members: int = 1, seed: int = 0, sets=(), run=None) -> EnvelopeReport:
+    """Find the capture boundary along every ray (`rays`) of a single-arm scenario (with the
+    overrides `sets`, as `--set`), its probes run on Dask (or by `run(point) -> record` in
+    this process, for tests). Probes found in `out_dir`'s points file are not run again."""
+    import yaml
+
+    from .sweep import base_raw
+
+    config, out = Path(config), Path(out_dir)
+    raw0 = base_raw(config, list(sets))
+    scenario = from_dict(raw0, str(config))
+    if scenario.kind != "single_arm":
+        raise ScenarioError([f"{config}: kind = {scenario.kind}: the envelope is of a single-arm scenario's module"])
+    for axis in AXES:  # the centred start: the rays' origin
+        set_value(raw0, AXES[axis][0], 0.0)
+    todo = rays(axes, planes, plane_rays, resolution, limit)
+    out.mkdir(parents=True, exist_ok=True)
+    done = read_records(out / POINTS_FILE)
+    (out / "envelope.yaml").write_text(yaml.safe_dump({"scenario": str(config), "set": list(sets),
+                                                       "precision_mm": precision_mm,
+                                                       "rays": [{"name": r.name, "direction": r.direction,
+                                                                 "resolution": r.resolution, "limit": r.limit}
+                                                                for r in todo]}, sort_keys=False))
+    state = {"runs": 0, "index": 0}
+
+    def settle(ray, magnitude, record):
+        if record["key"] not in done:
+            _append(out / POINTS_FILE, record)
+            done[record["key"]] = record
+            state["runs"] += 1
+        ray.record(magnitude, verdict(record["status"], record.get("summary"), precision_mm), record["key"])
+
+    def probe(ray):
+        """The ray's next probe as a point, settling those already done; None when finished."""
+        while (m := ray.next_probe()) is not None:
+            state["index"] += 1
+            point = probe_point(raw0, ray, m, state["index"], f"{config} [{ray.name} {m:g}]")
+            if point.key in done:
+                settle(ray, m, done[point.key])
+                continue
+            return m, point
+        return None
+
+    interrupted = False
+    try:
+        if run is not None:
+            for ray in todo:
+                while (p := probe(ray)) is not None:
+                    settle(ray, p[0], run(p[1]))
+        else:
+            _on_dask(todo, probe, settle, scheduler, workers, wall_limit_s, str(config), progress, scenario)
+        if members > 1:
+            state["runs"] += _chances(todo, raw0, members, seed, done, out, precision_mm, scheduler, workers,
+                                      wall_limit_s, str(config), progress, run)
+    except KeyboardInterrupt:
+        interrupted = True
+    report = EnvelopeReport(todo, done, state["runs"], interrupted, out)
+    write_envelope(report)
+    return report
+
+
+def _chances(todo, raw0, members, seed, done, out, precision_mm, scheduler, workers, wall_limit_s, source,
+             progress, run) -> int:
+    """Each ray's bracket run as ensembles: `members` perturbed starts (seeded; member 0 the
+    probe itself) at its last captured and first uncaptured magnitudes, their capture
+    fractions into `Ray.chance`. Returns the runs made."""
+    from .ensemble import member_scenario, perturbed_starts
+    from .sweep import _run_on_dask
+
+    plan = []  # (ray, magnitude, point)
+    for ray in todo:
+        for m in (ray.lo, ray.hi):
+            if m is None or m == 0.0:
+                continue
+            base = probe_point(raw0, ray, m, 0, source)
+            if base.scenario is None:
+                continue
+            for i, start in enumerate(perturbed_starts(base.scenario, members, seed)):
+                s = member_scenario(base.scenario, start)
+                plan.append((ray, m, Point(i, base.values, scenario_key(s), s)))
+    missing = list({p.key: p for _, _, p in plan if p.key not in done}.values())
+    before = len(done)
+    if run is not None:
+        for p in missing:
+            record = run(p)
+            _append(out / POINTS_FILE, record)
+            done[p.key] = record
+    elif missing:
+        _run_on_dask(missing, out, done, scheduler, workers, wall_limit_s, False, progress, None, source,
+                     grow_gap=True)
+    for ray, m, p in plan:
+        rec = done.get(p.key)
+        if rec is None:
+            continue
+        captured, n = ray.chance.get(m, (0, 0))
+        ray.chance[m] = (captured + (verdict(rec["status"], rec.get("summary"), precision_mm) == CONVERGED), n + 1)
+    return len(done) - before
+
+
+def _on_dask(todo, probe, settle, scheduler, workers, wall_limit_s, source, progress, scenario) -> None:
+    from distributed import as_completed
+    from tqdm import tqdm
+
+    with dask_client(scheduler, workers) as client:
+        client.run(warm_worker, scenario, source)
+        pending = as_completed()
+        where = {}
+        bar = tqdm(unit="probe", disable=not progress)
+
+        def submit(ray):
+            nxt = probe(ray)
+            if nxt is not None:
+                m, point = nxt
+                fut = client.submit(run_point, point, wall_limit_s, False, source, True, key=f"probe-{point.key}",
+                                    pure=False)
+                where[fut.key] = (ray, m, point)
+                pending.add(fut)
+
+        try:
+            for ray in todo:
+                submit(ray)
+            for fut in pending:
+                ray, m, point = where.pop(fut.key)
+                try:
+                    record = fut.result()
+                except Exception as e:  # noqa: BLE001 - the probe's failure, not the envelope's
+                    record = failed_record(point, e)
+                settle(ray, m, record)
+                bar.update(1)
+                submit(ray)
+        finally:
+            bar.close()
+
+
+# ----------------------------------------------------------------------------- output
+
+
+def write_envelope(report: EnvelopeReport) -> None:
+    """envelope.csv (a row per ray: its direction, bracket, boundary and runs), envelope.md
+    (claimed against measured per axis) and envelope.png."""
+    import csv
+
+    out = report.out
+    with (out / "envelope.csv").open("w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["ray", *(f"dir_{a}" for a in AXES), "resolution", "limit", "captured_up_to", "not_captured_from",
+                    "boundary", "beyond", "runs", "capture_fraction_at_captured", "capture_fraction_at_not_captured"])
+        for r in report.rays:
+            w.writerow([r.name, *(r.direction.get(a, 0.0) for a in AXES), r.resolution, r.limit, r.lo,
+                        "" if r.hi is None else r.hi, r.boundary, r.beyond, len(r.probes),
+                        *(_fraction(r.chance.get(m)) for m in (r.lo, r.hi))])
+    lines = ["| axis | claimed | measured + | measured − | beyond + / − | runs |",
+             "| --- | --- | --- | --- | --- | --- |"]
+    for row in report.axis_table():
+        def fmt(s):
+            lo, hi = row[f"bracket{s}"]
+            return f"≥ {lo:g}" if hi is None else f"{lo:g}–{hi:g}"
+        lines.append(f"| {row['axis']} ({row['unit']}) | ±{row['claimed']:g} | {fmt('+')} | {fmt('-')} | "
+                     f"{row['beyond+'] or '–'} / {row['beyond-'] or '–'} | {row['runs']} |")
+    (out / "envelope.md").write_text("\n".join(lines) + "\n")
+    try:
+        plot_envelope(report, out / "envelope.png")
+    except Exception:  # noqa: BLE001 - a figure never costs the envelope's results
+        pass
+
+
+def _fraction(chance) -> str:
+    return "" if not chance else f"{chance[0] / chance[1]:.3g}"
+
+
+def plot_envelope(report: EnvelopeReport, path: Path) -> None:
+    """The planes in the paper's Fig. 16 style: every probe coloured by its residual offset
+    (converged) or marked by its verdict, the boundary joined around the rays, and the
+    claimed tolerance rectangle."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    planes = [(a, b) for a, b in PLANES if any(set(r.direction) == {a, b} for r in report.rays)]
+    fig, axes = plt.subplots(1, max(len(planes), 1), figsize=(6.2 * max(len(planes), 1), 5.6), squeeze=False)
+    for ax, (a, b) in zip(axes[0], planes):
+        ua, ub = AXES[a][1], AXES[b][1]
+        xs, ys, res = [], [], []
+        bx, by = [], []
+        for r in report.rays:
+            if not set(r.direction) <= {a, b}:
+                continue
+            da, db = r.direction.get(a, 0.0), r.direction.get(b, 0.0)
+            for m, v, key in r.probes:
+                rec = report.records.get(key, {})
+                s = rec.get("summary") or {}
+                g = (s.get("grasps") or [{}])[0]
+                xs.append(m * da)
+                ys.append(m * db)
+                res.append(g.get("residual_offset_norm_mm") if v == CONVERGED else np.nan)
+                if v != CONVERGED:
+                    ax.plot(m * da, m * db, "x", color="0.3", ms=5)
+            edge = min(r.boundary, r.limit)
+            bx.append((math.atan2(db, da), edge * da, edge * db))
+        sc = ax.scatter(xs, ys, c=res, cmap="viridis", s=18, zorder=3)
+        if bx:
+            bx.sort()
+            ax.plot([p[1] for p in bx] + [bx[0][1]], [p[2] for p in bx] + [bx[0][2]], "-", color="C3",
+                    label="capture boundary")
+        ca, cb = CLAIMED[a], CLAIMED[b]
+        ax.plot([-ca, ca, ca, -ca, -ca], [-cb, -cb, cb, cb, -cb], "--", color="k", label="claimed tolerance")
+        ax.set_xlabel(f"{a} ({ua})")
+        ax.set_ylabel(f"{b} ({ub})")
+        ax.set_title(f"capture envelope, {a}-{b} (x: not converged)")
+        ax.legend(loc="upper right", fontsize=8)
+        fig.colorbar(sc, ax=ax, label="residual offset (mm)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

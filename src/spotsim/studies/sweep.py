@@ -1,0 +1,669 @@
+"""Sweeps: one scenario run over many variations of its keys, on Dask, resumable.
+
+A sweep's points each set some scenario keys, by the key paths `--set` takes (a whole-number
+part picks a sequence's item: `module.initial_offset_mm.1`):
+
+- a grid over axes, `--vary key=LO:HI:N` (N values from LO to HI) or `--vary key=A,B,C`;
+- a space-filling sample over ranges, Sobol or Latin hypercube (`scipy.stats.qmc`), seeded;
+- a list of points;
+
+the last two from a spec file (`--spec`, `SweepSpec.from_yaml`). Every point is a full run at
+the scenario's accuracy, with its error estimate (`studies.estimate`) unless turned off.
+
+The output directory holds:
+
+- `spec.yaml`: the resolved spec (the scenario file, the fixed overrides and every point);
+- `points.jsonl`: a line per finished point, appended and flushed when it ends. A point's key
+  is a hash of its resolved scenario: a sweep started again over the same directory runs only
+  the points without a line, and a line cut short by a kill is dropped when read;
+- `sweep.parquet` and `sweep.csv`: the table, a row per point in the spec's order, written to
+  a temporary file and renamed over the last one when the sweep ends or stops.
+
+The points run on `dask.distributed`: a local cluster of one single-threaded worker process per
+core by default, or an existing scheduler (`scheduler=`, `--scheduler tcp://HOST:PORT`). A
+worker keeps the models it built by their scene (the scenario without the modules' starts), so
+points that change only the starts share one model, and points that change no more than the
+contact, friction, drive or integrator parameters share one compiled scene; it loads numba's
+kernels once. A point that raises, diverges or spends its wall-time budget is a row with its
+status; one whose worker died is tried once more (the local cluster's `allowed-failures`; an
+existing scheduler's own setting rules there) and is then recorded as `worker died`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import itertools
+import json
+import math
+import os
+import time
+import traceback
+from collections import Counter, OrderedDict
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from ..errors import ScenarioError, SpotsimError
+from ..scenario import from_dict, modules_of, set_value, to_dict, to_yaml
+from ..sim.run import WALL_LIMIT
+from .ensemble import Member, Start, grasp_prefix, member_row
+
+#: What a point ended as besides the run's own statuses (completed, incomplete, diverged,
+#: wall limit): its scenario was invalid or its start interpenetrates; the run raised; its
+#: worker died twice.
+REJECTED, EXCEPTION, WORKER_DIED = "rejected", "exception", "worker died"
+#: Verdicts of a point that ran: every grasp seated within the precision; complete but off
+#: centre; a grasp not complete by the time-out; diverged. Points that did not run have none.
+CONVERGED, OFF_CENTRE, NOT_CAPTURED, DIVERGED = "converged", "off centre", "not captured", "diverged"
+#: The residual offset norm under which a complete grasp counts as converged, mm.
+PRECISION_MM = 0.3
+#: A point's default wall-time budget (its run and its error estimate's companion), s.
+WALL_LIMIT_S = 600.0
+#: Models a worker keeps, the least recently used dropped first.
+MODELS_KEPT = 8
+SAMPLERS = ("sobol", "lhs")
+POINTS_FILE, SPEC_FILE, TABLE = "points.jsonl", "spec.yaml", "sweep"
+
+
+# ----------------------------------------------------------------------------- the spec
+
+
+def _number(text: str):
+    """A value of `--vary`: YAML's reading, with numbers in exponent form (1e-6) as numbers."""
+    value = yaml.safe_load(text)
+    if isinstance(value, str):
+        try:
+            return float(value)
+        except ValueError:
+            return value
+    return value
+
+
+def parse_range(text: str, where: str) -> list:
+    """`LO:HI:N` as N values from LO to HI (N >= 2; N = 1 gives LO), or `A,B,C` as a list."""
+    if ":" in text:
+        parts = text.split(":")
+        try:
+            lo, hi, n = float(_number(parts[0])), float(_number(parts[1])), int(parts[2])
+        except (ValueError, TypeError, IndexError):
+            raise ScenarioError([f"{where} = {text}: must read LO:HI:N (N a whole number) or A,B,C"]) from None
+        if len(parts) != 3 or n < 1 or not (math.isfinite(lo) and math.isfinite(hi)):
+            raise ScenarioError([f"{where} = {text}: must read LO:HI:N with finite LO, HI and N >= 1"])
+        return [float(x) for x in np.linspace(lo, hi, n)]
+    values = [_number(x) for x in text.split(",")]
+    if any(v is None for v in values):
+        raise ScenarioError([f"{where} = {text}: an empty value"])
+    return values
+
+
+def parse_vary(assignment: str) -> tuple[str, list]:
+    """`key.path=LO:HI:N` or `key.path=A,B,C` as (key path, values)."""
+    if "=" not in assignment:
+        raise ScenarioError([f"--vary: {assignment}: must read key.path=LO:HI:N or key.path=A,B,C"])
+    path, text = (x.strip() for x in assignment.split("=", 1))
+    return path, parse_range(text, f"--vary: {path}")
+
+
+@dataclass
+class SweepSpec:
+    """The points of a sweep: a grid over `grid` (key path -> values), a `sample` (method,
+    n, seed, ranges: key path -> [lo, hi]), or listed `points` (each key path -> value); `sets`
+    are overrides every point takes (`--set`)."""
+
+    grid: dict = field(default_factory=dict)
+    sample: dict | None = None
+    points: list = field(default_factory=list)
+    sets: list = field(default_factory=list)
+
+    @classmethod
+    def from_yaml(cls, path: str | Path) -> SweepSpec:
+        """A spec file: `set` (a list of key.path=value), then one of `grid` (key path: a list
+        or 'LO:HI:N'), `sample` (method: sobol or lhs, n, seed, ranges: key path: [lo, hi]) or
+        `points` (a list of mappings of key path to value)."""
+        path = Path(path)
+        try:
+            raw = yaml.safe_load(path.read_text())
+        except OSError as e:
+            raise ScenarioError([f"{path}: cannot read: {e.strerror}"]) from e
+        except yaml.YAMLError as e:
+            raise ScenarioError([f"{path}: not valid YAML: {e}"]) from e
+        if not isinstance(raw, dict):
+            raise ScenarioError([f"{path}: a sweep spec is a mapping of set, grid, sample or points"])
+        unknown = sorted(set(raw) - {"set", "grid", "sample", "points", "scenario"})
+        if unknown:
+            raise ScenarioError([f"{path}: {k}: not a key of a sweep spec (set, grid, sample, points)"
+                                 for k in unknown])
+        grid = {}
+        for k, v in (raw.get("grid") or {}).items():
+            grid[str(k)] = parse_range(str(v), f"{path}: grid.{k}") if isinstance(v, str) else (
+                list(v) if isinstance(v, list) else [v])
+        spec = cls(grid=grid, sample=raw.get("sample"), points=list(raw.get("points") or []),
+                   sets=[str(s) for s in raw.get("set") or []])
+        spec.check(str(path))
+        return spec
+
+    def check(self, where: str = "sweep") -> None:
+        problems = []
+        kinds = [bool(self.grid), self.sample is not None, bool(self.points)]
+        if sum(kinds) != 1:
+            problems.append(f"{where}: give exactly one of a grid (--vary), a sample or a list of points")
+        if self.sample is not None:
+            s = self.sample
+            if not isinstance(s, dict) or s.get("method") not in SAMPLERS:
+                problems.append(f"{where}: sample.method = {s.get('method') if isinstance(s, dict) else s}: "
+                                f"must be one of {', '.join(SAMPLERS)}")
+            elif not isinstance(s.get("n"), int) or s["n"] < 1:
+                problems.append(f"{where}: sample.n = {s.get('n')}: must be a whole number >= 1")
+            elif not isinstance(s.get("ranges"), dict) or not s["ranges"]:
+                problems.append(f"{where}: sample.ranges: must map key paths to [lo, hi]")
+            else:
+                for k, r in s["ranges"].items():
+                    ok = isinstance(r, list) and len(r) == 2 and all(isinstance(x, (int, float)) for x in r)
+                    if not ok or not r[0] < r[1]:
+                        problems.append(f"{where}: sample.ranges.{k} = {r}: must be [lo, hi] with lo < hi")
+        for i, p in enumerate(self.points):
+            if not isinstance(p, dict) or not p:
+                problems.append(f"{where}: points[{i}]: must map key paths to values")
+        for k, values in self.grid.items():
+            if not values:
+                problems.append(f"{where}: grid.{k}: no values")
+        if problems:
+            raise ScenarioError(problems)
+
+    def keys(self) -> list[str]:
+        if self.grid:
+            return list(self.grid)
+        if self.sample is not None:
+            return [str(k) for k in self.sample["ranges"]]
+        return list(dict.fromkeys(str(k) for p in self.points for k in p))
+
+    def resolved(self) -> list[dict]:
+        """Every point as key path -> value, in the spec's order."""
+        self.check()
+        if self.grid:
+            keys = list(self.grid)
+            return [dict(zip(keys, combo, strict=True)) for combo in itertools.product(*self.grid.values())]
+        if self.sample is not None:
+            from scipy.stats import qmc
+
+            s, keys = self.sample, self.keys()
+            seed = int(s.get("seed", 0))
+            if s["method"] == "sobol":
+                sampler = qmc.Sobol(len(keys), scramble=True, seed=seed)
+                n = s["n"]
+                unit = sampler.random_base2(int(math.log2(n))) if n & (n - 1) == 0 else sampler.random(n)
+            else:
+                unit = qmc.LatinHypercube(len(keys), seed=seed).random(s["n"])
+            lo = [float(s["ranges"][k][0]) for k in keys]
+            hi = [float(s["ranges"][k][1]) for k in keys]
+            return [dict(zip(keys, map(float, row), strict=True)) for row in qmc.scale(unit, lo, hi)]
+        return [{str(k): v for k, v in p.items()} for p in self.points]
+
+
+# ----------------------------------------------------------------------------- points
+
+
+@dataclass
+class Point:
+    """One point of a sweep: its index in the spec, its values by key path, its key (a hash of
+    its resolved scenario) and the scenario, or the problems that made it invalid."""
+
+    index: int
+    values: dict
+    key: str
+    scenario: object = None
+    problems: list = field(default_factory=list)
+
+
+def scenario_key(scenario) -> str:
+    """A short hash of a resolved scenario: equal scenarios, equal keys."""
+    return hashlib.sha256(to_yaml(scenario).encode()).hexdigest()[:16]
+
+
+def base_raw(config: Path, sets: list[str]) -> dict:
+    """The raw mapping of a scenario file with the fixed overrides applied, validated once."""
+    from ..scenario import load_scenario, set_override
+
+    load_scenario(config, sets)  # every problem of the file and its overrides, reported at once
+    raw = yaml.safe_load(Path(config).read_text()) or {}
+    for s in sets:
+        set_override(raw, s)
+    return raw
+
+
+def resolve_points(config: Path, spec: SweepSpec) -> list[Point]:
+    """The spec's points as scenarios. A key path the scenario does not have is an error of the
+    whole sweep (ScenarioError); a value its rule refuses makes that point invalid."""
+    raw0 = base_raw(config, spec.sets)
+    base = from_dict(raw0, str(config))
+    known = to_dict(base)
+    bad = [k for k in spec.keys() if not _has_path(known, k)]
+    if bad:
+        raise ScenarioError([f"{config}: {k}: not a key path of the scenario" for k in bad])
+    points = []
+    for i, values in enumerate(spec.resolved()):
+        raw = json.loads(json.dumps(raw0))  # a deep copy of plain data
+        try:
+            for k, v in values.items():
+                set_value(raw, k, v)
+            scenario = from_dict(raw, f"{config} [point {i}]")
+        except ScenarioError as e:
+            points.append(Point(i, values, hashlib.sha256(repr(sorted(values.items())).encode()).hexdigest()[:16],
+                                problems=list(e.problems)))
+            continue
+        points.append(Point(i, values, scenario_key(scenario), scenario))
+    return points
+
+
+def _has_path(tree, path: str) -> bool:
+    node = tree
+    for part in path.split("."):
+        if isinstance(node, list) and part.isdigit() and int(part) < len(node):
+            node = node[int(part)]
+        elif isinstance(node, dict) and part in node:
+            node = node[part]
+        else:
+            return False
+    return True
+
+
+# ----------------------------------------------------------------------------- one point (worker)
+
+#: A worker process's models by scene key, and compiled scenes (URDF and contact faces) by
+#: the XACRO's inputs, the least recently used first.
+_MODELS: OrderedDict = OrderedDict()
+_SCENES: OrderedDict = OrderedDict()
+
+
+def scene_key(scenario) -> str:
+    """A hash of the scenario without the modules' starts: scenarios with equal scene keys
+    share a model (`build.model.with_start`)."""
+    raw = to_dict(scenario)
+    for k in modules_of(scenario):
+        raw[k].pop("initial_offset_mm", None)
+        raw[k].pop("initial_rpy_deg", None)
+    return hashlib.sha256(json.dumps(raw, sort_keys=True, default=str).encode()).hexdigest()
+
+
+def _kept(cache: OrderedDict, key, value):
+    cache[key] = value
+    cache.move_to_end(key)
+    while len(cache) > MODELS_KEPT:
+        cache.popitem(last=False)
+    return value
+
+
+def model_for(scenario, source: str = "<sweep>"):
+    """The Model of `scenario`, from the worker's kept models when one shares its scene (only
+    the starts differ), else built on the compiled scene of one that shares its XACRO's
+    inputs (the geometry and the modules' mass properties: the contact law, friction, drive,
+    integrator may differ), else built whole."""
+    from ..build.model import build_model, with_start
+    from ..build.scene import scene_spec
+
+    k = scene_key(scenario)
+    nominal = _MODELS.get(k)
+    if nominal is None:
+        spec = scene_spec(scenario)
+        xacro = hashlib.sha256(json.dumps([str(spec.xacro), sorted(spec.args.items())], default=str).encode()).digest()
+        compiled = _SCENES.get(xacro)
+        if compiled is None:
+            nominal = build_model(scenario, source)
+        else:
+            nominal = build_model(scenario, source, urdf=compiled[0], faces=compiled[1])
+        _kept(_SCENES, xacro, (nominal.urdf, nominal.faces))
+        _kept(_MODELS, k, nominal)
+    else:
+        _MODELS.move_to_end(k)
+    return nominal if nominal.scenario == scenario else with_start(nominal, scenario)
+
+
+def warm_worker(scenario, source: str = "<sweep>") -> int:
+    """Build the scenario's model and load the compiled loop into this worker (once per
+    worker, before its first point): the points' wall times are then their runs'."""
+    from ..sim.data import make_data
+    from ..sim.run import compile_loop
+
+    model = model_for(scenario, source)
+    compile_loop(model, make_data(model))
+    return os.getpid()
+
+
+def run_point(point: Point, wall_limit_s: float | None = WALL_LIMIT_S, with_estimate: bool = True,
+              source: str = "<sweep>", grow_gap: bool = False) -> dict:
+    """Run one point (in a worker) and return its record: status, message, wall time, the
+    run's summary and its error estimate. Never raises: a problem is the point's status.
+    grow_gap: a start whose fingers and groove interpenetrate runs with the start gap that
+    clears it (`stability.clearing_gap`, the time the longer travel takes added), recorded as
+    `start_gap_mm`."""
+    from ..sim.run import check_start, initial_contacts, simulate
+    from .estimate import companion, error_estimate
+    from .stability import clearing_gap, widened
+
+    t0 = time.perf_counter()
+    record = {"key": point.key, "index": point.index, "values": point.values, "summary": None,
+              "worker": os.getpid(), "start_gap_mm": None}
+    if point.scenario is None:
+        return {**record, "status": REJECTED, "message": "; ".join(point.problems), "wall_time_s": 0.0}
+    stage, scenario = "the start", point.scenario
+    try:
+        model = model_for(scenario, source)
+        if grow_gap and initial_contacts(model):
+            gap = clearing_gap(scenario)
+            if gap is not None:
+                scenario = widened(scenario, gap)
+                model = model_for(scenario, source)
+                record["start_gap_mm"] = gap
+        check_start(model, source)
+        stage = "simulate"
+        result = simulate(scenario, model=model, source=source, wall_limit_s=wall_limit_s)
+        summary = result.summary
+        other = companion(scenario) if with_estimate and summary["status"] != WALL_LIMIT else None
+        if other is not None:
+            stage = "the error estimate's companion"
+            left = None if wall_limit_s is None else max(wall_limit_s - (time.perf_counter() - t0), 1e-3)
+            comp = simulate(other, model=model_for(other, source), source=source, wall_limit_s=left)
+            summary["error_estimate"] = error_estimate(summary, comp.summary)
+    except SpotsimError as e:
+        if stage != "the start":
+            raise
+        return {**record, "status": REJECTED, "message": str(e).replace("\n", "; "),
+                "wall_time_s": time.perf_counter() - t0}
+    except Exception as e:  # the point reports it; the sweep goes on
+        where = traceback.extract_tb(e.__traceback__)[-1]
+        return {**record, "status": EXCEPTION, "wall_time_s": time.perf_counter() - t0,
+                "message": f"{type(e).__name__} raised by {stage}: {e} ({Path(where.filename).name}:{where.lineno})"}
+    return {**record, "status": summary["status"], "message": summary["message"], "summary": summary,
+            "wall_time_s": time.perf_counter() - t0}
+
+
+# ----------------------------------------------------------------------------- rows
+
+
+def verdict(status: str, summary: dict | None, precision_mm: float = PRECISION_MM) -> str:
+    """A point's verdict (module docstring): '' when it did not run to a verdict."""
+    if status == "diverged":
+        return DIVERGED
+    if summary is None or status not in ("completed", "incomplete"):
+        return ""
+    if status == "incomplete":
+        return NOT_CAPTURED
+    worst = max(g["residual_offset_norm_mm"] for g in summary["grasps"])
+    return CONVERGED if worst <= precision_mm else OFF_CENTRE
+
+
+#: Error estimate columns: summary quantity -> column suffix.
+ESTIMATED = {"residual_offset_norm_mm": "residual_error_mm", "peak_force_norm_N": "peak_force_error_N",
+             "peak_torque_norm_Nm": "peak_torque_error_Nm",
+             "robot_centroid_displacement_norm_mm": "centroid_displacement_error_mm"}
+
+
+def table_row(record: dict, scenario, keys: list[str], precision_mm: float = PRECISION_MM) -> dict:
+    """The table's row of a point's record: its key, its values, status, verdict and message,
+    each grasp's results (`ensemble.member_row`: class, residual, peaks, completion, the robot
+    centroid's displacement) and error estimates, and its wall time."""
+    summary = record.get("summary")
+    row = {"key": record["key"], "index": record["index"]}
+    row.update({k: record["values"].get(k) for k in keys})
+    row["status"] = record["status"]
+    row["verdict"] = verdict(record["status"], summary, precision_mm)
+    n_grasps = len(modules_of(scenario)) if scenario is not None else 1
+    dual = scenario is not None and scenario.kind == "dual_arm"
+    start = Start({k: tuple(m.initial_offset_mm) for k, m in modules_of(scenario).items()},
+                  {k: tuple(m.initial_rpy_deg) for k, m in modules_of(scenario).items()}) if scenario else Start({}, {})
+    member = Member(record["index"], start, record["status"], record["message"], summary)
+    results = member_row(member, n_grasps, centroid=dual)
+    for k in ("member", "status", "message", "wall_time_s", "sim_time_s"):
+        results.pop(k, None)
+    row.update(results)
+    estimate = (summary or {}).get("error_estimate", {})
+    for g in range(n_grasps):
+        p = grasp_prefix(g, n_grasps)
+        entry = estimate["grasps"][g] if estimate.get("grasps") else {}
+        for q, name in ESTIMATED.items():
+            if q != "robot_centroid_displacement_norm_mm" or dual:
+                row[f"{p}{name}"] = (entry.get(q) or {}).get("estimate")
+    row["start_gap_mm"] = record.get("start_gap_mm")
+    row["sim_time_s"] = (summary or {}).get("sim_time_s")
+    row["run_wall_time_s"] = (summary or {}).get("wall_time_s")
+    row["companion_wall_time_s"] = (estimate.get("companion") or {}).get("wall_time_s")
+    row["wall_time_s"] = record["wall_time_s"]
+    row["worker"] = record.get("worker")
+    row["message"] = record["message"]
+    return row
+
+
+def read_records(path: Path) -> dict[str, dict]:
+    """The finished points of a points file by key; a line cut short (a kill while writing)
+    or not a record is dropped, and the file truncated to its last whole line."""
+    out: dict = {}
+    if not path.exists():
+        return out
+    data = path.read_bytes()
+    good = 0
+    for line in data.splitlines(keepends=True):
+        if not line.endswith(b"\n"):
+            break
+        try:
+            rec = json.loads(line)
+        except ValueError:
+            break
+        if not isinstance(rec, dict) or "key" not in rec or "status" not in rec:
+            break
+        out.setdefault(rec["key"], rec)
+        good += len(line)
+    if good < len(data):
+        with path.open("r+b") as f:
+            f.truncate(good)
+    return out
+
+
+def _append(path: Path, record: dict) -> None:
+    line = json.dumps(record, default=_plain) + "\n"
+    with path.open("a") as f:
+        f.write(line)
+        f.flush()
+        os.fsync(f.fileno())
+
+
+def _plain(x):
+    if isinstance(x, np.generic):
+        return x.item()
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    if dataclasses.is_dataclass(x):
+        return dataclasses.asdict(x)
+    return str(x)
+
+
+def write_table(rows: list[dict], out: Path):
+    """rows as sweep.parquet and sweep.csv, each written whole to a temporary file and then
+    renamed over the last one; returns the DataFrame."""
+    import pandas as pd
+
+    frame = pd.DataFrame(rows)
+    for suffix, write in ((".parquet", lambda p: frame.to_parquet(p, index=False)),
+                          (".csv", lambda p: frame.to_csv(p, index=False))):
+        final = out / f"{TABLE}{suffix}"
+        tmp = out / f".{TABLE}{suffix}.tmp"
+        write(tmp)
+        os.replace(tmp, final)
+    return frame
+
+
+# ----------------------------------------------------------------------------- the sweep
+
+
+@dataclass
+class SweepReport:
+    """What a sweep did: its table (a pandas DataFrame, a row per point), how many points it
+    ran now and found done before, whether it was interrupted, and its wall time."""
+
+    table: object
+    ran: int
+    reused: int
+    interrupted: bool
+    wall_time_s: float
+    out: Path
+
+    def counts(self) -> Counter:
+        t = self.table
+        return Counter((t["verdict"].where(t["verdict"] != "", t["status"])).tolist()) if len(t) else Counter()
+
+    def failed(self) -> int:
+        t = self.table
+        return int((t["verdict"] == "").sum()) if len(t) else 0
+
+    def lines(self) -> list[str]:
+        t = self.table
+        out = [f"{len(t)} points ({self.ran} run now, {self.reused} from before) in {self.wall_time_s:.1f} s"
+               + (": interrupted" if self.interrupted else "")]
+        out.append("  " + ", ".join(f"{k}: {v}" for k, v in sorted(self.counts().items())))
+        if self.failed():
+            out.append(f"  {self.failed()} without a verdict (rejected, exception, wall limit, worker died)")
+        if len(t):
+            slow = t.sort_values("wall_time_s", ascending=False).head(3)
+            out.append("  slowest: " + "; ".join(f"point {int(r['index'])} {r['wall_time_s']:.2f} s"
+                                                 for _, r in slow.iterrows()))
+        out.append(f"  table in {self.out / (TABLE + '.parquet')} and .csv")
+        return out
+
+
+def run_sweep(config, spec: SweepSpec, out_dir, *, scheduler: str | None = None, workers: int | None = None,
+          wall_limit_s: float | None = WALL_LIMIT_S, precision_mm: float = PRECISION_MM,
+          error_estimate: bool = True, progress: bool = False, on_record=None) -> SweepReport:
+    """Run `config` (a scenario file) at every point of `spec` not already in `out_dir`, on a
+    Dask cluster (a local one of `workers` processes, by default one per core, or the
+    scheduler at `scheduler`), and write the table. Ctrl-C stops it and keeps every finished
+    point (report.interrupted); a point's own failure never stops it. `on_record(record)` is
+    called after each point is written (tests use it to interrupt or kill)."""
+    config, out = Path(config), Path(out_dir)
+    points = resolve_points(config, spec)
+    keys = spec.keys()
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        (out / SPEC_FILE).write_text(yaml.safe_dump(
+            {"scenario": str(config), "set": spec.sets, "keys": keys,
+             "points": [{"key": p.key, **{k: _plain(v) if isinstance(v, np.generic) else v
+                                          for k, v in p.values.items()}} for p in points]}, sort_keys=False))
+    except OSError as e:
+        raise SpotsimError(f"{out}: cannot write the sweep's files: {e.strerror}") from e
+    done = read_records(out / POINTS_FILE)
+    todo = list({p.key: p for p in points if p.key not in done}.values())
+    reused = len({p.key for p in points} & set(done))
+    t0 = time.perf_counter()
+    interrupted = False
+    ran = 0
+    if todo:
+        try:
+            ran = _run_on_dask(todo, out, done, scheduler, workers, wall_limit_s, error_estimate, progress,
+                               on_record, str(config))
+        except KeyboardInterrupt:
+            interrupted = True
+            ran = sum(1 for p in todo if p.key in done)
+    # a record may come from an earlier sweep over the directory: this spec's index and values
+    rows = [table_row({**done[p.key], "index": p.index, "values": p.values}, p.scenario, keys, precision_mm)
+            for p in points if p.key in done]
+    table = write_table(rows, out)
+    return SweepReport(table, ran, reused, interrupted, time.perf_counter() - t0, out)
+
+
+def spec_of(vary=(), spec: SweepSpec | str | Path | None = None, sets=()) -> SweepSpec:
+    """A SweepSpec from `--vary` assignments (a grid), a spec (or its file), and `--set`s."""
+    if spec is not None and not isinstance(spec, SweepSpec):
+        spec = SweepSpec.from_yaml(spec)
+    if spec is not None and vary:
+        raise ScenarioError(["give the points either by --vary or by a spec file, not both"])
+    if spec is None:
+        spec = SweepSpec(grid=dict(parse_vary(v) for v in vary))
+    spec = dataclasses.replace(spec, sets=[*spec.sets, *sets])
+    spec.check()
+    return spec
+
+
+def sweep(config, *, vary=(), spec: SweepSpec | str | Path | None = None, sets=(), out_dir=None, **options):
+    """Run a sweep from Python as `spotsim sweep` does (`run_sweep`'s options) and return its
+    table as a pandas DataFrame, a row per point; `table.attrs['report']` is the SweepReport.
+    out_dir: by default results/<scenario name>/sweep."""
+    from ..scenario import load_scenario
+
+    spec = spec_of(vary, spec, sets)
+    if out_dir is None:
+        out_dir = Path("results") / load_scenario(config, spec.sets).name / "sweep"
+    report = run_sweep(config, spec, out_dir, **options)
+    table = report.table
+    table.attrs["report"] = report
+    return table
+
+
+@contextmanager
+def dask_client(scheduler: str | None = None, workers: int | None = None):
+    """A dask.distributed Client: of the scheduler at `scheduler`, or of a local cluster of
+    `workers` single-threaded worker processes (default one per core) whose scheduler lets a
+    task's worker die once (`allowed-failures`) before it gives up on the task."""
+    import dask
+    from distributed import Client, LocalCluster
+
+    cluster = None
+    with dask.config.set({"distributed.scheduler.allowed-failures": 1}):
+        if scheduler:
+            try:
+                client = Client(scheduler, timeout="30s")
+            except OSError as e:
+                raise SpotsimError(f"--scheduler {scheduler}: cannot connect: {e}") from e
+        else:
+            cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
+                                   dashboard_address=None, silence_logs=40)
+            client = Client(cluster)
+    try:
+        yield client
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+def failed_record(point: Point, error: BaseException) -> dict:
+    """The record of a point whose task failed on Dask: its worker died (twice) or it could
+    not run there."""
+    return {"key": point.key, "index": point.index, "values": point.values, "summary": None, "worker": None,
+            "start_gap_mm": None, "status": WORKER_DIED if type(error).__name__ == "KilledWorker" else EXCEPTION,
+            "message": f"{type(error).__name__}: {error}", "wall_time_s": math.nan}
+
+
+def _run_on_dask(todo, out, done, scheduler, workers, wall_limit_s, error_estimate, progress, on_record,
+                 source, grow_gap: bool = False) -> int:
+    from distributed import as_completed
+    from distributed.client import FutureCancelledError
+    from tqdm import tqdm
+
+    ran = 0
+    with dask_client(scheduler, workers) as client:
+        bar = tqdm(total=len(todo), unit="point", disable=not progress, smoothing=0.1)
+        try:
+            first = next((p.scenario for p in todo if p.scenario is not None), None)
+            if first is not None:
+                client.run(warm_worker, first, source)
+            futures = {client.submit(run_point, p, wall_limit_s, error_estimate, source, grow_gap,
+                                     key=f"point-{p.key}", pure=False): p for p in todo}
+            for fut in as_completed(futures):
+                p = futures[fut]
+                try:
+                    record = fut.result()
+                except FutureCancelledError:
+                    continue
+                except Exception as e:  # noqa: BLE001 - the point's failure, not the sweep's
+                    record = failed_record(p, e)
+                _append(out / POINTS_FILE, record)
+                done[p.key] = record
+                ran += 1
+                bar.update(1)
+                if on_record is not None:
+                    on_record(record)
+        finally:
+            bar.close()
+    return ran

@@ -1,0 +1,334 @@
+"""Sweeps: their points, their verdicts, and their runs on Dask (a local cluster and a real
+scheduler with two workers), through a killed worker, an interruption and a killed sweep."""
+
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import CASE_I
+
+from spotsim import ScenarioError, load_scenario
+from spotsim.cli import main
+from spotsim.sim.run import WALL_LIMIT
+from spotsim.studies import sweep as sw
+
+#: Three short Case I points, x_a offset -1, 0 and 1 mm (each ~0.2 s and its companion).
+VARY = ["module.initial_offset_mm.0=-1:1:3"]
+#: Columns that depend on the machine or the worker, not on the physics.
+NOT_PHYSICS = ("wall_time_s", "run_wall_time_s", "companion_wall_time_s", "worker")
+
+
+def physics(table):
+    """The table's physics: every column but wall times and workers, rows by key."""
+    return table.drop(columns=[c for c in NOT_PHYSICS if c in table]).sort_values("key").reset_index(drop=True)
+
+
+# ----------------------------------------------------------------------------- the points
+
+
+def test_a_vary_axis_reads_a_range_or_a_list():
+    assert sw.parse_vary("module.initial_offset_mm.1=-2:2:5") == ("module.initial_offset_mm.1",
+                                                                  [-2.0, -1.0, 0.0, 1.0, 2.0])
+    assert sw.parse_vary("friction.mu_k=0.1,0.2") == ("friction.mu_k", [0.1, 0.2])
+    assert sw.parse_vary("simulation.integrator.velocity_tol_m_s=1e-6,2.5e-6")[1] == [1e-6, 2.5e-6]
+    for bad in ("module.mass_kg", "module.mass_kg=1:2", "module.mass_kg=1:2:x", "module.mass_kg=1,,2"):
+        with pytest.raises(ScenarioError):
+            sw.parse_vary(bad)
+
+
+def test_a_grid_is_every_combination_of_its_axes_in_order():
+    spec = sw.spec_of(["module.initial_offset_mm.0=0,1", "module.initial_rpy_deg.2=-5:5:3"])
+    points = spec.resolved()
+    assert len(points) == 6
+    assert points[0] == {"module.initial_offset_mm.0": 0, "module.initial_rpy_deg.2": -5.0}
+    assert points[-1] == {"module.initial_offset_mm.0": 1, "module.initial_rpy_deg.2": 5.0}
+
+
+def test_space_filling_samples_are_seeded_and_fill_their_ranges(tmp_path):
+    """A Latin hypercube puts exactly one of its n points in each of n equal bins of every
+    axis; a Sobol sample is reproducible from its seed and stays within its ranges."""
+    ranges = {"module.initial_offset_mm.0": [-10.0, 10.0], "module.initial_rpy_deg.0": [-30.0, 30.0]}
+    lhs = sw.SweepSpec(sample={"method": "lhs", "n": 16, "seed": 3, "ranges": ranges}).resolved()
+    for k, (lo, hi) in ranges.items():
+        bins = np.floor((np.array([p[k] for p in lhs]) - lo) / (hi - lo) * 16).astype(int)
+        assert sorted(bins) == list(range(16))
+    path = tmp_path / "spec.yaml"
+    path.write_text(f"sample: {{method: sobol, n: 8, seed: 1, ranges: {json.dumps(ranges)}}}\n")
+    a, b = sw.SweepSpec.from_yaml(path).resolved(), sw.SweepSpec.from_yaml(path).resolved()
+    assert a == b and len(a) == 8
+    assert all(lo <= p[k] <= hi for p in a for k, (lo, hi) in ranges.items())
+
+
+def test_bad_sweeps_are_refused_naming_the_key(tmp_path):
+    with pytest.raises(ScenarioError, match="module.nothing: not a key path"):
+        sw.resolve_points(CASE_I, sw.spec_of(["module.nothing=1,2"]))
+    with pytest.raises(ScenarioError, match="not both"):
+        sw.spec_of(VARY, sw.SweepSpec(points=[{"module.mass_kg": 2.0}]))
+    spec = tmp_path / "bad.yaml"
+    spec.write_text("sample: {method: halton, n: 4, ranges: {module.mass_kg: [1, 2]}}\n")
+    with pytest.raises(ScenarioError, match="sample.method = halton"):
+        sw.SweepSpec.from_yaml(spec)
+    assert main(["sweep", str(CASE_I), "--vary", "module.nothing=1,2", "--out", str(tmp_path / "x")]) == 2
+
+
+def test_a_value_its_rule_refuses_makes_only_that_point_invalid():
+    points = sw.resolve_points(CASE_I, sw.spec_of(["module.mass_kg=-1,2.768"]))
+    assert points[0].scenario is None and "mass_kg" in points[0].problems[0]
+    assert points[1].scenario is not None
+
+
+def test_one_sequence_component_is_set_by_its_index():
+    s = load_scenario(CASE_I, ["module.initial_offset_mm.1=2.5", "module.initial_rpy_deg.2=1.5"])
+    assert s.module.initial_offset_mm == (0.0, 2.5, 0.0) and s.module.initial_rpy_deg == (0.0, 0.0, 1.5)
+    with pytest.raises(ScenarioError, match="has 3 items: 3 is not one of 0..2"):
+        load_scenario(CASE_I, ["module.initial_offset_mm.3=1"])
+
+
+def test_verdicts():
+    def summary(*residuals):
+        return {"grasps": [{"residual_offset_norm_mm": r} for r in residuals]}
+
+    assert sw.verdict("completed", summary(0.01, 0.29)) == sw.CONVERGED
+    assert sw.verdict("completed", summary(0.01, 0.31)) == sw.OFF_CENTRE
+    assert sw.verdict("completed", summary(0.31), precision_mm=0.5) == sw.CONVERGED
+    assert sw.verdict("incomplete", summary(None)) == sw.NOT_CAPTURED
+    assert sw.verdict("diverged", None) == sw.DIVERGED
+    assert sw.verdict(WALL_LIMIT, summary(0.1)) == ""
+    assert sw.verdict(sw.EXCEPTION, None) == ""
+
+
+def test_a_points_file_cut_by_a_kill_loses_only_its_last_line(tmp_path):
+    path = tmp_path / sw.POINTS_FILE
+    path.write_text(json.dumps({"key": "a", "status": "completed"}) + "\n" + '{"key": "b", "sta')
+    assert list(sw.read_records(path)) == ["a"]
+    assert path.read_text().endswith("}\n")  # truncated to its last whole line
+
+
+def test_a_point_that_raises_is_recorded_with_its_status(monkeypatch):
+    import spotsim.sim.run as run
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("a bug")
+
+    monkeypatch.setattr(run, "simulate", broken)
+    point = sw.resolve_points(CASE_I, sw.spec_of(VARY))[0]
+    record = sw.run_point(point)
+    assert record["status"] == sw.EXCEPTION and "RuntimeError raised by simulate: a bug" in record["message"]
+
+
+# ----------------------------------------------------------------------------- on Dask
+
+
+@pytest.fixture(scope="module")
+def local(tmp_path_factory):
+    """The three points on the default local cluster (two workers)."""
+    out = tmp_path_factory.mktemp("sweep_local")
+    return sw.run_sweep(CASE_I, sw.spec_of(VARY), out, workers=2)
+
+
+def test_a_sweep_writes_a_row_per_point_with_its_verdict_and_error_estimate(local):
+    t = local.table
+    assert len(t) == 3 and local.ran == 3 and not local.interrupted
+    assert list(t["module.initial_offset_mm.0"]) == [-1.0, 0.0, 1.0]
+    assert set(t["status"]) == {"completed"} and set(t["verdict"]) == {sw.CONVERGED}
+    assert (t["residual_norm_mm"] < sw.PRECISION_MM).all() and (t["peak_force_norm_N"] > 0).all()
+    assert t["peak_force_error_N"].notna().all() and t["residual_error_mm"].notna().all()
+    assert (local.out / "sweep.parquet").exists() and (local.out / "sweep.csv").exists()
+    assert (local.out / "spec.yaml").exists()
+
+
+def test_a_finished_sweep_started_again_runs_nothing(local):
+    again = sw.run_sweep(CASE_I, sw.spec_of(VARY), local.out, workers=2)
+    assert again.ran == 0 and again.reused == 3
+    assert physics(again.table).equals(physics(local.table))
+
+
+def test_an_existing_scheduler_with_two_workers_gives_the_local_clusters_table(local, tmp_path):
+    """A real `dask scheduler` and two `dask worker` processes on localhost."""
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
+    file = tmp_path / "scheduler.json"
+    bin_dir = Path(sys.executable).parent
+    procs = [subprocess.Popen([str(bin_dir / "dask"), "scheduler", "--host", "127.0.0.1", "--port", "0",
+                               "--no-dashboard", "--scheduler-file", str(file)], env=env,
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)]
+    try:
+        for _ in range(300):
+            if file.exists() and file.stat().st_size:
+                break
+            time.sleep(0.1)
+        address = json.loads(file.read_text())["address"]
+        for _ in range(2):
+            procs.append(subprocess.Popen([str(bin_dir / "dask"), "worker", address, "--nthreads", "1",
+                                           "--no-dashboard"], env=env, stdout=subprocess.DEVNULL,
+                                          stderr=subprocess.DEVNULL, start_new_session=True))
+        from distributed import Client
+
+        with Client(address, timeout="60s") as c:
+            c.wait_for_workers(2, timeout=120)
+        remote = sw.run_sweep(CASE_I, sw.spec_of(VARY), tmp_path / "out", scheduler=address)
+    finally:
+        for p in procs:
+            os.killpg(p.pid, signal.SIGKILL)
+            p.wait()
+    assert remote.ran == 3
+    assert len(set(remote.table["worker"])) == 2  # both workers ran points
+    assert physics(remote.table).equals(physics(local.table))
+
+
+def test_a_killed_worker_leaves_every_point_in_the_table_exactly_once(local, tmp_path):
+    killed = []
+
+    def kill_a_worker(record):
+        if not killed:
+            os.kill(record["worker"], signal.SIGKILL)
+            killed.append(record["worker"])
+
+    spec = sw.spec_of(["module.initial_offset_mm.0=-1:1:5"])
+    report = sw.run_sweep(CASE_I, spec, tmp_path, workers=2, on_record=kill_a_worker)
+    assert killed
+    keys = [json.loads(line)["key"] for line in (tmp_path / sw.POINTS_FILE).read_text().splitlines()]
+    assert len(keys) == len(set(keys)) == 5
+    assert sorted(report.table["key"]) == sorted(keys)
+    ran = report.table[report.table["status"] != sw.WORKER_DIED]
+    assert set(ran["verdict"]) == {sw.CONVERGED}
+
+
+def test_an_interrupted_sweep_resumes_with_only_its_missing_points(local, tmp_path):
+    def stop_after_two(record, seen=[]):  # noqa: B006 - the count across calls
+        seen.append(record["key"])
+        if len(seen) == 2:
+            raise KeyboardInterrupt
+
+    first = sw.run_sweep(CASE_I, sw.spec_of(VARY), tmp_path, workers=2, on_record=stop_after_two)
+    assert first.interrupted and len(first.table) == 2
+    resumed = sw.run_sweep(CASE_I, sw.spec_of(VARY), tmp_path, workers=2)
+    assert resumed.ran == 1 and resumed.reused == 2 and not resumed.interrupted
+    assert physics(resumed.table).equals(physics(local.table))
+
+
+def test_failed_points_get_their_status_and_the_sweep_exits_0(tmp_path, capsys):
+    spec = tmp_path / "spec.yaml"
+    spec.write_text("points:\n  - {module.mass_kg: -1.0}\n  - {module.mass_kg: 2.768}\n")
+    code = main(["sweep", str(CASE_I), "--spec", str(spec), "--out", str(tmp_path / "out"), "--workers", "1",
+                 "--wall-limit", "0.001", "--quiet"])
+    assert code == 0
+    text = capsys.readouterr().out
+    assert "2 without a verdict" in text
+    import pandas as pd
+
+    t = pd.read_parquet(tmp_path / "out" / "sweep.parquet")
+    assert list(t["status"]) == [sw.REJECTED, WALL_LIMIT]
+    assert "mass_kg" in t["message"][0] and "wall-time budget of 0.001 s spent" in t["message"][1]
+
+
+def test_a_sweep_killed_with_sigkill_resumes_and_keeps_each_point_once(tmp_path):
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "spotsim.cli", "sweep", str(CASE_I), "--vary", "module.initial_offset_mm.0=-1:1:5",
+           "--out", str(out), "--workers", "1", "--quiet", "--no-error-estimate"]
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            start_new_session=True)
+    points = out / sw.POINTS_FILE
+    deadline = time.time() + 240
+    while time.time() < deadline and proc.poll() is None:
+        if points.exists() and points.read_text().count("\n") >= 2:
+            break
+        time.sleep(0.05)
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()
+    before = len(sw.read_records(points))
+    assert 2 <= before <= 5
+    assert subprocess.run(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL).returncode == 0
+    keys = [json.loads(line)["key"] for line in points.read_text().splitlines()]
+    assert len(keys) == len(set(keys)) == 5
+    import pandas as pd
+
+    assert len(pd.read_parquet(out / "sweep.parquet")) == 5
+
+
+# ----------------------------------------------------------------------------- the envelope
+
+
+def fake_run(boundary: dict):
+    """A stand-in for a run: captured (complete, residual 0.01 mm) while each axis' start lies
+    inside its `boundary`, else not captured; no simulation."""
+    def run(point):
+        inside = all(abs(point.values[sw_axis(a)]) < b for a, b in boundary.items())
+        summary = {"grasps": [{"residual_offset_norm_mm": 0.01 if inside else None}]}
+        return {"key": point.key, "index": point.index, "values": point.values, "summary": summary,
+                "status": "completed" if inside else "incomplete", "message": "", "wall_time_s": 0.0,
+                "worker": None, "start_gap_mm": None}
+    return run
+
+
+def sw_axis(a):
+    from spotsim.studies.envelope import AXES
+
+    return AXES[a][0]
+
+
+def test_bisection_finds_a_known_boundary_in_log_runs(tmp_path):
+    """A boundary at x = +3.7 / -2.2 mm and roll 12.3 deg: each ray brackets it within its
+    resolution in 1 + ceil(log2(limit / resolution)) runs; a resumed envelope runs nothing."""
+    from spotsim.studies import envelope as env
+
+    run = fake_run({"x": 3.7, "roll": 12.3})
+    asym = lambda point: run(point) if point.values[sw_axis("x")] >= 0 else fake_run({"x": 2.2})(point)  # noqa: E731
+    report = env.envelope(CASE_I, tmp_path, axes=("x", "roll"), planes=(), run=asym)
+    by = {r.name: r for r in report.rays}
+    for name, true in (("x+", 3.7), ("x-", 2.2), ("roll+", 12.3), ("roll-", 12.3)):
+        r = by[name]
+        assert r.lo < true <= r.hi and r.hi - r.lo <= r.resolution
+        assert len(r.probes) == 1 + math.ceil(math.log2(r.limit / r.resolution))
+        assert r.beyond == sw.NOT_CAPTURED
+    again = env.envelope(CASE_I, tmp_path, axes=("x", "roll"), planes=(), run=asym)
+    assert again.runs == 0 and [r.boundary for r in again.rays] == [r.boundary for r in report.rays]
+    text = (tmp_path / "envelope.md").read_text()
+    assert "| x (mm) | ±10 |" in text
+
+
+def test_a_ray_captured_at_its_limit_has_its_boundary_beyond(tmp_path):
+    from spotsim.studies import envelope as env
+
+    report = env.envelope(CASE_I, tmp_path, axes=("y",), planes=(), run=fake_run({"y": 100.0}))
+    assert all(r.boundary == math.inf and len(r.probes) == 1 for r in report.rays)
+
+
+def test_bad_envelopes_are_refused(tmp_path):
+    assert main(["envelope", str(CASE_I), "--axes", "q", "--out", str(tmp_path)]) == 2
+    assert main(["envelope", str(CASE_I), "--resolution-mm", "0", "--out", str(tmp_path)]) == 2
+    assert main(["envelope", str(CASE_I.parent / "dual_arm_sequential.yaml"), "--out", str(tmp_path)]) == 2
+
+
+def test_near_the_boundary_the_capture_fraction_is_counted_over_perturbed_starts(tmp_path):
+    """Ensembles at each ray's bracket: the stand-in captures every member inside, none outside."""
+    from spotsim.studies import envelope as env
+
+    report = env.envelope(CASE_I, tmp_path, axes=("x",), planes=(), members=4, run=fake_run({"x": 3.7}))
+    for r in report.rays:
+        assert r.chance[r.lo] == (4, 4) and r.chance[r.hi] == (0, 4)
+    assert "capture_fraction_at_captured" in (tmp_path / "envelope.csv").read_text()
+
+
+def test_a_worker_reuses_a_model_across_starts_and_a_compiled_scene_across_contact_parameters():
+    """Models from the worker's caches are those built from scratch."""
+    from spotsim.build.model import build_model
+
+    sw._MODELS.clear()
+    sw._SCENES.clear()
+    a = load_scenario(CASE_I)
+    b = load_scenario(CASE_I, ["module.initial_offset_mm.1=-2.0"])
+    c = load_scenario(CASE_I, ["friction.mu_k=0.3", "contact.restitution=0.6"])
+    ma, mb, mc = sw.model_for(a), sw.model_for(b), sw.model_for(c)
+    assert mb.pin_model is ma.pin_model  # with_start: the Pinocchio model shared
+    assert mc.urdf is ma.urdf and len(sw._SCENES) == 1 and len(sw._MODELS) == 2
+    for cached, scenario in ((mb, b), (mc, c)):
+        fresh = build_model(scenario)
+        assert np.array_equal(cached.q0, fresh.q0) and cached.law == fresh.law
