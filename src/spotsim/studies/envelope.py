@@ -319,7 +319,7 @@ def write_envelope(report: EnvelopeReport) -> None:
     for row in report.axis_table():
         def fmt(s):
             lo, hi = row[f"bracket{s}"]
-            return f"≥ {lo:g}" if hi is None else f"{lo:g}–{hi:g}"
+            return f"≥ {lo:.3g}" if hi is None else f"{lo:.3g}–{hi:.3g}"
         lines.append(f"| {row['axis']} ({row['unit']}) | ±{row['claimed']:g} | {fmt('+')} | {fmt('-')} | "
                      f"{row['beyond+'] or '–'} / {row['beyond-'] or '–'} | {row['runs']} |")
     (out / "envelope.md").write_text("\n".join(lines) + "\n")
