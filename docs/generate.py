@@ -1014,6 +1014,16 @@ def grids(r=None) -> str:
 # ------------------------------------------------------------------------------ performance
 
 
+def sweep_speed(r=None) -> str:
+    """The sweep benchmark's printout (`benchmarks/sweep.py`, saved in docs/results/sweep_speed.md)."""
+    path = RESULTS / "sweep_speed.md"
+    if not path.exists():
+        return "Not measured yet: run `python benchmarks/sweep.py > docs/results/sweep_speed.md`."
+    head, *lines = path.read_text().strip().splitlines()
+    return f"{head}. Copied by `{GENERATE} pages` from `docs/results/sweep_speed.md`:\n\n" + "\n".join(
+        f"    {line}" for line in lines)
+
+
 def speed(r: Results) -> str:
     if r.speed is None:
         return (f"Not measured yet: run `python benchmarks/speed.py > docs/results/speed.md` on an otherwise idle "
@@ -1193,6 +1203,7 @@ RENDER = {
     "cli-usage": cli_usage,
     "grids": grids,
     "speed": speed,
+    "sweep-speed": sweep_speed,
 }
 PAGES = [ROOT / "README.md", DOCS / "usage.md", DOCS / "validation.md", DOCS / "performance.md"]
 
