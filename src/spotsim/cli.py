@@ -117,13 +117,8 @@ def _envelope(args) -> int:
                           limit={"mm": args.limit_mm, "deg": args.limit_deg}, precision_mm=args.precision_mm,
                           scheduler=args.scheduler, workers=args.workers, wall_limit_s=args.wall_limit,
                           progress=not args.quiet, members=args.members, seed=args.seed, sets=args.set)
-    except ScenarioError as e:
-        for line in e.problems:
-            print(line, file=sys.stderr)
-        return 2
     except SpotsimError as e:
-        print(e, file=sys.stderr)
-        return 2
+        return _bad_input(e)
     print((out / "envelope.md").read_text(), end="")
     print(f"{report.runs} probes run now, {sum(len(r.probes) for r in report.rays)} in all; results in {out}")
     return 130 if report.interrupted else 0
@@ -155,6 +150,13 @@ def _sweep_parser(sub) -> None:
     sw.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
+def _bad_input(e: SpotsimError) -> int:
+    """Print every problem of a bad input (a ScenarioError's each on its line): exit code 2."""
+    for line in e.problems if isinstance(e, ScenarioError) else [str(e)]:
+        print(line, file=sys.stderr)
+    return 2
+
+
 def _sweep(args) -> int:
     """`spotsim sweep`: exit 0 when every point has a row (whatever its status), 2 on bad
     input, 130 if interrupted."""
@@ -170,13 +172,8 @@ def _sweep(args) -> int:
         report = run_sweep(path, spec, out, scheduler=args.scheduler, workers=args.workers,
                            wall_limit_s=args.wall_limit, precision_mm=args.precision_mm,
                            error_estimate=not args.no_error_estimate, progress=not args.quiet)
-    except ScenarioError as e:
-        for line in e.problems:
-            print(line, file=sys.stderr)
-        return 2
     except SpotsimError as e:
-        print(e, file=sys.stderr)
-        return 2
+        return _bad_input(e)
     for line in report.lines():
         print(line)
     return 130 if report.interrupted else 0

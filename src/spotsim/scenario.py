@@ -434,15 +434,21 @@ def from_dict(raw: Any, where: str = "<scenario>"):
     return scenario
 
 
-def load_scenario(path: str | Path, overrides: list[str] = ()) -> Scenario:
-    """Read, override (`key.path=value`) and validate a YAML scenario file."""
+def read_yaml(path: str | Path) -> Any:
+    """A YAML file's data, or ScenarioError naming the file when it cannot be read or parsed."""
     path = Path(path)
     try:
-        raw = yaml.safe_load(path.read_text())
+        return yaml.safe_load(path.read_text())
     except OSError as e:
         raise ScenarioError([f"{path}: cannot read: {e.strerror}"]) from e
     except yaml.YAMLError as e:
         raise ScenarioError([f"{path}: not valid YAML: {e}"]) from e
+
+
+def load_scenario(path: str | Path, overrides: list[str] = ()) -> Scenario:
+    """Read, override (`key.path=value`) and validate a YAML scenario file."""
+    path = Path(path)
+    raw = read_yaml(path)
     if raw is None:
         raw = {}
     if isinstance(raw, dict):  # anything else is reported by from_dict as not a mapping

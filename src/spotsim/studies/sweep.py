@@ -48,7 +48,7 @@ import numpy as np
 import yaml
 
 from ..errors import ScenarioError, SpotsimError
-from ..scenario import from_dict, modules_of, set_value, to_dict, to_yaml
+from ..scenario import from_dict, modules_of, read_yaml, set_value, to_dict, to_yaml
 from ..sim.run import WALL_LIMIT
 from .ensemble import Member, Start, grasp_prefix, member_row
 
@@ -125,12 +125,7 @@ class SweepSpec:
         or 'LO:HI:N'), `sample` (method: sobol or lhs, n, seed, ranges: key path: [lo, hi]) or
         `points` (a list of mappings of key path to value)."""
         path = Path(path)
-        try:
-            raw = yaml.safe_load(path.read_text())
-        except OSError as e:
-            raise ScenarioError([f"{path}: cannot read: {e.strerror}"]) from e
-        except yaml.YAMLError as e:
-            raise ScenarioError([f"{path}: not valid YAML: {e}"]) from e
+        raw = read_yaml(path)
         if not isinstance(raw, dict):
             raise ScenarioError([f"{path}: a sweep spec is a mapping of set, grid, sample or points"])
         unknown = sorted(set(raw) - {"set", "grid", "sample", "points", "scenario"})
@@ -229,7 +224,7 @@ def base_raw(config: Path, sets: list[str]) -> dict:
     from ..scenario import load_scenario, set_override
 
     load_scenario(config, sets)  # every problem of the file and its overrides, reported at once
-    raw = yaml.safe_load(Path(config).read_text()) or {}
+    raw = read_yaml(config) or {}
     for s in sets:
         set_override(raw, s)
     return raw
