@@ -3,7 +3,7 @@
     python docs/generate.py results   # rerun what the tables need: writes docs/results/
     python docs/generate.py ensembles # rerun only the ensemble accuracy studies (~22 min)
     python docs/generate.py drives    # rerun only the drive comparison's ensembles (~10 min)
-    python docs/generate.py envelope  # rerun only Case I's capture envelope (a few minutes)
+    python docs/generate.py envelope  # rerun only Case I's capture envelopes (about a minute)
     python docs/generate.py runs      # rerun all but the ensemble studies (~2 min)
     python docs/generate.py pages     # docs/scenarios.md, and the generated blocks of README.md,
                                       # docs/usage.md, docs/validation.md and docs/performance.md,
@@ -368,29 +368,37 @@ def drives_command(only: tuple[str, ...] = tuple(DRIVES)) -> None:
     print(f"results in {RESULTS.relative_to(ROOT)}; now run `{GENERATE} pages`")
 
 
-#: The capture envelope of the default geometry: Case I's scenario, every axis and plane.
-ENVELOPE = ("single_arm_case_I", ["config/single_arm_case_I.yaml", "--workers", "2", "--quiet"])
+#: The capture envelope of the default geometry, Case I's scenario, every axis and plane: with
+#: the paper's pair law, and with the energy-consistent one (where the paper's law gains
+#: energy, the run is stopped as diverged): (directory, arguments of `spotsim envelope`).
+ENVELOPES = [
+    ("single_arm_case_I", ["config/single_arm_case_I.yaml", "--workers", "2", "--quiet"]),
+    ("single_arm_case_I_gradient", ["config/single_arm_case_I.yaml", "--set", "contact.normal_direction=gradient",
+                                    "--workers", "2", "--quiet"]),
+]
 
 
 def envelope_command() -> None:
-    """Rerun Case I's capture envelope into docs/results/envelope/CASE/ (envelope.csv and .md;
-    its probes' points.jsonl is not kept), stamped in docs/results/meta.json."""
+    """Rerun Case I's capture envelopes into docs/results/envelope/NAME/ (envelope.csv and .md;
+    the probes' points.jsonl is not kept), stamped in docs/results/meta.json."""
     meta = json.loads((RESULTS / "meta.json").read_text())
-    name, args = ENVELOPE
-    out = RESULTS / "envelope" / name
-    shutil.rmtree(out, ignore_errors=True)
-    cmd = [sys.executable, "-m", "spotsim.cli", "envelope", *args, "--out", str(out.relative_to(ROOT))]
-    t0 = time.perf_counter()
-    proc = subprocess.run(cmd, cwd=ROOT, stdout=subprocess.DEVNULL)
-    wall = time.perf_counter() - t0
-    if proc.returncode != 0:
-        raise SystemExit(f"{' '.join(cmd)} exited {proc.returncode}")
-    for f in ("points.jsonl", "envelope.png"):
-        (out / f).unlink(missing_ok=True)
-    print(f"  envelope {name}: {wall:.0f} s", flush=True)
-    done = {"command": "spotsim envelope " + " ".join(args), "wall_time_s": round(wall, 1), "exit_code": 0,
-            "out": str(out.relative_to(ROOT)), "commit": git("rev-parse", "--short", "HEAD")}
-    meta["studies"] = [s for s in meta["studies"] if s.get("out") != done["out"]] + [done]
+    done = []
+    for name, args in ENVELOPES:
+        out = RESULTS / "envelope" / name
+        shutil.rmtree(out, ignore_errors=True)
+        cmd = [sys.executable, "-m", "spotsim.cli", "envelope", *args, "--out", str(out.relative_to(ROOT))]
+        t0 = time.perf_counter()
+        proc = subprocess.run(cmd, cwd=ROOT, stdout=subprocess.DEVNULL)
+        wall = time.perf_counter() - t0
+        if proc.returncode != 0:
+            raise SystemExit(f"{' '.join(cmd)} exited {proc.returncode}")
+        for f in ("points.jsonl", "envelope.png"):
+            (out / f).unlink(missing_ok=True)
+        print(f"  envelope {name}: {wall:.0f} s", flush=True)
+        done.append({"command": "spotsim envelope " + " ".join(args), "wall_time_s": round(wall, 1), "exit_code": 0,
+                     "out": str(out.relative_to(ROOT)), "commit": git("rev-parse", "--short", "HEAD")})
+    outs = {d["out"] for d in done}
+    meta["studies"] = [s for s in meta["studies"] if s.get("out") not in outs] + done
     write_json(RESULTS / "meta.json", meta)
     print(f"results in {RESULTS.relative_to(ROOT)}; now run `{GENERATE} pages`")
 
@@ -915,37 +923,39 @@ def drives_table(r: Results) -> str:
 
 
 def envelope_table(r: Results) -> str:
-    """Claimed against measured capture tolerance per axis, and the planes' rays, from
-    docs/results/envelope/ (`spotsim envelope`)."""
-    path = RESULTS / "envelope" / ENVELOPE[0] / "envelope.csv"
-    if not path.exists():
-        return f"Not measured yet: run `{GENERATE} envelope`, then `{GENERATE} pages`."
+    """Claimed against measured capture tolerance per axis, with the paper's pair law and the
+    energy-consistent one, and the planes' rays, from docs/results/envelope/ (`spotsim
+    envelope`)."""
     from spotsim.studies.envelope import AXES, CLAIMED
 
-    rays = read_csv(path)
+    found = {name: RESULTS / "envelope" / name / "envelope.csv" for name, _ in ENVELOPES}
+    if not all(p.exists() for p in found.values()):
+        return f"Not measured yet: run `{GENERATE} envelope`, then `{GENERATE} pages`."
+    paper, gradient = ({x["ray"]: x for x in read_csv(p)} for p in found.values())
+
     def bracket(x):
         lo, hi = x["captured_up_to"], x["not_captured_from"]
         return f"≥ {num(lo)}" if hi in ("", None) else f"{num(lo)}–{num(hi)}"
 
-    by = {x["ray"]: x for x in rays}
+    def cell(x):
+        return f"{bracket(x)} ({x['beyond'] or '–'})"
+
     rows = []
     for axis, (_, unit) in AXES.items():
-        plus, minus = by.get(f"{axis}+"), by.get(f"{axis}-")
-        if plus is None or minus is None:
+        if f"{axis}+" not in paper:
             continue
-        runs = int(plus["runs"]) + int(minus["runs"])
-        rows.append([f"{axis} ({unit})", f"±{num(CLAIMED[axis])}", bracket(plus), bracket(minus),
-                     f"{plus['beyond'] or '–'} / {minus['beyond'] or '–'}", str(runs)])
-    plane = [x for x in rays if x["ray"] not in {f"{a}{s}" for a in AXES for s in "+-"}]
-    total = sum(int(x["runs"]) for x in rays)
-    text = table(["axis", "claimed (paper Sec. 2.3)", "converged up to, + way", "converged up to, − way",
-                  "beyond: + / −", "runs"], rows)
+        rows.append([f"{axis} ({unit})", f"±{num(CLAIMED[axis])}",
+                     *(cell(law[f"{axis}{way}"]) for law in (paper, gradient) for way in "+-")])
+    text = table(["axis", "claimed (paper Sec. 2.3)", "paper's law, + way (beyond)", "paper's law, − way",
+                  "energy-consistent law, + way", "energy-consistent law, − way"], rows)
+    plane = [k for k in paper if k not in {f"{a}{w}" for a in AXES for w in "+-"}]
     if plane:
-        text += "\n\n" + table(["ray", "converged up to", "beyond", "runs"],
-                                 [[x["ray"], bracket(x), x["beyond"] or "–", str(int(x["runs"]))] for x in plane])
-    made = next((x for x in r.meta["studies"] if x.get("out", "").startswith("docs/results/envelope/")), {})
-    return (text + f"\n\n{total} runs in all, made by `{GENERATE} envelope` (`{made.get('command', '')}`) at "
-            f"commit `{made.get('commit', '?')}` in {num(made.get('wall_time_s'))} s.")
+        text += "\n\n" + table(["ray", "paper's law (beyond)", "energy-consistent law (beyond)"],
+                                 [[k, cell(paper[k]), cell(gradient[k])] for k in plane])
+    made = [x for x in r.meta["studies"] if x.get("out", "").startswith("docs/results/envelope/")]
+    runs = sum(int(x["runs"]) for law in (paper, gradient) for x in law.values())
+    return (text + f"\n\n{runs} runs in all, made by `{GENERATE} envelope` at commit "
+            f"`{made[0]['commit'] if made else '?'}` in {num(sum(x['wall_time_s'] for x in made))} s.")
 
 
 def _short_message(text: str) -> str:
