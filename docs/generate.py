@@ -1034,6 +1034,15 @@ def sweep_speed(r=None) -> str:
         f"    {line}" for line in lines)
 
 
+def design_sweep(r=None) -> str:
+    """The design sweep example's printout (docs/results/design_sweep.txt), verbatim."""
+    path = RESULTS / "design_sweep.txt"
+    if not path.exists():
+        return "Not run yet: `python examples/design_sweep.py`, its printout saved to docs/results/design_sweep.txt."
+    head, *lines = path.read_text().strip().splitlines()
+    return f"{head}:\n\n" + "\n".join(f"    {line}" for line in lines)
+
+
 def speed(r: Results) -> str:
     if r.speed is None:
         return (f"Not measured yet: run `python benchmarks/speed.py > docs/results/speed.md` on an otherwise idle "
@@ -1214,6 +1223,7 @@ RENDER = {
     "grids": grids,
     "speed": speed,
     "sweep-speed": sweep_speed,
+    "design-sweep": design_sweep,
 }
 PAGES = [ROOT / "README.md", DOCS / "usage.md", DOCS / "validation.md", DOCS / "performance.md"]
 
