@@ -120,7 +120,10 @@ def _envelope(args) -> int:
     except SpotsimError as e:
         return _bad_input(e)
     print((out / "envelope.md").read_text(), end="")
-    print(f"{report.runs} probes run now, {sum(len(r.probes) for r in report.rays)} in all; results in {out}")
+    probes = sum(len(r.probes) for r in report.rays)
+    near = sum(n for r in report.rays for _, n in r.chance.values())
+    print(f"{probes} bisection probes" + (f" and {near} runs near the boundaries" if near else "")
+          + f"; {report.runs} of them run now, the others found in {out}")
     return 130 if report.interrupted else 0
 
 
