@@ -370,11 +370,12 @@ def drives_command(only: tuple[str, ...] = tuple(DRIVES)) -> None:
 
 #: The capture envelope of the default geometry, Case I's scenario, every axis and plane: with
 #: the paper's pair law, and with the energy-consistent one (where the paper's law gains
-#: energy, the run is stopped as diverged): (directory, arguments of `spotsim envelope`).
+#: energy, the run is stopped as diverged); each bracket's ends run again from 8 perturbed
+#: starts: (directory, arguments of `spotsim envelope`).
 ENVELOPES = [
-    ("single_arm_case_I", ["config/single_arm_case_I.yaml", "--workers", "2", "--quiet"]),
+    ("single_arm_case_I", ["config/single_arm_case_I.yaml", "--members", "8", "--workers", "2", "--quiet"]),
     ("single_arm_case_I_gradient", ["config/single_arm_case_I.yaml", "--set", "contact.normal_direction=gradient",
-                                    "--workers", "2", "--quiet"]),
+                                    "--members", "8", "--workers", "2", "--quiet"]),
 ]
 
 
@@ -937,8 +938,13 @@ def envelope_table(r: Results) -> str:
         lo, hi = x["captured_up_to"], x["not_captured_from"]
         return f"≥ {num(lo)}" if hi in ("", None) else f"{num(lo)}–{num(hi)}"
 
+    def fraction(text):
+        return "–" if text in ("", None) else f"{float(text):.2g}"
+
     def cell(x):
-        return f"{bracket(x)} ({x['beyond'] or '–'})"
+        chance = (f"; {fraction(x['capture_fraction_at_captured'])}, {fraction(x['capture_fraction_at_not_captured'])}"
+                  if x.get("capture_fraction_at_captured") not in ("", None) else "")
+        return f"{bracket(x)} ({x['beyond'] or '–'}{chance})"
 
     rows = []
     for axis, (_, unit) in AXES.items():
@@ -954,7 +960,7 @@ def envelope_table(r: Results) -> str:
                                  [[k, cell(paper[k]), cell(gradient[k])] for k in plane])
     made = [x for x in r.meta["studies"] if x.get("out", "").startswith("docs/results/envelope/")]
     runs = sum(int(x["runs"]) for law in (paper, gradient) for x in law.values())
-    return (text + f"\n\n{runs} runs in all, made by `{GENERATE} envelope` at commit "
+    return (text + f"\n\n{runs} bisection runs, and 8 perturbed starts at each end of each bracket, made by `{GENERATE} envelope` at commit "
             f"`{made[0]['commit'] if made else '?'}` in {num(sum(x['wall_time_s'] for x in made))} s.")
 
 
