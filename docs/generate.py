@@ -942,8 +942,8 @@ def envelope_table(r: Results) -> str:
         return "–" if text in ("", None) else f"{float(text):.2g}"
 
     def cell(x):
-        chance = (f"; {fraction(x['capture_fraction_at_captured'])}, {fraction(x['capture_fraction_at_not_captured'])}"
-                  if x.get("capture_fraction_at_captured") not in ("", None) else "")
+        ends = (x.get("capture_fraction_at_captured"), x.get("capture_fraction_at_not_captured"))
+        chance = f"; {fraction(ends[0])}, {fraction(ends[1])}" if ends[0] not in ("", None) else ""
         return f"{bracket(x)} ({x['beyond'] or '–'}{chance})"
 
     rows = []
