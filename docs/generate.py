@@ -960,8 +960,9 @@ def envelope_table(r: Results) -> str:
                                  [[k, cell(paper[k]), cell(gradient[k])] for k in plane])
     made = [x for x in r.meta["studies"] if x.get("out", "").startswith("docs/results/envelope/")]
     runs = sum(int(x["runs"]) for law in (paper, gradient) for x in law.values())
-    return (text + f"\n\n{runs} bisection runs, and 8 perturbed starts at each end of each bracket, made by `{GENERATE} envelope` at commit "
-            f"`{made[0]['commit'] if made else '?'}` in {num(sum(x['wall_time_s'] for x in made))} s.")
+    return (text + f"\n\n{runs} bisection runs, and 8 perturbed starts at each end of each bracket, made by "
+            f"`{GENERATE} envelope` at commit `{made[0]['commit'] if made else '?'}` in "
+            f"{num(sum(x['wall_time_s'] for x in made))} s.")
 
 
 def _short_message(text: str) -> str:
