@@ -787,9 +787,10 @@ def signed_rel(x) -> str:
 
 def rel_error(x: dict, key: str) -> str:
     """x[key], a relative difference of two ensembles' medians, with its sampling error
-    (x[key + '_error'], the bootstrap's) as per cent: '+2.3 ± 1.2 %'."""
+    (x[key + '_error'], the bootstrap's) as per cent: '+2.3 ± 1.2 %'; the reference against
+    itself has none."""
     error = x.get(f"{key}_error")
-    if error is None or math.isnan(error) or math.isnan(x[key]):
+    if error is None or math.isnan(error) or math.isnan(x[key]) or x.get("role") == "reference":
         return signed_rel(x[key])
     return f"{signed_rel(x[key])[:-2]} ± {100 * error:.2g} %"
 

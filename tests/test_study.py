@@ -351,6 +351,9 @@ def test_ensemble_accuracy_study_writes_a_row_per_setting(accuracy_ensembles):
     ref = rows[0]
     assert float(ref["residual_ks_p"]) == 1.0 and float(ref["max_deterministic_rel"]) == 0.0
     assert ref["meets_targets"] == "yes" and int(ref["members"]) == 3
+    # the reference against itself: no sampling error; a setting against it: one
+    assert math.isnan(float(ref["peak_force_median_rel_error"]))
+    assert float(rows[1]["peak_force_median_rel_error"]) >= 0.0
     assert float(rows[1]["wall_per_member_s"]) > 0 and rows[2]["step_ms"] == "0.2"
     assert len(list((out / "members").glob("*.csv"))) == 3
     text = (out / "accuracy_ensemble.md").read_text()
