@@ -118,6 +118,39 @@ def test_unreadable_and_invalid_yaml_files(tmp_path, capsys):
     assert "not valid YAML" in capsys.readouterr().err
 
 
+def test_numbers_in_exponent_form_are_numbers_in_files_and_overrides(tmp_path):
+    """1e-6 and 2e0 are numbers, as YAML 1.2 reads them (YAML 1.1 reads them as strings)."""
+    text = CASE_I.read_text().replace("duration_s: 2.0", "duration_s: 2e0")
+    assert "2e0" in text
+    path = tmp_path / "exp.yaml"
+    path.write_text(text)
+    s = spotsim.load_scenario(path, ["simulation.integrator.velocity_tol_m_s=1e-6", "contact.skin_mm=5E-1"])
+    assert s.simulation.duration_s == 2.0 and s.simulation.integrator.velocity_tol_m_s == 1e-6
+    assert s.contact.skin_mm == 0.5
+
+
+def test_a_key_given_twice_names_both_lines(tmp_path, capsys):
+    path = tmp_path / "twice.yaml"
+    path.write_text(CASE_I.read_text() + "name: again\n")
+    first = 1 + CASE_I.read_text().splitlines().index(next(x for x in CASE_I.read_text().splitlines()
+                                                            if x.startswith("name:")))
+    last = len(path.read_text().splitlines())
+    assert main(["validate", str(path)]) == 2
+    assert f"{path}: line {last}: duplicate key 'name' (first at line {first})" in capsys.readouterr().err
+
+
+def test_binary_and_deeply_nested_files_are_one_clear_error(tmp_path, capsys):
+    binary = tmp_path / "binary.yaml"
+    binary.write_bytes(b"\xff\xfename: x\n")
+    assert main(["validate", str(binary)]) == 2
+    assert f"{binary}: not UTF-8 text (byte 0" in capsys.readouterr().err
+    deep = tmp_path / "deep.yaml"
+    deep.write_text("a: " + "[" * 2000 + "]" * 2000 + "\n")
+    proc = subprocess.run([sys.executable, "-m", "spotsim.cli", "validate", str(deep)], capture_output=True, text=True)
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    assert f"{deep}: nested too deeply to read" in proc.stderr
+
+
 def test_xacro_defaults_match_the_documented_geometry_defaults():
     """The scene XACRO's argument defaults equal the scenario's Geometry defaults (one truth)."""
     assert xacro_defaults_agree() == []

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 import typing
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -361,10 +362,7 @@ def set_override(raw: dict, assignment: str) -> None:
     if "=" not in assignment:
         raise ScenarioError([f"--set: {assignment}: must read key.path=value"])
     path, text = assignment.split("=", 1)
-    try:
-        value = yaml.safe_load(text)
-    except yaml.YAMLError as e:
-        raise ScenarioError([f"--set: {path} = {text}: not a YAML value ({e})"]) from e
+    value = parse_yaml(text, f"--set: {path} = {text}")
     set_value(raw, path.strip(), value)
 
 
@@ -434,15 +432,67 @@ def from_dict(raw: Any, where: str = "<scenario>"):
     return scenario
 
 
+class Loader(yaml.SafeLoader):
+    """PyYAML's safe loader, strict where a scenario needs it: a number in exponent form
+    without a dot (1e-6, 2E3) is a number, as YAML 1.2 and every scientist read it (YAML 1.1
+    reads it as a string); a key given twice in one mapping is an error naming both lines."""
+
+
+# YAML 1.2's float, exponent forms included, in place of YAML 1.1's (which needs a dot)
+Loader.yaml_implicit_resolvers = {k: [(tag, rx) for tag, rx in v if tag != "tag:yaml.org,2002:float"]
+                                  for k, v in yaml.SafeLoader.yaml_implicit_resolvers.items()}
+Loader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"""^(?:[-+]?(?:[0-9][0-9_]*)?\.[0-9_]*(?:[eE][-+]?[0-9]+)?
+                   |[-+]?[0-9][0-9_]*[eE][-+]?[0-9]+
+                   |[-+]?\.(?:inf|Inf|INF)
+                   |\.(?:nan|NaN|NAN))$""", re.X),
+    list("-+0123456789."))
+
+
+def _mapping(loader: Loader, node: yaml.MappingNode, deep: bool = False) -> dict:
+    seen: dict = {}
+    for key_node, _ in node.value:
+        key = loader.construct_object(key_node, deep=deep)
+        try:
+            first = seen.setdefault(key, key_node.start_mark.line + 1)
+        except TypeError:  # an unhashable key: SafeLoader's own error names it
+            break
+        if first != key_node.start_mark.line + 1:
+            raise yaml.constructor.ConstructorError(
+                None, None, f"duplicate key {key!r} (first at line {first})", key_node.start_mark)
+    return yaml.SafeLoader.construct_mapping(loader, node, deep=deep)
+
+
+Loader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _mapping)
+
+
+def parse_yaml(text: str, where: str) -> Any:
+    """YAML text's data (`Loader`), or ScenarioError: `where: line N: problem`."""
+    try:
+        return yaml.load(text, Loader=Loader)  # noqa: S506 - a SafeLoader
+    except yaml.MarkedYAMLError as e:
+        mark = e.problem_mark or e.context_mark
+        line = f"line {mark.line + 1}: " if mark is not None else ""
+        kind = "" if isinstance(e, yaml.constructor.ConstructorError) else "not valid YAML: "
+        raise ScenarioError([f"{where}: {line}{kind}{e.problem or e.context}"]) from None
+    except yaml.YAMLError as e:
+        raise ScenarioError([f"{where}: not valid YAML: {e}"]) from None
+    except RecursionError:
+        raise ScenarioError([f"{where}: nested too deeply to read"]) from None
+
+
 def read_yaml(path: str | Path) -> Any:
-    """A YAML file's data, or ScenarioError naming the file when it cannot be read or parsed."""
+    """A YAML file's data (`parse_yaml`), or ScenarioError naming the file when it cannot be
+    read, is not UTF-8 text, or not valid YAML."""
     path = Path(path)
     try:
-        return yaml.safe_load(path.read_text())
+        text = path.read_text(encoding="utf-8")
     except OSError as e:
         raise ScenarioError([f"{path}: cannot read: {e.strerror}"]) from e
-    except yaml.YAMLError as e:
-        raise ScenarioError([f"{path}: not valid YAML: {e}"]) from e
+    except UnicodeDecodeError as e:
+        raise ScenarioError([f"{path}: not UTF-8 text (byte {e.start}: {e.object[e.start:e.start + 1]!r})"]) from None
+    return parse_yaml(text, str(path))
 
 
 def load_scenario(path: str | Path, overrides: list[str] = ()) -> Scenario:

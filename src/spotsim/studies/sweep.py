@@ -48,7 +48,7 @@ import numpy as np
 import yaml
 
 from ..errors import ScenarioError, SpotsimError
-from ..scenario import from_dict, modules_of, read_yaml, set_value, to_dict, to_yaml
+from ..scenario import from_dict, modules_of, parse_yaml, read_yaml, set_value, to_dict, to_yaml
 from ..sim.run import WALL_LIMIT
 from .ensemble import Member, Start, grasp_prefix, member_row
 
@@ -73,14 +73,8 @@ POINTS_FILE, SPEC_FILE, TABLE = "points.jsonl", "spec.yaml", "sweep"
 
 
 def _number(text: str):
-    """A value of `--vary`: YAML's reading, with numbers in exponent form (1e-6) as numbers."""
-    value = yaml.safe_load(text)
-    if isinstance(value, str):
-        try:
-            return float(value)
-        except ValueError:
-            return value
-    return value
+    """A value of `--vary`, read as `--set` reads one (`scenario.parse_yaml`: 1e-6 a number)."""
+    return parse_yaml(text, f"--vary: {text}")
 
 
 def parse_range(text: str, where: str) -> list:
