@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from conftest import CASE_I
 
-from spotsim import ScenarioError, load_scenario
+from spotsim import ScenarioError, SpotsimError, load_scenario
 from spotsim.cli import main
 from spotsim.sim.run import WALL_LIMIT
 from spotsim.studies import sweep as sw
@@ -109,6 +109,18 @@ def test_a_points_file_cut_by_a_kill_loses_only_its_last_line(tmp_path):
     path.write_text(json.dumps({"key": "a", "status": "completed"}) + "\n" + '{"key": "b", "sta')
     assert list(sw.read_records(path)) == ["a"]
     assert path.read_text().endswith("}\n")  # truncated to its last whole line
+
+
+def test_a_foreign_points_file_is_refused_and_left_as_it_is(tmp_path, capsys):
+    path = tmp_path / sw.POINTS_FILE
+    text = json.dumps({"key": "a", "status": "completed"}) + "\nnot a record\n" + '{"key": "b", "sta'
+    path.write_text(text)
+    with pytest.raises(SpotsimError, match="line 2 is not a sweep's point record"):
+        sw.read_records(path)
+    assert path.read_text() == text
+    assert main(["sweep", str(CASE_I), "--vary", VARY[0], "--out", str(tmp_path), "--quiet"]) == 2
+    assert "line 2 is not a sweep's point record" in capsys.readouterr().err and path.read_text() == text
+    assert not (tmp_path / sw.SPEC_FILE).exists()
 
 
 def test_a_point_that_raises_is_recorded_with_its_status(monkeypatch):

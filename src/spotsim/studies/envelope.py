@@ -179,8 +179,8 @@ def envelope(config, out_dir, *, axes=tuple(AXES), planes=PLANES, plane_rays: in
     for axis in AXES:  # the centred start: the rays' origin
         set_value(raw0, AXES[axis][0], 0.0)
     todo = rays(axes, planes, plane_rays, resolution, limit)
+    done = read_records(out / POINTS_FILE)  # before anything is written: a foreign file stays as it is
     out.mkdir(parents=True, exist_ok=True)
-    done = read_records(out / POINTS_FILE)
     (out / "envelope.yaml").write_text(yaml.safe_dump({"scenario": str(config), "set": list(sets),
                                                        "precision_mm": precision_mm,
                                                        "rays": [{"name": r.name, "direction": r.direction,

@@ -15,7 +15,8 @@ The output directory holds:
 - `spec.yaml`: the resolved spec (the scenario file, the fixed overrides and every point);
 - `points.jsonl`: a line per finished point, appended and flushed when it ends. A point's key
   is a hash of its resolved scenario: a sweep started again over the same directory runs only
-  the points without a line, and a line cut short by a kill is dropped when read;
+  the points without a line; a last line cut short by a kill is dropped when read, and a file
+  with any other line that is not a record is refused, left as it is;
 - `sweep.parquet` and `sweep.csv`: the table, a row per point in the spec's order, written to
   a temporary file and renamed over the last one when the sweep ends or stops.
 
@@ -427,27 +428,27 @@ def table_row(record: dict, scenario, keys: list[str], precision_mm: float = PRE
 
 
 def read_records(path: Path) -> dict[str, dict]:
-    """The finished points of a points file by key; a line cut short (a kill while writing)
-    or not a record is dropped, and the file truncated to its last whole line."""
+    """The finished points of a points file by key. A last line without its newline (a kill
+    while writing) is dropped and cut from the file; any other line that is not a record is an
+    error (SpotsimError), and the file is left as it is."""
     out: dict = {}
     if not path.exists():
         return out
     data = path.read_bytes()
-    good = 0
-    for line in data.splitlines(keepends=True):
+    lines = data.splitlines(keepends=True)
+    for n, line in enumerate(lines, 1):
         if not line.endswith(b"\n"):
+            with path.open("r+b") as f:
+                f.truncate(len(data) - len(line))
             break
         try:
             rec = json.loads(line)
         except ValueError:
-            break
+            rec = None
         if not isinstance(rec, dict) or "key" not in rec or "status" not in rec:
-            break
+            raise SpotsimError(f"{path}: line {n} is not a sweep's point record: not resumable; move the file "
+                               "or give another --out")
         out.setdefault(rec["key"], rec)
-        good += len(line)
-    if good < len(data):
-        with path.open("r+b") as f:
-            f.truncate(good)
     return out
 
 
@@ -533,6 +534,7 @@ def run_sweep(config, spec: SweepSpec, out_dir, *, scheduler: str | None = None,
     config, out = Path(config), Path(out_dir)
     points = resolve_points(config, spec)
     keys = spec.keys()
+    done = read_records(out / POINTS_FILE)  # before anything is written: a foreign file stays as it is
     try:
         out.mkdir(parents=True, exist_ok=True)
         (out / SPEC_FILE).write_text(yaml.safe_dump(
@@ -541,7 +543,6 @@ def run_sweep(config, spec: SweepSpec, out_dir, *, scheduler: str | None = None,
                                           for k, v in p.values.items()}} for p in points]}, sort_keys=False))
     except OSError as e:
         raise SpotsimError(f"{out}: cannot write the sweep's files: {e.strerror}") from e
-    done = read_records(out / POINTS_FILE)
     todo = list({p.key: p for p in points if p.key not in done}.values())
     reused = len({p.key for p in points} & set(done))
     t0 = time.perf_counter()
