@@ -276,9 +276,13 @@ def _convert(tp, value, path, problems, where):
     if tp is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             return bad("must be a number")
-        if not math.isfinite(value):
+        try:
+            number = float(value)
+        except OverflowError:  # an integer beyond any float
             return bad("must be finite")
-        return float(value)
+        if not math.isfinite(number):
+            return bad("must be finite")
+        return number
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
             return bad("must be an integer")
@@ -419,7 +423,7 @@ def from_dict(raw: Any, where: str = "<scenario>"):
     ScenarioError with every problem."""
     problems: list[str] = []
     kind = raw.get("kind", "single_arm") if isinstance(raw, dict) else "single_arm"
-    if kind not in SCENARIO_KINDS:
+    if not isinstance(kind, str) or kind not in SCENARIO_KINDS:
         raise ScenarioError([f"{where}: kind = {_fmt(kind)}: must be one of {', '.join(SCENARIO_KINDS)}"])
     sim = raw.get("simulation") if isinstance(raw, dict) else None
     if isinstance(sim, dict) and isinstance(sim.get("integrator"), str):  # `integrator: rk4` names the method
