@@ -127,6 +127,11 @@ def test_numbers_in_exponent_form_are_numbers_in_files_and_overrides(tmp_path):
     s = spotsim.load_scenario(path, ["simulation.integrator.velocity_tol_m_s=1e-6", "contact.skin_mm=5E-1"])
     assert s.simulation.duration_s == 2.0 and s.simulation.integrator.velocity_tol_m_s == 1e-6
     assert s.contact.skin_mm == 0.5
+    from spotsim.scenario import parse_yaml
+
+    # numbers need a digit; the rest stays text (a dot alone, a bare exponent, a sign)
+    assert parse_yaml("[1e-6, 2E3, .5, 1., -.inf, ., -., e5, 1e, +]", "x")[:4] == [1e-6, 2000.0, 0.5, 1.0]
+    assert parse_yaml("[1e-6, 2E3, .5, 1., -.inf, ., -., e5, 1e, +]", "x")[5:] == [".", "-.", "e5", "1e", "+"]
 
 
 def test_a_key_given_twice_names_both_lines(tmp_path, capsys):
