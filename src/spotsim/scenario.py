@@ -331,12 +331,34 @@ def _cross_checks(s: Scenario, where: str) -> list[str]:
     if s.friction.mu_k > s.friction.mu_s:
         problems.append(f"{where}: friction.mu_k = {_fmt(s.friction.mu_k)}: must not exceed "
                         f"friction.mu_s = {_fmt(s.friction.mu_s)}")
-    g = s.geometry
+    g, c = s.geometry, s.contact
+    wide, coarse = [], []  # the grooves whose finger is wider than their mouth; whose flank is narrower than a sphere
     for side in ("upper", "lower"):
         depth = getattr(g, f"{side}_depth_mm")
         if depth > g.adapter_half_thickness_mm:
             problems.append(f"{where}: geometry.{side}_depth_mm = {_fmt(depth)}: must not exceed "
                             f"geometry.adapter_half_thickness_mm = {_fmt(g.adapter_half_thickness_mm)}")
+        # the finger seats in its groove: its flanks, up from the truncated tip, fit the mouth
+        bevel = math.radians(getattr(g, f"{side}_bevel_deg"))
+        mouth = depth * math.tan(bevel)
+        finger = g.finger_tip_half_width_mm + g.finger_slant_mm * math.sin(bevel)
+        if finger > mouth:
+            wide.append(f"the {side} finger is {finger:.3g} mm wide each side of its ridge, its groove's mouth "
+                        f"{mouth:.3g} mm")
+        flank = min(g.bevel_edge_length_mm, depth / math.cos(bevel))
+        if 2 * c.sphere_radius_groove_mm > flank:
+            coarse.append(f"the {side} groove's flank is {flank:.3g} mm on its shorter side")
+    if wide:
+        problems.append(f"{where}: geometry.finger_slant_mm = {_fmt(g.finger_slant_mm)}: a finger must fit its "
+                        f"groove's mouth (finger_tip_half_width_mm + finger_slant_mm sin bevel <= depth tan bevel): "
+                        f"{'; '.join(wide)}")
+    if coarse:
+        problems.append(f"{where}: contact.sphere_radius_groove_mm = {_fmt(c.sphere_radius_groove_mm)}: a sphere "
+                        f"must fit a groove's flank: {'; '.join(coarse)}")
+    if 2 * c.sphere_radius_finger_mm > min(g.finger_length_mm, g.finger_slant_mm):
+        problems.append(f"{where}: contact.sphere_radius_finger_mm = {_fmt(c.sphere_radius_finger_mm)}: a sphere "
+                        f"must fit a finger's flank: it is {min(g.finger_length_mm, g.finger_slant_mm):.3g} mm on its "
+                        f"shorter side")
     return problems
 
 
