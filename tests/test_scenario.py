@@ -48,6 +48,11 @@ BROKEN = {
     "finger sphere wider than a flank": ({"contact": {"sphere_radius_finger_mm": 4.5}},
                                          "contact.sphere_radius_finger_mm = 4.5: a sphere must fit a finger's flank: "
                                          "it is 8 mm on its shorter side"),
+    "too many spheres": ({"contact": {"sphere_radius_groove_mm": 0.01}},
+                         "contact.sphere_radius_groove_mm = 0.01: the sphere layers would hold about "),
+    "too many records": ({"simulation": {"duration_s": 1.0e5, "dt_s": 1.0e-3}},
+                         "simulation.duration_s = 100000.0: 1e+08 recorded intervals of dt_s = 0.001, more than the "
+                         "5e+06 a run may record"),
     "interpenetration": ({"end_effector": {"start_gap_mm": 1.0}},
                          "module.initial_offset_mm = [0.0, -3.0, 0.0]: fingers and groove interpenetrate"),
 }
@@ -198,6 +203,11 @@ DUAL_BROKEN = {
     "finger sphere wider than a flank": ({"contact": {"sphere_radius_finger_mm": 4.5}},
                                          "contact.sphere_radius_finger_mm = 4.5: a sphere must fit a finger's flank: "
                                          "it is 8 mm on its shorter side"),
+    "too many spheres": ({"contact": {"sphere_radius_groove_mm": 0.01}},
+                         "contact.sphere_radius_groove_mm = 0.01: the sphere layers would hold about "),
+    "too many records": ({"simulation": {"duration_s": 1.0e5, "dt_s": 1.0e-3}},
+                         "simulation.duration_s = 100000.0: 1e+08 recorded intervals of dt_s = 0.001, more than the "
+                         "5e+06 a run may record"),
     "interpenetration": ({"end_effector": {"start_gap_mm": 1.0}}, "fingers and groove interpenetrate"),
 }
 

@@ -326,8 +326,38 @@ def _build(cls, data, path, problems, where):
     return cls(**values) if ok else None
 
 
-def _cross_checks(s: Scenario, where: str) -> list[str]:
+#: What a run may allocate before it starts: spheres in its layers (each ~0.1 kB: 2e6 is about
+#: 200 MB) and recorded intervals (each ~0.3 kB of time series: 5e6 is about 1.6 GB).
+MAX_SPHERES = 2_000_000
+MAX_RECORDS = 5_000_000
+
+
+def _budget(s, where: str) -> list[str]:
+    """A run's size against MAX_SPHERES and MAX_RECORDS, estimated from its keys: each face's
+    layer holds about (length / r + 1)(width / r + 1) spheres at a spacing of its radius."""
     problems = []
+    g, c = s.geometry, s.contact
+    grooves = sum((g.bevel_edge_length_mm / c.sphere_radius_groove_mm + 1)
+                  * (getattr(g, f"{side}_depth_mm") / math.cos(math.radians(getattr(g, f"{side}_bevel_deg")))
+                     / c.sphere_radius_groove_mm + 1) * 2 for side in ("upper", "lower"))
+    r1 = c.sphere_radius_finger_mm
+    fingers = 4 * (g.finger_length_mm / r1 + 1) * (g.finger_slant_mm / r1 + 1)
+    spheres = len(modules_of(s)) * (grooves + fingers)  # a module and an end-effector per grasp
+    if spheres > MAX_SPHERES:
+        key = "sphere_radius_groove_mm" if grooves >= fingers else "sphere_radius_finger_mm"
+        problems.append(f"{where}: contact.{key} = {_fmt(getattr(c, key))}: the sphere layers would hold about "
+                        f"{spheres:.2g} spheres, more than the {MAX_SPHERES:.0e} a run may allocate: use larger "
+                        "spheres")
+    records = s.simulation.duration_s / s.simulation.dt_s
+    if records > MAX_RECORDS:
+        problems.append(f"{where}: simulation.duration_s = {_fmt(s.simulation.duration_s)}: {records:.2g} recorded "
+                        f"intervals of dt_s = {_fmt(s.simulation.dt_s)}, more than the {MAX_RECORDS:.0e} a run may "
+                        f"record: shorten the run or lengthen dt_s")
+    return problems
+
+
+def _cross_checks(s: Scenario, where: str) -> list[str]:
+    problems = _budget(s, where)
     if s.friction.mu_k > s.friction.mu_s:
         problems.append(f"{where}: friction.mu_k = {_fmt(s.friction.mu_k)}: must not exceed "
                         f"friction.mu_s = {_fmt(s.friction.mu_s)}")
