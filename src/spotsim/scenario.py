@@ -326,8 +326,9 @@ def _build(cls, data, path, problems, where):
     return cls(**values) if ok else None
 
 
-#: What a run may allocate before it starts: spheres in its layers (each ~0.1 kB: 2e6 is about
-#: 200 MB) and recorded intervals (each ~0.3 kB of time series: 5e6 is about 1.6 GB).
+#: What a run may allocate: spheres in its layers (77 B each in the compiled model, measured on
+#: Case I, and as much again while it is built: 2e6 is about 300 MB) and recorded intervals
+#: (304 B of time series each: 5e6 is about 1.5 GB).
 MAX_SPHERES = 2_000_000
 MAX_RECORDS = 5_000_000
 
