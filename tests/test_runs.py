@@ -236,3 +236,26 @@ def test_plot_of_a_bad_directory_is_a_clear_error(tmp_path, capsys):
     """A directory without results gives one clear line and exit 2."""
     assert main(["plot", str(tmp_path)]) == 2
     assert "not a spotsim results directory" in capsys.readouterr().err
+
+
+def test_cut_empty_and_foreign_results_are_one_clear_line_for_plot_and_replay(tmp_path, capsys):
+    """A run's results cut short, emptied, or replaced by foreign files: `plot` and `replay`
+    each give one line naming the file, exit 2, and write nothing."""
+    out = tmp_path / "out"
+    main(["run", str(ROOT / "config" / "single_arm_case_I.yaml"), "--out", str(out), "--quiet", "--no-figures",
+          "--no-error-estimate", "--set", "simulation.duration_s=0.3"])
+    capsys.readouterr()
+    good = {name: (out / name).read_bytes() for name in ("summary.json", "timeseries.npz", "replay.npz")}
+    damages = {"timeseries.npz": [good["timeseries.npz"][:100], b""], "summary.json": [b"{", b"[1]", b""],
+               "replay.npz": [good["replay.npz"][:100], (out / "timeseries.npz").read_bytes()]}
+    for name, variants in damages.items():
+        for bad in variants:
+            (out / name).write_bytes(bad)
+            for cmd in (["plot", str(out)], ["replay", str(out), "--html", str(tmp_path / "x.html")]):
+                if name == "replay.npz" and cmd[0] == "plot":
+                    continue  # plot does not read the replay's snapshots
+                assert main(cmd) == 2, (name, bad[:10], cmd[0])
+                err = capsys.readouterr().err.strip().splitlines()
+                assert len(err) == 1 and name in err[0] and "Traceback" not in err[0], err
+                assert not (tmp_path / "x.html").exists()
+            (out / name).write_bytes(good[name])

@@ -20,6 +20,26 @@ def test_every_shipped_config_validates(path, capsys):
     assert from_dict(yaml.safe_load(printed)) == spotsim.load_scenario(path)
 
 
+#: Geometry and size a run cannot have, either kind of scenario: one line each.
+SHAPES_BROKEN = {
+    "finger wider than the mouth": ({"geometry": {"finger_slant_mm": 16.0}},
+                                    "geometry.finger_slant_mm = 16.0: a finger must fit its groove's mouth "
+                                    "(finger_tip_half_width_mm + finger_slant_mm sin bevel <= depth tan bevel): the "
+                                    "upper finger is 13.3 mm wide each side of its ridge, its groove's mouth 13 mm; "
+                                    "the lower finger"),
+    "groove sphere wider than a flank": ({"contact": {"sphere_radius_groove_mm": 10.0}},
+                                         "contact.sphere_radius_groove_mm = 10.0: a sphere must fit a groove's flank: "
+                                         "the upper groove's flank is 18.4 mm on its shorter side; the lower"),
+    "finger sphere wider than a flank": ({"contact": {"sphere_radius_finger_mm": 4.5}},
+                                         "contact.sphere_radius_finger_mm = 4.5: a sphere must fit a finger's flank: "
+                                         "it is 8 mm on its shorter side"),
+    "too many spheres": ({"contact": {"sphere_radius_groove_mm": 0.01}},
+                         "contact.sphere_radius_groove_mm = 0.01: the sphere layers would hold about "),
+    "too many records": ({"simulation": {"duration_s": 1.0e5, "dt_s": 1.0e-3}},
+                         "simulation.duration_s = 100000.0: 1e+08 recorded intervals of dt_s = 0.001, more than the "
+                         "5e+06 a run may record"),
+}
+
 BROKEN = {
     "unknown key": ({"contact": {"restitutoin": 0.8}}, "contact.restitutoin = 0.8: unknown key"),
     "wrong type": ({"end_effector": {"closing_speed_m_s": "fast"}},
@@ -37,22 +57,7 @@ BROKEN = {
     "bad choice": ({"contact": {"broad_phase": "bvh"}}, "contact.broad_phase = bvh: must be one of coal, none"),
     "joint limit": ({"arm": {"joint_angles_rad": [0, -1.0, -1.0, 0, 0, 0]}},
                     "arm.joint_angles_rad[1] = -1.0: must be within the joint2 limits"),
-    "finger wider than the mouth": ({"geometry": {"finger_slant_mm": 16.0}},
-                                    "geometry.finger_slant_mm = 16.0: a finger must fit its groove's mouth "
-                                    "(finger_tip_half_width_mm + finger_slant_mm sin bevel <= depth tan bevel): the "
-                                    "upper finger is 13.3 mm wide each side of its ridge, its groove's mouth 13 mm; "
-                                    "the lower finger"),
-    "groove sphere wider than a flank": ({"contact": {"sphere_radius_groove_mm": 10.0}},
-                                         "contact.sphere_radius_groove_mm = 10.0: a sphere must fit a groove's flank: "
-                                         "the upper groove's flank is 18.4 mm on its shorter side; the lower"),
-    "finger sphere wider than a flank": ({"contact": {"sphere_radius_finger_mm": 4.5}},
-                                         "contact.sphere_radius_finger_mm = 4.5: a sphere must fit a finger's flank: "
-                                         "it is 8 mm on its shorter side"),
-    "too many spheres": ({"contact": {"sphere_radius_groove_mm": 0.01}},
-                         "contact.sphere_radius_groove_mm = 0.01: the sphere layers would hold about "),
-    "too many records": ({"simulation": {"duration_s": 1.0e5, "dt_s": 1.0e-3}},
-                         "simulation.duration_s = 100000.0: 1e+08 recorded intervals of dt_s = 0.001, more than the "
-                         "5e+06 a run may record"),
+    **SHAPES_BROKEN,
     "interpenetration": ({"end_effector": {"start_gap_mm": 1.0}},
                          "module.initial_offset_mm = [0.0, -3.0, 0.0]: fingers and groove interpenetrate"),
 }
@@ -192,22 +197,7 @@ DUAL_BROKEN = {
     "missing module": ({"tm2": None}, "tm2 = (missing): required key"),
     "arm beyond its limit": ({"robot": {"arm1_joint_angles_rad": [0, 0, 4.0, 0, 0, 0]}},
                              "robot.arm1_joint_angles_rad[2] = 4.0: must be within the arm1_elbow_joint limits"),
-    "finger wider than the mouth": ({"geometry": {"finger_slant_mm": 16.0}},
-                                    "geometry.finger_slant_mm = 16.0: a finger must fit its groove's mouth "
-                                    "(finger_tip_half_width_mm + finger_slant_mm sin bevel <= depth tan bevel): the "
-                                    "upper finger is 13.3 mm wide each side of its ridge, its groove's mouth 13 mm; "
-                                    "the lower finger"),
-    "groove sphere wider than a flank": ({"contact": {"sphere_radius_groove_mm": 10.0}},
-                                         "contact.sphere_radius_groove_mm = 10.0: a sphere must fit a groove's flank: "
-                                         "the upper groove's flank is 18.4 mm on its shorter side; the lower"),
-    "finger sphere wider than a flank": ({"contact": {"sphere_radius_finger_mm": 4.5}},
-                                         "contact.sphere_radius_finger_mm = 4.5: a sphere must fit a finger's flank: "
-                                         "it is 8 mm on its shorter side"),
-    "too many spheres": ({"contact": {"sphere_radius_groove_mm": 0.01}},
-                         "contact.sphere_radius_groove_mm = 0.01: the sphere layers would hold about "),
-    "too many records": ({"simulation": {"duration_s": 1.0e5, "dt_s": 1.0e-3}},
-                         "simulation.duration_s = 100000.0: 1e+08 recorded intervals of dt_s = 0.001, more than the "
-                         "5e+06 a run may record"),
+    **SHAPES_BROKEN,
     "interpenetration": ({"end_effector": {"start_gap_mm": 1.0}}, "fingers and groove interpenetrate"),
 }
 

@@ -163,18 +163,41 @@ FIGURES_SINGLE = ("offset.png", "contact_force.png", "contact_torque.png", "acti
 FIGURES_DUAL = FIGURES_SINGLE + ("robot_centroid_displacement.png", "contact_forces_torques.png")
 
 
-def replot(result_dir: str | Path) -> list[Path]:
-    """Regenerate a results directory's figures from its timeseries.npz and summary.json."""
+def read_arrays(path: Path) -> dict:
+    """The arrays of an .npz file; OSError or ValueError for a file that is missing, cut short
+    or not an .npz (numpy's and zipfile's own errors, made one)."""
+    import zipfile
+
+    try:
+        with np.load(path) as f:
+            return {k: f[k] for k in f.files}
+    except (zipfile.BadZipFile, EOFError, KeyError) as e:
+        raise ValueError(f"{path.name}: not a readable .npz ({type(e).__name__}: {e})") from e
+
+
+def read_results(result_dir: str | Path) -> tuple[dict, dict]:
+    """A results directory's summary.json and time series, or SpotsimError naming what is
+    missing or unreadable."""
     from .errors import SpotsimError
 
     d = Path(result_dir)
     try:
         summary = json.loads((d / SUMMARY).read_text())
-        with np.load(d / "timeseries.npz") as f:
-            ts = {k: f[k] for k in f.files}
-    except (OSError, ValueError, KeyError) as e:
+        ts = read_arrays(d / "timeseries.npz")
+    except (OSError, ValueError) as e:
         raise SpotsimError(f"{d}: not a spotsim results directory (needs {SUMMARY} and "
                            f"timeseries.npz): {e}") from e
+    if not isinstance(summary, dict):
+        raise SpotsimError(f"{d}: {SUMMARY} is not a run's summary (a JSON object)")
+    return summary, ts
+
+
+def replot(result_dir: str | Path) -> list[Path]:
+    """Regenerate a results directory's figures from its timeseries.npz and summary.json."""
+    from .errors import SpotsimError
+
+    d = Path(result_dir)
+    summary, ts = read_results(d)
     if len(ts.get("t", ())) < 2:
         raise SpotsimError(f"{d}: the run recorded fewer than two samples; nothing to plot")
     plot_figures(ts, d / "figures", summary.get("scenario", d.name))

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -28,29 +27,29 @@ class Run:
 def load_run(result_dir: str | Path) -> Run:
     """Read a results directory (raises SpotsimError with what is missing or wrong)."""
     from ..build.model import build_model
-    from ..results import REPLAY, SUMMARY
+    from ..results import REPLAY, read_arrays, read_results
     from ..scenario import load_scenario
 
     d = Path(result_dir)
+    summary, ts = read_results(d)
     try:
-        summary = json.loads((d / SUMMARY).read_text())
-        with np.load(d / "timeseries.npz") as f:
-            ts = {k: f[k] for k in f.files}
         scenario = load_scenario(d / "scenario.yaml")
-    except (OSError, ValueError, KeyError, ScenarioError) as e:
-        raise SpotsimError(f"{d}: not a spotsim results directory (needs {SUMMARY}, timeseries.npz "
-                           f"and scenario.yaml): {e}") from e
+    except ScenarioError as e:
+        raise SpotsimError(f"{d}: not a spotsim results directory (needs scenario.yaml): "
+                           f"{'; '.join(e.problems)}") from e
     if len(ts.get("t", ())) < 2:
         raise SpotsimError(f"{d}: the run recorded fewer than two samples; nothing to replay")
     model = build_model(scenario, str(d / "scenario.yaml"))
     snapshots = None
     if (d / REPLAY).exists():
         try:
-            with np.load(d / REPLAY) as f:
-                snapshots = {k: f[k] for k in f.files}
+            snapshots = read_arrays(d / REPLAY)
         except (OSError, ValueError) as e:
             raise SpotsimError(f"{d / REPLAY}: unreadable: {e}") from e
         names = model.face_names
+        if not {"master_faces", "slave_faces"} <= set(snapshots):
+            raise SpotsimError(f"{d / REPLAY}: not a replay file (no contact faces); was it written by another "
+                               "spotsim version?")
         if [list(snapshots["master_faces"]), list(snapshots["slave_faces"])] != [names[0], names[1]]:
             raise SpotsimError(f"{d / REPLAY}: its contact faces are not those of the scene of "
                                f"{d / 'scenario.yaml'}; was it written by another spotsim version?")
