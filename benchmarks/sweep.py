@@ -44,7 +44,8 @@ def simulation_s(table) -> float:
 def timed(vary, workers: int, estimate: bool):
     with tempfile.TemporaryDirectory() as out:
         t0 = time.perf_counter()
-        report = sw.run_sweep(CASE_I, sw.spec_of(vary), out, workers=workers, error_estimate=estimate)
+        report = sw.run_sweep(CASE_I, sw.spec_of(vary), out, cluster=sw.Cluster(workers=workers),
+                              error_estimate=estimate)
         return report, time.perf_counter() - t0
 
 

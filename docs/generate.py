@@ -1032,23 +1032,25 @@ def grids(r=None) -> str:
 # ------------------------------------------------------------------------------ performance
 
 
-def sweep_speed(r=None) -> str:
-    """The sweep benchmark's printout (`benchmarks/sweep.py`, saved in docs/results/sweep_speed.md)."""
-    path = RESULTS / "sweep_speed.md"
+def printout(name: str, command: str, head_end: str) -> str:
+    """A script's printout saved in docs/results/NAME: its first line (the stamp) + `head_end`,
+    then the rest as a code block; or how to make it."""
+    path = RESULTS / name
     if not path.exists():
-        return "Not measured yet: run `python benchmarks/sweep.py > docs/results/sweep_speed.md`."
+        return f"Not run yet: `{command} > docs/results/{name}`, with the commit on its first line."
     head, *lines = path.read_text().strip().splitlines()
-    return f"{head}. Copied by `{GENERATE} pages` from `docs/results/sweep_speed.md`:\n\n" + "\n".join(
-        f"    {line}" for line in lines)
+    return f"{head}{head_end}\n\n" + "\n".join(f"    {line}" for line in lines)
+
+
+def sweep_speed(r=None) -> str:
+    """The sweep benchmark's printout (`benchmarks/sweep.py`)."""
+    return printout("sweep_speed.md", "python benchmarks/sweep.py",
+                    f". Copied by `{GENERATE} pages` from `docs/results/sweep_speed.md`:")
 
 
 def design_sweep(r=None) -> str:
-    """The design sweep example's printout (docs/results/design_sweep.txt), verbatim."""
-    path = RESULTS / "design_sweep.txt"
-    if not path.exists():
-        return "Not run yet: `python examples/design_sweep.py`, its printout saved to docs/results/design_sweep.txt."
-    head, *lines = path.read_text().strip().splitlines()
-    return f"{head}:\n\n" + "\n".join(f"    {line}" for line in lines)
+    """The design sweep example's printout (`examples/design_sweep.py`), verbatim."""
+    return printout("design_sweep.txt", "python examples/design_sweep.py", ":")
 
 
 def speed(r: Results) -> str:

@@ -20,7 +20,8 @@ import itertools
 from pathlib import Path
 
 import spotsim
-from spotsim.studies.envelope import CLAIMED, envelope
+from spotsim.studies.envelope import CLAIMED, Search, envelope
+from spotsim.studies.sweep import Cluster
 
 CONFIG = Path(__file__).resolve().parents[1] / "config" / "single_arm_case_I.yaml"
 
@@ -41,7 +42,8 @@ def main() -> None:
         sets = [f"geometry.upper_bevel_deg={bevel}", f"geometry.lower_bevel_deg={bevel}",
                 f"geometry.upper_depth_mm={depth}", f"geometry.lower_depth_mm={depth}"]
         out = Path(args.out) / f"bevel_{bevel:g}_depth_{depth:g}"
-        report = envelope(CONFIG, out, axes=axes, planes=(), resolution=res, workers=args.workers, sets=sets)
+        report = envelope(CONFIG, out, Search(axes=axes, planes=(), resolution=res),
+                          cluster=Cluster(workers=args.workers), sets=sets)
         run = spotsim.simulate(spotsim.load_scenario(CONFIG, sets))
         grasp = run.grasp
         bounds = {r.name: (r.lo, r.hi) for r in report.rays}

@@ -292,6 +292,10 @@ def test_ensemble_comparison_statistics_on_hand_made_samples():
     assert c["wedged"] == pytest.approx(0.3) and c["seated"] == pytest.approx(0.7)
 
 
+#: How close a bootstrap sampling error comes to the asymptotic law (see the test below).
+BOOTSTRAP_REL = 0.15
+
+
 def test_a_median_difference_carries_the_sampling_error_of_two_medians():
     """Constant samples: no sampling error. Two normal samples of n with spread sigma: the
     median's standard error is sqrt(pi / 2) sigma / sqrt(n) each (asymptotically), so their
@@ -303,7 +307,9 @@ def test_a_median_difference_carries_the_sampling_error_of_two_medians():
     rng = np.random.default_rng(1)
     n, sigma = 400, 1.0
     a, b = 100.0 + sigma * rng.standard_normal(n), 100.0 + sigma * rng.standard_normal(n)
-    assert ae.median_rel_error(a, b) == pytest.approx(math.sqrt(math.pi / n) * sigma / 100.0, rel=0.15)
+    # the asymptotic law holds to a few per cent at n = 400; 2000 resamples estimate a standard
+    # deviation to sqrt(1 / (2 * 2000)) = 1.6 %: 15 % leaves room for both and this one draw
+    assert ae.median_rel_error(a, b) == pytest.approx(math.sqrt(math.pi / n) * sigma / 100.0, rel=BOOTSTRAP_REL)
     c = ae.compare([member(i, 0.1, 50.0 + i) for i in range(8)], [member(i, 0.1, 50.0) for i in range(8)], 1,
                    dual=False)
     assert c["peak_force_median_rel_error"] > 0.0 and c["residual_median_rel_error"] == 0.0

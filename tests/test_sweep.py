@@ -142,7 +142,7 @@ def test_a_point_that_raises_is_recorded_with_its_status(monkeypatch):
 def local(tmp_path_factory):
     """The three points on the default local cluster (two workers)."""
     out = tmp_path_factory.mktemp("sweep_local")
-    return sw.run_sweep(CASE_I, sw.spec_of(VARY), out, workers=2)
+    return sw.run_sweep(CASE_I, sw.spec_of(VARY), out, cluster=sw.Cluster(workers=2))
 
 
 def test_a_sweep_writes_a_row_per_point_with_its_verdict_and_error_estimate(local):
@@ -157,7 +157,7 @@ def test_a_sweep_writes_a_row_per_point_with_its_verdict_and_error_estimate(loca
 
 
 def test_a_finished_sweep_started_again_runs_nothing(local):
-    again = sw.run_sweep(CASE_I, sw.spec_of(VARY), local.out, workers=2)
+    again = sw.run_sweep(CASE_I, sw.spec_of(VARY), local.out, cluster=sw.Cluster(workers=2))
     assert again.ran == 0 and again.reused == 3
     assert physics(again.table).equals(physics(local.table))
 
@@ -184,7 +184,7 @@ def test_an_existing_scheduler_with_two_workers_gives_the_local_clusters_table(l
 
         with Client(address, timeout="60s") as c:
             c.wait_for_workers(2, timeout=120)
-        remote = sw.run_sweep(CASE_I, sw.spec_of(VARY), tmp_path / "out", scheduler=address)
+        remote = sw.run_sweep(CASE_I, sw.spec_of(VARY), tmp_path / "out", cluster=sw.Cluster(scheduler=address))
     finally:
         for p in procs:
             os.killpg(p.pid, signal.SIGKILL)
@@ -203,7 +203,7 @@ def test_a_killed_worker_leaves_every_point_in_the_table_exactly_once(local, tmp
             killed.append(record["worker"])
 
     spec = sw.spec_of(["module.initial_offset_mm.0=-1:1:5"])
-    report = sw.run_sweep(CASE_I, spec, tmp_path, workers=2, on_record=kill_a_worker)
+    report = sw.run_sweep(CASE_I, spec, tmp_path, cluster=sw.Cluster(workers=2), on_record=kill_a_worker)
     assert killed
     keys = [json.loads(line)["key"] for line in (tmp_path / sw.POINTS_FILE).read_text().splitlines()]
     assert len(keys) == len(set(keys)) == 5
@@ -218,9 +218,9 @@ def test_an_interrupted_sweep_resumes_with_only_its_missing_points(local, tmp_pa
         if len(seen) == 2:
             raise KeyboardInterrupt
 
-    first = sw.run_sweep(CASE_I, sw.spec_of(VARY), tmp_path, workers=2, on_record=stop_after_two)
+    first = sw.run_sweep(CASE_I, sw.spec_of(VARY), tmp_path, cluster=sw.Cluster(workers=2), on_record=stop_after_two)
     assert first.interrupted and len(first.table) == 2
-    resumed = sw.run_sweep(CASE_I, sw.spec_of(VARY), tmp_path, workers=2)
+    resumed = sw.run_sweep(CASE_I, sw.spec_of(VARY), tmp_path, cluster=sw.Cluster(workers=2))
     assert resumed.ran == 1 and resumed.reused == 2 and not resumed.interrupted
     assert physics(resumed.table).equals(physics(local.table))
 
@@ -293,14 +293,14 @@ def test_bisection_finds_a_known_boundary_in_log_runs(tmp_path):
 
     run = fake_run({"x": 3.7, "roll": 12.3})
     asym = lambda point: run(point) if point.values[sw_axis("x")] >= 0 else fake_run({"x": 2.2})(point)  # noqa: E731
-    report = env.envelope(CASE_I, tmp_path, axes=("x", "roll"), planes=(), run=asym)
+    report = env.envelope(CASE_I, tmp_path, env.Search(axes=("x", "roll"), planes=()), run=asym)
     by = {r.name: r for r in report.rays}
     for name, true in (("x+", 3.7), ("x-", 2.2), ("roll+", 12.3), ("roll-", 12.3)):
         r = by[name]
         assert r.lo < true <= r.hi and r.hi - r.lo <= r.resolution
         assert len(r.probes) == 1 + math.ceil(math.log2(r.limit / r.resolution))
         assert r.beyond == sw.NOT_CAPTURED
-    again = env.envelope(CASE_I, tmp_path, axes=("x", "roll"), planes=(), run=asym)
+    again = env.envelope(CASE_I, tmp_path, env.Search(axes=("x", "roll"), planes=()), run=asym)
     assert again.runs == 0 and [r.boundary for r in again.rays] == [r.boundary for r in report.rays]
     text = (tmp_path / "envelope.md").read_text()
     assert "| x (mm) | ±10 |" in text
@@ -309,7 +309,7 @@ def test_bisection_finds_a_known_boundary_in_log_runs(tmp_path):
 def test_a_ray_captured_at_its_limit_has_its_boundary_beyond(tmp_path):
     from spotsim.studies import envelope as env
 
-    report = env.envelope(CASE_I, tmp_path, axes=("y",), planes=(), run=fake_run({"y": 100.0}))
+    report = env.envelope(CASE_I, tmp_path, env.Search(axes=("y",), planes=()), run=fake_run({"y": 100.0}))
     assert all(r.boundary == math.inf and len(r.probes) == 1 for r in report.rays)
 
 
@@ -323,7 +323,7 @@ def test_near_the_boundary_the_capture_fraction_is_counted_over_perturbed_starts
     """Ensembles at each ray's bracket: the stand-in captures every member inside, none outside."""
     from spotsim.studies import envelope as env
 
-    report = env.envelope(CASE_I, tmp_path, axes=("x",), planes=(), members=4, run=fake_run({"x": 3.7}))
+    report = env.envelope(CASE_I, tmp_path, env.Search(axes=("x",), planes=(), members=4), run=fake_run({"x": 3.7}))
     for r in report.rays:
         assert r.chance[r.lo] == (4, 4) and r.chance[r.hi] == (0, 4)
     assert "capture_fraction_at_captured" in (tmp_path / "envelope.csv").read_text()

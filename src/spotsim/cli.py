@@ -97,7 +97,7 @@ def _envelope_parser(sub) -> None:
 def _envelope(args) -> int:
     """`spotsim envelope`: exit 0, 2 on bad input, 130 if interrupted."""
     from .scenario import load_scenario
-    from .studies.envelope import AXES, PLANES, envelope
+    from .studies.envelope import AXES, PLANES, Search, envelope
 
     path = Path(args.config)
     try:
@@ -108,15 +108,14 @@ def _envelope(args) -> int:
         if bad:
             raise ScenarioError([f"--axes/--planes: {', '.join(bad)}: not one of {', '.join(AXES)} / "
                                  f"{', '.join('-'.join(p) for p in PLANES)}"])
-        for name in ("rays", "members", "resolution_mm", "resolution_deg", "limit_mm", "limit_deg", "wall_limit"):
+        for name in ("rays", "members", "resolution_mm", "resolution_deg", "limit_mm", "limit_deg"):
             if not getattr(args, name) > 0:
                 raise ScenarioError([f"--{name.replace('_', '-')} = {getattr(args, name)}: must be positive"])
+        cluster = _cluster(args)
         out = Path(args.out) if args.out else Path("results") / load_scenario(path, args.set).name / "envelope"
-        report = envelope(path, out, axes=axes, planes=planes, plane_rays=args.rays,
-                          resolution={"mm": args.resolution_mm, "deg": args.resolution_deg},
-                          limit={"mm": args.limit_mm, "deg": args.limit_deg}, precision_mm=args.precision_mm,
-                          scheduler=args.scheduler, workers=args.workers, wall_limit_s=args.wall_limit,
-                          progress=not args.quiet, members=args.members, seed=args.seed, sets=args.set)
+        search = Search(axes, planes, args.rays, {"mm": args.resolution_mm, "deg": args.resolution_deg},
+                        {"mm": args.limit_mm, "deg": args.limit_deg}, args.precision_mm, args.members, args.seed)
+        report = envelope(path, out, search, cluster=cluster, sets=args.set)
     except SpotsimError as e:
         return _bad_input(e)
     print((out / "envelope.md").read_text(), end="")
@@ -153,6 +152,15 @@ def _sweep_parser(sub) -> None:
     sw.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
+def _cluster(args):
+    """The Cluster of `sweep`'s and `envelope`'s options (ScenarioError for a bad budget)."""
+    from .studies.sweep import Cluster
+
+    if not args.wall_limit > 0:
+        raise ScenarioError([f"--wall-limit = {args.wall_limit}: must be positive"])
+    return Cluster(args.scheduler, args.workers, args.wall_limit, not args.quiet)
+
+
 def _bad_input(e: SpotsimError) -> int:
     """Print every problem of a bad input (a ScenarioError's each on its line): exit code 2."""
     for line in e.problems if isinstance(e, ScenarioError) else [str(e)]:
@@ -170,11 +178,8 @@ def _sweep(args) -> int:
     try:
         spec = spec_of(args.vary, args.spec, args.set)
         out = Path(args.out) if args.out else Path("results") / load_scenario(path, spec.sets).name / "sweep"
-        if args.wall_limit is not None and not args.wall_limit > 0:
-            raise ScenarioError([f"--wall-limit = {args.wall_limit}: must be positive"])
-        report = run_sweep(path, spec, out, scheduler=args.scheduler, workers=args.workers,
-                           wall_limit_s=args.wall_limit, precision_mm=args.precision_mm,
-                           error_estimate=not args.no_error_estimate, progress=not args.quiet)
+        report = run_sweep(path, spec, out, cluster=_cluster(args), precision_mm=args.precision_mm,
+                           error_estimate=not args.no_error_estimate)
     except SpotsimError as e:
         return _bad_input(e)
     for line in report.lines():

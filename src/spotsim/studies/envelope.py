@@ -32,9 +32,9 @@ from ..errors import ScenarioError
 from ..scenario import TOLERANCE_DEG, TOLERANCE_OFFSET_MM, from_dict, set_value, to_dict
 from .sweep import (
     CONVERGED,
+    Cluster,
     POINTS_FILE,
     PRECISION_MM,
-    WALL_LIMIT_S,
     Point,
     _append,
     dask_client,
@@ -160,13 +160,32 @@ class EnvelopeReport:
         return rows
 
 
-def envelope(config, out_dir, *, axes=tuple(AXES), planes=PLANES, plane_rays: int = PLANE_RAYS,
-             resolution: dict | None = None, limit: dict | None = None, precision_mm: float = PRECISION_MM,
-             scheduler: str | None = None, workers: int | None = None, wall_limit_s: float = WALL_LIMIT_S,
-             progress: bool = False, members: int = 1, seed: int = 0, sets=(), run=None) -> EnvelopeReport:
-    """Find the capture boundary along every ray (`rays`) of a single-arm scenario (with the
-    overrides `sets`, as `--set`), its probes run on Dask (or by `run(point) -> record` in
-    this process, for tests). Probes found in `out_dir`'s points file are not run again."""
+@dataclass(frozen=True)
+class Search:
+    """What an envelope searches: both ways along `axes`, `plane_rays` rays around each of
+    `planes`, to `resolution` and out to `limit` (per unit, over RESOLUTION and LIMIT), a
+    probe captured when it converges within `precision_mm`; with `members` > 1, each bracket's
+    ends again from that many starts perturbed with `seed`."""
+
+    axes: tuple = tuple(AXES)
+    planes: tuple = PLANES
+    plane_rays: int = PLANE_RAYS
+    resolution: dict | None = None
+    limit: dict | None = None
+    precision_mm: float = PRECISION_MM
+    members: int = 1
+    seed: int = 0
+
+    def rays(self) -> list[Ray]:
+        return rays(self.axes, self.planes, self.plane_rays, self.resolution, self.limit)
+
+
+def envelope(config, out_dir, search: Search = Search(), *, cluster: Cluster = Cluster(), sets=(),
+             run=None) -> EnvelopeReport:
+    """Find the capture boundary along every ray of `search` for a single-arm scenario (with
+    the overrides `sets`, as `--set`), its probes run on `cluster` (or by `run(point) ->
+    record` in this process, for tests). Probes found in `out_dir`'s points file are not run
+    again."""
     import yaml
 
     from .sweep import base_raw
@@ -178,22 +197,26 @@ def envelope(config, out_dir, *, axes=tuple(AXES), planes=PLANES, plane_rays: in
         raise ScenarioError([f"{config}: kind = {scenario.kind}: the envelope is of a single-arm scenario's module"])
     for axis in AXES:  # the centred start: the rays' origin
         set_value(raw0, AXES[axis][0], 0.0)
-    todo = rays(axes, planes, plane_rays, resolution, limit)
+    todo = search.rays()
     done = read_records(out / POINTS_FILE)  # before anything is written: a foreign file stays as it is
     out.mkdir(parents=True, exist_ok=True)
     (out / "envelope.yaml").write_text(yaml.safe_dump({"scenario": str(config), "set": list(sets),
-                                                       "precision_mm": precision_mm,
+                                                       "precision_mm": search.precision_mm,
                                                        "rays": [{"name": r.name, "direction": r.direction,
                                                                  "resolution": r.resolution, "limit": r.limit}
                                                                 for r in todo]}, sort_keys=False))
     state = {"runs": 0, "index": 0}
 
+    def store(record):
+        """Keep a new record: appended to the points file and in `done`."""
+        _append(out / POINTS_FILE, record)
+        done[record["key"]] = record
+        state["runs"] += 1
+
     def settle(ray, magnitude, record):
         if record["key"] not in done:
-            _append(out / POINTS_FILE, record)
-            done[record["key"]] = record
-            state["runs"] += 1
-        ray.record(magnitude, verdict(record["status"], record.get("summary"), precision_mm), record["key"])
+            store(record)
+        ray.record(magnitude, verdict(record["status"], record.get("summary"), search.precision_mm), record["key"])
 
     def probe(ray):
         """The ray's next probe as a point, settling those already done; None when finished."""
@@ -213,10 +236,9 @@ def envelope(config, out_dir, *, axes=tuple(AXES), planes=PLANES, plane_rays: in
                 while (p := probe(ray)) is not None:
                     settle(ray, p[0], run(p[1]))
         else:
-            _on_dask(todo, probe, settle, scheduler, workers, wall_limit_s, str(config), progress, scenario)
-        if members > 1:
-            state["runs"] += _chances(todo, raw0, members, seed, done, out, precision_mm, scheduler, workers,
-                                      wall_limit_s, str(config), progress, run)
+            _on_dask(todo, probe, settle, cluster, str(config), scenario)
+        if search.members > 1:
+            state["runs"] += _chances(todo, raw0, search, done, out, cluster, str(config), store, run)
     except KeyboardInterrupt:
         interrupted = True
     report = EnvelopeReport(todo, done, state["runs"], interrupted, out)
@@ -224,11 +246,11 @@ def envelope(config, out_dir, *, axes=tuple(AXES), planes=PLANES, plane_rays: in
     return report
 
 
-def _chances(todo, raw0, members, seed, done, out, precision_mm, scheduler, workers, wall_limit_s, source,
-             progress, run) -> int:
-    """Each ray's bracket run as ensembles: `members` perturbed starts (seeded; member 0 the
-    probe itself) at its last captured and first uncaptured magnitudes, their capture
-    fractions into `Ray.chance`. Returns the runs made."""
+def _chances(todo, raw0, search: Search, done: dict, out: Path, cluster: Cluster, source: str, store, run) -> int:
+    """Each ray's bracket run as ensembles: `search.members` perturbed starts (seeded; member
+    0 the probe itself) at its last captured and first uncaptured magnitudes, their capture
+    fractions into `Ray.chance`. New records go through `store` (by `run`) or straight into
+    the points file and `done` (on the cluster). Returns the runs made on the cluster."""
     from .ensemble import member_scenario, perturbed_starts
     from .sweep import _run_on_dask
 
@@ -240,44 +262,43 @@ def _chances(todo, raw0, members, seed, done, out, precision_mm, scheduler, work
             base = probe_point(raw0, ray, m, 0, source)
             if base.scenario is None:
                 continue
-            for i, start in enumerate(perturbed_starts(base.scenario, members, seed)):
+            for i, start in enumerate(perturbed_starts(base.scenario, search.members, search.seed)):
                 s = member_scenario(base.scenario, start)
                 plan.append((ray, m, Point(i, base.values, scenario_key(s), s)))
     missing = list({p.key: p for _, _, p in plan if p.key not in done}.values())
-    before = len(done)
+    ran = 0
     if run is not None:
         for p in missing:
-            record = run(p)
-            _append(out / POINTS_FILE, record)
-            done[p.key] = record
+            store(run(p))
     elif missing:
-        _run_on_dask(missing, out, done, scheduler, workers, wall_limit_s, False, progress, None, source,
-                     grow_gap=True)
+        ran = _run_on_dask(missing, out, done, cluster, source, error_estimate=False, grow_gap=True)
     for ray, m, p in plan:
         rec = done.get(p.key)
         if rec is None:
             continue
         captured, n = ray.chance.get(m, (0, 0))
-        ray.chance[m] = (captured + (verdict(rec["status"], rec.get("summary"), precision_mm) == CONVERGED), n + 1)
-    return len(done) - before
+        converged = verdict(rec["status"], rec.get("summary"), search.precision_mm) == CONVERGED
+        ray.chance[m] = (captured + converged, n + 1)
+    return ran
 
 
-def _on_dask(todo, probe, settle, scheduler, workers, wall_limit_s, source, progress, scenario) -> None:
+def _on_dask(todo, probe, settle, cluster: Cluster, source: str, scenario) -> None:
+    """Bisect every ray at once on `cluster`: each ray's next probe submitted as its last ends."""
     from distributed import as_completed
     from tqdm import tqdm
 
-    with dask_client(scheduler, workers) as client:
+    with dask_client(cluster) as client:
         client.run(warm_worker, scenario, source)
         pending = as_completed()
         where = {}
-        bar = tqdm(unit="probe", disable=not progress)
+        bar = tqdm(unit="probe", disable=not cluster.progress)
 
         def submit(ray):
             nxt = probe(ray)
             if nxt is not None:
                 m, point = nxt
-                fut = client.submit(run_point, point, wall_limit_s, False, source, True, key=f"probe-{point.key}",
-                                    pure=False)
+                fut = client.submit(run_point, point, cluster.wall_limit_s, False, source, True,
+                                    key=f"probe-{point.key}", pure=False)
                 where[fut.key] = (ray, m, point)
                 pending.add(fut)
 

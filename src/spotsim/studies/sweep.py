@@ -523,14 +523,24 @@ class SweepReport:
         return out
 
 
-def run_sweep(config, spec: SweepSpec, out_dir, *, scheduler: str | None = None, workers: int | None = None,
-          wall_limit_s: float | None = WALL_LIMIT_S, precision_mm: float = PRECISION_MM,
-          error_estimate: bool = True, progress: bool = False, on_record=None) -> SweepReport:
-    """Run `config` (a scenario file) at every point of `spec` not already in `out_dir`, on a
-    Dask cluster (a local one of `workers` processes, by default one per core, or the
-    scheduler at `scheduler`), and write the table. Ctrl-C stops it and keeps every finished
-    point (report.interrupted); a point's own failure never stops it. `on_record(record)` is
-    called after each point is written (tests use it to interrupt or kill)."""
+@dataclass(frozen=True)
+class Cluster:
+    """Where and how a sweep's or an envelope's points run: on the Dask scheduler at
+    `scheduler`, or on a local cluster of `workers` processes (default one per core); each
+    point within `wall_limit_s` (None: no budget); with a progress bar or not."""
+
+    scheduler: str | None = None
+    workers: int | None = None
+    wall_limit_s: float | None = WALL_LIMIT_S
+    progress: bool = False
+
+
+def run_sweep(config, spec: SweepSpec, out_dir, *, cluster: Cluster = Cluster(), precision_mm: float = PRECISION_MM,
+              error_estimate: bool = True, on_record=None) -> SweepReport:
+    """Run `config` (a scenario file) at every point of `spec` not already in `out_dir`, on
+    `cluster`, and write the table. Ctrl-C stops it and keeps every finished point
+    (report.interrupted); a point's own failure never stops it. `on_record(record)` is called
+    after each point is written (tests use it to interrupt or kill)."""
     config, out = Path(config), Path(out_dir)
     points = resolve_points(config, spec)
     keys = spec.keys()
@@ -550,8 +560,8 @@ def run_sweep(config, spec: SweepSpec, out_dir, *, scheduler: str | None = None,
     ran = 0
     if todo:
         try:
-            ran = _run_on_dask(todo, out, done, scheduler, workers, wall_limit_s, error_estimate, progress,
-                               on_record, str(config))
+            ran = _run_on_dask(todo, out, done, cluster, str(config), error_estimate=error_estimate,
+                               on_record=on_record)
         except KeyboardInterrupt:
             interrupted = True
             ran = sum(1 for p in todo if p.key in done)
@@ -576,9 +586,10 @@ def spec_of(vary=(), spec: SweepSpec | str | Path | None = None, sets=()) -> Swe
 
 
 def sweep(config, *, vary=(), spec: SweepSpec | str | Path | None = None, sets=(), out_dir=None, **options):
-    """Run a sweep from Python as `spotsim sweep` does (`run_sweep`'s options) and return its
-    table as a pandas DataFrame, a row per point; `table.attrs['report']` is the SweepReport.
-    out_dir: by default results/<scenario name>/sweep."""
+    """Run a sweep from Python as `spotsim sweep` does (`run_sweep`'s options: `cluster=
+    Cluster(workers=2)`, `precision_mm`, ...) and return its table as a pandas DataFrame, a
+    row per point; `table.attrs['report']` is the SweepReport. out_dir: by default
+    results/<scenario name>/sweep."""
     from ..scenario import load_scenario
 
     spec = spec_of(vary, spec, sets)
@@ -591,30 +602,30 @@ def sweep(config, *, vary=(), spec: SweepSpec | str | Path | None = None, sets=(
 
 
 @contextmanager
-def dask_client(scheduler: str | None = None, workers: int | None = None):
-    """A dask.distributed Client: of the scheduler at `scheduler`, or of a local cluster of
-    `workers` single-threaded worker processes (default one per core) whose scheduler lets a
-    task's worker die once (`allowed-failures`) before it gives up on the task."""
+def dask_client(cluster: Cluster):
+    """A dask.distributed Client: of `cluster.scheduler`, or of a local cluster of
+    `cluster.workers` single-threaded worker processes (default one per core) whose scheduler
+    lets a task's worker die once (`allowed-failures`) before it gives up on the task."""
     import dask
     from distributed import Client, LocalCluster
 
-    cluster = None
+    local = None
     with dask.config.set({"distributed.scheduler.allowed-failures": 1}):
-        if scheduler:
+        if cluster.scheduler:
             try:
-                client = Client(scheduler, timeout="30s")
+                client = Client(cluster.scheduler, timeout="30s")
             except OSError as e:
-                raise SpotsimError(f"--scheduler {scheduler}: cannot connect: {e}") from e
+                raise SpotsimError(f"--scheduler {cluster.scheduler}: cannot connect: {e}") from e
         else:
-            cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
-                                   dashboard_address=None, silence_logs=40)
-            client = Client(cluster)
+            local = LocalCluster(n_workers=cluster.workers or os.cpu_count() or 1, threads_per_worker=1,
+                                 processes=True, dashboard_address=None, silence_logs=40)
+            client = Client(local)
     try:
         yield client
     finally:
         client.close()
-        if cluster is not None:
-            cluster.close()
+        if local is not None:
+            local.close()
 
 
 def failed_record(point: Point, error: BaseException) -> dict:
@@ -625,20 +636,22 @@ def failed_record(point: Point, error: BaseException) -> dict:
             "message": f"{type(error).__name__}: {error}", "wall_time_s": math.nan}
 
 
-def _run_on_dask(todo, out, done, scheduler, workers, wall_limit_s, error_estimate, progress, on_record,
-                 source, grow_gap: bool = False) -> int:
+def _run_on_dask(todo: list[Point], out: Path, done: dict, cluster: Cluster, source: str, *,
+                 error_estimate: bool = True, grow_gap: bool = False, on_record=None) -> int:
+    """Run the points `todo` on `cluster`, each record appended to out's points file and put
+    in `done` as it ends (then `on_record(record)`); returns how many ran."""
     from distributed import as_completed
     from distributed.client import FutureCancelledError
     from tqdm import tqdm
 
     ran = 0
-    with dask_client(scheduler, workers) as client:
-        bar = tqdm(total=len(todo), unit="point", disable=not progress, smoothing=0.1)
+    with dask_client(cluster) as client:
+        bar = tqdm(total=len(todo), unit="point", disable=not cluster.progress, smoothing=0.1)
         try:
             first = next((p.scenario for p in todo if p.scenario is not None), None)
             if first is not None:
                 client.run(warm_worker, first, source)
-            futures = {client.submit(run_point, p, wall_limit_s, error_estimate, source, grow_gap,
+            futures = {client.submit(run_point, p, cluster.wall_limit_s, error_estimate, source, grow_gap,
                                      key=f"point-{p.key}", pure=False): p for p in todo}
             for fut in as_completed(futures):
                 p = futures[fut]
