@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import yaml
 
 from .errors import ScenarioError
@@ -48,6 +49,23 @@ def _bevel(x):
 
 def _crossing(x):
     return None if 0 <= x <= 180 else "must be in [0, 180] deg"
+
+
+#: The longest scenario name: it names the results directory (results/<name>).
+MAX_NAME = 100
+#: The longest free text (`description`).
+MAX_TEXT = 10_000
+
+
+def _name(x):
+    if re.fullmatch(rf"[A-Za-z0-9][A-Za-z0-9._-]{{0,{MAX_NAME - 1}}}", x):
+        return None
+    return (f"must be 1-{MAX_NAME} letters, digits, '.', '_' or '-', the first a letter or digit "
+            "(it names the results directory)")
+
+
+def _text(x):
+    return None if len(x) <= MAX_TEXT else f"must be at most {MAX_TEXT} characters, not {len(x)}"
 
 
 def _choice(*options):
@@ -199,13 +217,13 @@ class Completion:
 class Scenario:
     """A single arm on a fixed base grasping one module (paper Sec. 4)."""
 
-    name: str = key(doc="scenario name, used in results")
+    name: str = key(rule=_name, doc="scenario name, used in results")
     kind: str = key("single_arm", _choice("single_arm"), "single_arm or dual_arm")
     simulation: Simulation = key(doc="time step, duration and integrator")
     arm: Arm = key(doc="the arm on its fixed base")
     end_effector: EndEffector = key(doc="the finger drive")
     module: Module = key(doc="the target module")
-    description: str = key("", doc="free text")
+    description: str = key("", _text, "free text")
     geometry: Geometry = key(Geometry(), doc="the double V-groove and the fingers")
     contact: Contact = key(Contact(), doc="sphere layers, search and the normal contact law (Table 1)")
     friction: Friction = key(Friction(), doc="bristle friction (Table 2)")
@@ -230,13 +248,13 @@ class Robot:
 class DualArmScenario:
     """The free-flying dual-arm robot grasping TM-1 with EE-1, then TM-2 with EE-2 (Sec. 5)."""
 
-    name: str = key(doc="scenario name, used in results")
+    name: str = key(rule=_name, doc="scenario name, used in results")
     kind: str = key(rule=_choice("dual_arm"), doc="single_arm or dual_arm")
     simulation: Simulation = key(doc="time step, duration and integrator")
     end_effector: EndEffector = key(doc="both end-effectors")
     tm1: Module = key(doc="target module 1 (Table 5 body 1), offset from EE-1")
     tm2: Module = key(doc="target module 2 (Table 5 body 2), offset from EE-2")
-    description: str = key("", doc="free text")
+    description: str = key("", _text, "free text")
     robot: Robot = key(Robot(), doc="the free-flying dual-arm robot")
     geometry: Geometry = key(Geometry(), doc="the double V-groove and the fingers")
     contact: Contact = key(Contact(), doc="sphere layers, search and the normal contact law (Table 1)")
@@ -254,8 +272,15 @@ TOLERANCE_OFFSET_MM = 10.0
 TOLERANCE_DEG = {"roll": 30.0, "pitch": 62.0, "yaw": 30.0}
 
 
+#: The most characters of a value an error message shows.
+MAX_SHOWN = 80
+
+
 def _fmt(value) -> str:
-    return yaml.safe_dump(value, default_flow_style=True, width=1000).strip().removesuffix("...").strip()
+    """A value as YAML on one line, cut to MAX_SHOWN characters."""
+    text = yaml.safe_dump(value, default_flow_style=True, width=math.inf).strip().removesuffix("...").strip()
+    text = " ".join(text.split())  # a multi-line scalar on one line
+    return text if len(text) <= MAX_SHOWN else f"{text[:MAX_SHOWN - 20]}... ({len(text)} characters)"
 
 
 def _convert(tp, value, path, problems, where):
@@ -331,6 +356,9 @@ def _build(cls, data, path, problems, where):
 #: (304 B of time series each: 5e6 is about 1.5 GB).
 MAX_SPHERES = 2_000_000
 MAX_RECORDS = 5_000_000
+#: Dynamics steps a fixed-step run may take (duration_s / dt_s x substeps): at the 1-10 us a
+#: contact step costs, 1e8 is several minutes to hours.
+MAX_STEPS = 100_000_000
 
 
 def _budget(s, where: str) -> list[str]:
@@ -354,11 +382,42 @@ def _budget(s, where: str) -> list[str]:
         problems.append(f"{where}: simulation.duration_s = {_fmt(s.simulation.duration_s)}: {records:.2g} recorded "
                         f"intervals of dt_s = {_fmt(s.simulation.dt_s)}, more than the {MAX_RECORDS:.0e} a run may "
                         f"record: shorten the run or lengthen dt_s")
+    sim = s.simulation
+    if sim.integrator.method in FIXED_STEP and records * sim.substeps > MAX_STEPS:
+        problems.append(f"{where}: simulation.substeps = {sim.substeps}: {records * sim.substeps:.2g} dynamics steps "
+                        f"(duration_s / dt_s x substeps) of {sim.integrator.method}, more than the "
+                        f"{MAX_STEPS:.0e} a run may take: lower substeps or use adaptive_euler")
     return problems
+
+
+#: The integrators that take substeps fixed steps per recorded step.
+FIXED_STEP = ("symplectic_euler", "rk4")
+
+
+def _inertia_problems(section: str, m: Module, where: str) -> list[str]:
+    """A module's inertia tensor must be one a rigid body can have: positive definite, its
+    principal moments each at most the sum of the other two."""
+    i = m.inertia_kg_m2
+    tensor = [[i.ixx, i.ixy, i.ixz], [i.ixy, i.iyy, i.iyz], [i.ixz, i.iyz, i.izz]]
+    moments = sorted(float(x) for x in np.linalg.eigvalsh(tensor))
+    shown = ", ".join(f"{x:.4g}" for x in moments)
+    if moments[0] <= 0:
+        return [f"{where}: {section}.inertia_kg_m2 = {_fmt(to_dict(i))}: must be positive definite "
+                f"(its principal moments are {shown} kg m^2)"]
+    if moments[2] > (moments[0] + moments[1]) * (1 + 1e-9):
+        return [f"{where}: {section}.inertia_kg_m2 = {_fmt(to_dict(i))}: no rigid body has principal moments "
+                f"{shown} kg m^2 (the largest must not exceed the sum of the other two)"]
+    return []
 
 
 def _cross_checks(s: Scenario, where: str) -> list[str]:
     problems = _budget(s, where)
+    for section, module in modules_of(s).items():
+        problems += _inertia_problems(section, module, where)
+    integrator = s.simulation.integrator
+    if integrator.h_min_s > integrator.h_max_s:
+        problems.append(f"{where}: simulation.integrator.h_min_s = {_fmt(integrator.h_min_s)}: must not exceed "
+                        f"simulation.integrator.h_max_s = {_fmt(integrator.h_max_s)}")
     if s.friction.mu_k > s.friction.mu_s:
         problems.append(f"{where}: friction.mu_k = {_fmt(s.friction.mu_k)}: must not exceed "
                         f"friction.mu_s = {_fmt(s.friction.mu_s)}")
@@ -489,10 +548,35 @@ def from_dict(raw: Any, where: str = "<scenario>"):
     return scenario
 
 
+#: The most bytes a scenario file may hold (the shipped ones hold 2-3 kB).
+MAX_FILE_BYTES = 1_000_000
+#: The most values (YAML nodes) a scenario may hold with its aliases expanded: an alias
+#: (*name) stands for a whole tree, and a few nested ones for more nodes than memory holds
+#: once anything walks them. The shipped scenarios hold about 150.
+MAX_NODES = 100_000
+
+
+class TooLarge(yaml.composer.ComposerError):
+    """Valid YAML, larger than a scenario may be."""
+
+
 class Loader(yaml.SafeLoader):
     """PyYAML's safe loader, strict where a scenario needs it: a number in exponent form
     without a dot (1e-6, 2E3) is a number, as YAML 1.2 and every scientist read it (YAML 1.1
-    reads it as a string); a key given twice in one mapping is an error naming both lines."""
+    reads it as a string); a key given twice in one mapping is an error naming both lines;
+    more than MAX_NODES values, aliases expanded, are an error where the count passes it."""
+
+    def compose_node(self, parent, index):
+        mark = self.peek_event().start_mark
+        node = super().compose_node(parent, index)
+        sizes = self.__dict__.setdefault("_sizes", {})  # id(node) -> values in its expanded tree
+        if id(node) not in sizes:
+            children = node.value if isinstance(node, yaml.SequenceNode) else \
+                [n for pair in node.value for n in pair] if isinstance(node, yaml.MappingNode) else ()
+            sizes[id(node)] = 1 + sum(sizes.get(id(c), 1) for c in children)
+        if sizes[id(node)] > MAX_NODES:
+            raise TooLarge(None, None, f"more than {MAX_NODES:.0e} values, aliases expanded", mark)
+        return node
 
 
 # YAML 1.2's float, exponent forms included, in place of YAML 1.1's (which needs a dot)
@@ -532,7 +616,7 @@ def parse_yaml(text: str, where: str) -> Any:
     except yaml.MarkedYAMLError as e:
         mark = e.problem_mark or e.context_mark
         line = f"line {mark.line + 1}: " if mark is not None else ""
-        kind = "" if isinstance(e, yaml.constructor.ConstructorError) else "not valid YAML: "
+        kind = "" if isinstance(e, (yaml.constructor.ConstructorError, TooLarge)) else "not valid YAML: "
         raise ScenarioError([f"{where}: {line}{kind}{e.problem or e.context}"]) from None
     except yaml.YAMLError as e:
         raise ScenarioError([f"{where}: not valid YAML: {e}"]) from None
@@ -545,9 +629,14 @@ def read_yaml(path: str | Path) -> Any:
     read, is not UTF-8 text, or not valid YAML."""
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        with path.open("rb") as f:  # at most one byte too many: a device or a pipe may not end
+            data = f.read(MAX_FILE_BYTES + 1)
     except OSError as e:
         raise ScenarioError([f"{path}: cannot read: {e.strerror}"]) from e
+    if len(data) > MAX_FILE_BYTES:
+        raise ScenarioError([f"{path}: more than the {MAX_FILE_BYTES:.0e} bytes a scenario file may hold"])
+    try:
+        text = data.decode("utf-8")
     except UnicodeDecodeError as e:
         raise ScenarioError([f"{path}: not UTF-8 text (byte {e.start}: {e.object[e.start:e.start + 1]!r})"]) from None
     return parse_yaml(text, str(path))

@@ -43,7 +43,7 @@ from ..sim.model import (
 from ..sim.record import REPLAY_RATE_HZ, Layout
 from . import assets
 from .faces import contact_faces, sphere_layer
-from .scene import FINGER_NAMES, SceneSpec, check_inertias, frame, lock_joints, scene_spec, weld_urdf
+from .scene import FINGER_NAMES, SceneSpec, check_inertials, check_inertias, frame, lock_joints, scene_spec, weld_urdf
 
 
 @dataclass(frozen=True)
@@ -190,6 +190,7 @@ def build_model(s, source: str = "<scenario>", welded: dict | None = None, urdf:
         urdf = assets.compile_xacro(spec.xacro, spec.args)
     else:
         urdf = weld_urdf(urdf, spec)
+    check_inertials(urdf)
     try:
         full = pin.buildModelFromXML(urdf)
     except Exception as e:

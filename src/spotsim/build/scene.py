@@ -6,6 +6,7 @@ joined to the robot).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, fields
 
 import numpy as np
@@ -95,6 +96,51 @@ def scene_spec(s, welded: dict | None = None) -> SceneSpec:
     raise TypeError(f"not a scenario: {type(s).__name__}")
 
 
+def check_inertials(urdf: str) -> None:
+    """Reject a URDF whose <inertial> values are not finite numbers, whose mass is negative or
+    whose inertia is not positive semi-definite, naming the link: Pinocchio's URDF parser drops
+    an inertial it cannot read (a massless link) with only a log line, and takes the rest as
+    they are."""
+    import xml.etree.ElementTree as ET
+
+    try:
+        root = ET.fromstring(urdf)
+    except ET.ParseError as e:
+        raise ModelError(f"not a URDF: {e}") from None
+    problems = []
+    for link in root.iter("link"):
+        inertial = link.find("inertial")
+        if inertial is None:
+            continue
+        name = link.get("name")
+        values = {}
+        for tag, attrs in (("mass", ("value",)), ("inertia", ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")),
+                           ("origin", ("xyz", "rpy"))):
+            element = inertial.find(tag)
+            for attr in attrs:
+                text = element.get(attr) if element is not None else None
+                if text is None:
+                    continue
+                try:
+                    numbers = [float(x) for x in text.split()]
+                except ValueError:
+                    numbers = [math.nan]
+                if not numbers or not all(math.isfinite(x) for x in numbers):
+                    problems.append(f"link {name}: inertial {tag} {attr}={text!r} must be finite numbers")
+                values[attr] = numbers[0] if numbers else math.nan
+        if not all(math.isfinite(v) for v in values.values()):
+            continue
+        if values.get("value", 0.0) < 0:
+            problems.append(f"link {name}: mass {values['value']} kg must be >= 0")
+        I = np.array([[values.get("ixx", 0.0), values.get("ixy", 0.0), values.get("ixz", 0.0)],
+                      [values.get("ixy", 0.0), values.get("iyy", 0.0), values.get("iyz", 0.0)],
+                      [values.get("ixz", 0.0), values.get("iyz", 0.0), values.get("izz", 0.0)]])
+        if np.linalg.eigvalsh(I).min() < -MIN_INERTIA_EIGENVALUE:
+            problems.append(f"link {name}: inertia {I.tolist()} is not positive semi-definite")
+    if problems:
+        raise ModelError("; ".join(problems))
+
+
 def check_inertias(model: pin.Model, joints=None) -> None:
     """Reject non-finite values, negative masses and inertias that are not positive definite.
 
@@ -103,14 +149,15 @@ def check_inertias(model: pin.Model, joints=None) -> None:
     problems = []
     for j in range(1, model.njoints):
         I = model.inertias[j]
-        name = model.names[j]
+        links = [f.name for f in model.frames if f.type == pin.BODY and f.parentJoint == j]
+        name = f"link {links[0]} (joint {model.names[j]})" if links else f"body of joint {model.names[j]}"
         if not (np.isfinite(I.mass) and np.all(np.isfinite(I.lever)) and np.all(np.isfinite(I.inertia))):
-            problems.append(f"body of joint {name}: non-finite mass, centroid or inertia")
+            problems.append(f"{name}: non-finite mass, centroid or inertia")
             continue
         if I.mass < 0 or (joints is not None and j in joints and I.mass <= 0):
-            problems.append(f"body of joint {name}: mass {I.mass} kg must be > 0")
+            problems.append(f"{name}: mass {I.mass} kg must be > 0")
         if I.mass > 0 and np.linalg.eigvalsh(I.inertia).min() < MIN_INERTIA_EIGENVALUE:
-            problems.append(f"body of joint {name}: inertia {I.inertia.tolist()} is not positive definite")
+            problems.append(f"{name}: inertia {I.inertia.tolist()} is not positive definite")
     if problems:
         raise ModelError("; ".join(problems))
 
