@@ -1,10 +1,13 @@
 """Whole runs: the paper's Cases I-III, every shipped config's smoke run, and the results contract."""
 
 import json
+import os
+import subprocess
+import sys
 
 import numpy as np
 import pytest
-from conftest import CONFIGS, ROOT
+from conftest import CASE_I, CONFIGS, ROOT
 
 import spotsim
 from spotsim.cli import main
@@ -192,10 +195,10 @@ def test_interrupted_run_keeps_what_it_recorded(case_I, tmp_path, monkeypatch):
 
 def test_results_are_written_atomically(case_I, tmp_path):
     """A new run into an old directory first removes the old summary; no temp files remain."""
-    from spotsim.results import clear_summary
+    from spotsim.results import prepare
 
     (tmp_path / "summary.json").write_text('{"status": "completed"}')
-    clear_summary(tmp_path)
+    prepare(tmp_path)
     assert not (tmp_path / "summary.json").exists()
     r = spotsim.simulate(spotsim.replace(case_I, simulation={"duration_s": 0.01}))
     spotsim.write_results(r, tmp_path, figures=False)
@@ -259,3 +262,38 @@ def test_cut_empty_and_foreign_results_are_one_clear_line_for_plot_and_replay(tm
                 assert len(err) == 1 and name in err[0] and "Traceback" not in err[0], err
                 assert not (tmp_path / "x.html").exists()
             (out / name).write_bytes(good[name])
+
+
+def test_a_disk_too_full_for_the_results_is_reported_before_the_run(tmp_path, capsys, monkeypatch):
+    """The results' size (1 kB a recorded interval, 2 MB besides) is checked against the free
+    space before anything runs."""
+    import shutil
+
+    monkeypatch.setattr(shutil, "disk_usage", lambda path: shutil._ntuple_diskusage(10**9, 10**9 - 10**5, 10**5))
+    out = tmp_path / "out"
+    assert main(["run", str(CASE_I), "--out", str(out), "--quiet"]) == 2
+    assert capsys.readouterr().err.strip() == f"{out}: the results need about 4 MB, and its disk has 0.1 MB free"
+    assert list(out.iterdir()) == []
+
+
+def test_a_write_that_fails_midway_keeps_what_was_written_and_no_summary(tmp_path):
+    """With files limited to 200 kB (as a disk filling up would stop them), the run reports the
+    file it could not write and the files it kept, exit 2; the kept time series loads, no
+    temporary file is left and no summary.json claims a complete result."""
+    import resource
+
+    out = tmp_path / "out"
+    limit = lambda: resource.setrlimit(resource.RLIMIT_FSIZE, (200_000, 200_000))  # noqa: E731
+    proc = subprocess.run([sys.executable, "-m", "spotsim.cli", "run", str(CASE_I), "--out", str(out), "--quiet",
+                           "--no-error-estimate"], capture_output=True, text=True, preexec_fn=limit,
+                          env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)})
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    assert proc.stderr.strip().splitlines()[-1] == (
+        f"{out}: cannot write results: File too large (writing timeseries.csv); kept: timeseries.npz, replay.npz; "
+        "no summary.json: the run's results are not complete")
+    assert sorted(p.name for p in out.iterdir()) == ["replay.npz", "timeseries.npz"]
+    from spotsim.results import read_arrays
+
+    kept = read_arrays(out / "timeseries.npz")
+    recorded = spotsim.simulate(spotsim.load_scenario(CASE_I)).timeseries
+    assert set(kept) == set(recorded) and all(np.array_equal(kept[k], recorded[k]) for k in kept)

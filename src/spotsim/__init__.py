@@ -4,11 +4,13 @@
     scenario = spotsim.load_scenario("config/single_arm_case_I.yaml")
     result = spotsim.simulate(scenario)
     print(result.grasp["residual_offset_mm"])
+    spotsim.write_results(result, "results/case_I")
+    summary, timeseries = spotsim.read_results("results/case_I")
 """
 
 from .build.model import Model, build_model
 from .errors import ModelError, ScenarioError, SimulationError, SpotsimError
-from .results import write_results
+from .results import read_results, write_results
 from .scenario import Scenario, from_dict, load_scenario, replace, to_yaml
 from .sim.run import Result, simulate
 from .studies.ensemble import EnsembleResult, ensemble
@@ -28,6 +30,7 @@ __all__ = [
     "ensemble",
     "from_dict",
     "load_scenario",
+    "read_results",
     "replace",
     "simulate",
     "sweep",

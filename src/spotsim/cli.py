@@ -360,7 +360,9 @@ def _estimate_study(scenario, reference, args, out: Path, progress: bool) -> int
     """`spotsim study estimate`: estimate.csv, and per quantity how often the true error lay
     within the estimate. Exit 0, 2 when the integrator has no companion, 130 if interrupted."""
     import csv
+    import io
 
+    from .files import atomic_write
     from .studies.estimate import validate, validation_table
 
     try:
@@ -372,10 +374,11 @@ def _estimate_study(scenario, reference, args, out: Path, progress: bool) -> int
         print("interrupted", file=sys.stderr)
         return 130
     path = out / "estimate.csv"
-    with path.open("w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(rows[0]) if rows else ["member"])
-        w.writeheader()
-        w.writerows(rows)
+    text = io.StringIO()
+    w = csv.DictWriter(text, fieldnames=list(rows[0]) if rows else ["member"])
+    w.writeheader()
+    w.writerows(rows)
+    atomic_write(path, text.getvalue())
     print(f"{scenario.name}: error estimate against {reference.label(scenario.simulation.dt_s)}, "
           f"{args.members} starts")
     for r in validation_table(rows):
@@ -473,11 +476,13 @@ def _ensemble(args, scenario, model, path: Path, out: Path) -> int:
     if bad:
         print("\n".join(bad), file=sys.stderr)
         return 2
+    from .results import prepare
+    from .studies.ensemble import ENSEMBLE_JSON
+
     try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        print(f"{out}: cannot write results: {e.strerror}", file=sys.stderr)
-        return 2
+        prepare(out, ENSEMBLE_JSON)
+    except SpotsimError as err:
+        return _bad_input(err)
     e = ensemble(scenario, args.ensemble, seed=args.seed, workers=args.workers, progress=not args.quiet,
                  model=model, source=str(path))
     first = e.members[0] if e.members else None
@@ -590,7 +595,7 @@ def main(argv=None) -> int:
         print(to_yaml(scenario), end="")
         return 0
 
-    from .results import clear_summary, write_results
+    from .results import disk_need, prepare, write_results
     from .sim.run import simulate
 
     if args.replay:  # before the run: a missing meshcat is bad input, found before anything ran
@@ -604,11 +609,9 @@ def main(argv=None) -> int:
         return _ensemble(args, scenario, model, path, out)
     out = Path(args.out) if args.out else Path("results") / scenario.name
     try:
-        out.mkdir(parents=True, exist_ok=True)
-        clear_summary(out)
-    except OSError as e:
-        print(f"{out}: cannot write results: {e.strerror}", file=sys.stderr)
-        return 2
+        prepare(out, need_bytes=disk_need(scenario))
+    except SpotsimError as e:
+        return _bad_input(e)
     result = simulate(scenario, model=model, progress=not args.quiet, source=str(path))
     if not args.no_error_estimate and result.status != "interrupted":
         from .studies.estimate import estimate
@@ -619,9 +622,8 @@ def main(argv=None) -> int:
             result.summary["error_estimate"] = {"note": "interrupted by the user"}
     try:
         write_results(result, out, figures=not args.no_figures)
-    except OSError as e:
-        print(f"{out}: cannot write results: {e.strerror}", file=sys.stderr)
-        return 2
+    except SpotsimError as e:
+        return _bad_input(e)
     s = result.summary
     print(f"{s['scenario']}: {s['status']} - {s['message']}")
     for g in s["grasps"]:

@@ -1,61 +1,72 @@
-"""Writing a run's results: summary.json last and atomically, so a half-written run never
-looks complete."""
+"""Writing a run's results (summary.json last, every file atomically, so that a half-written
+run never looks complete) and reading them back."""
 
 from __future__ import annotations
 
 import csv
 import json
-import os
-import tempfile
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
+from .errors import SpotsimError
+from .files import atomic, atomic_write, check_space, save_figure
 from .scenario import to_yaml
-from .sim.run import Result
+from .sim.run import RESULTS_FORMAT, Result
 
 SUMMARY = "summary.json"
 REPLAY = "replay.npz"  # what `spotsim replay` draws besides the timeseries
+#: What a recorded interval takes on disk at most (timeseries.npz and .csv; Case I writes
+#: 222 B, the dual arm ...), and the figures and the rest.
+DISK_PER_RECORD_B = 1000
+DISK_FIXED_B = 2e6
 
 
-def _atomic_write(path: Path, text: str) -> None:
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
+def prepare(out_dir: str | Path, summary: str = SUMMARY, need_bytes: float = 0.0) -> Path:
+    """Make `out_dir`, remove a previous result's `summary` file (so that a run killed before
+    it writes its own leaves none), and check that `need_bytes` fit on its disk: SpotsimError
+    before anything runs if not."""
+    out = Path(out_dir)
     try:
-        with os.fdopen(fd, "w") as f:
-            f.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+        out.mkdir(parents=True, exist_ok=True)
+        (out / summary).unlink(missing_ok=True)
+    except OSError as e:
+        raise SpotsimError(f"{out}: cannot write results: {e.strerror}") from e
+    check_space(out, need_bytes, "the results")
+    return out
 
 
-def _atomic_npz(path: Path, arrays: dict) -> None:
-    tmp = path.with_name(f".{path.name}.tmp")
-    with open(tmp, "wb") as f:
-        np.savez_compressed(f, **arrays)
-    os.replace(tmp, path)
-
-
-def clear_summary(out_dir: Path) -> None:
-    """Remove a previous run's summary before a new run writes into the same directory."""
-    (Path(out_dir) / SUMMARY).unlink(missing_ok=True)
+def disk_need(scenario) -> float:
+    """Bytes a run's results may take on disk (`DISK_PER_RECORD_B` a recorded interval)."""
+    return scenario.simulation.duration_s / scenario.simulation.dt_s * DISK_PER_RECORD_B + DISK_FIXED_B
 
 
 def write_results(result: Result, out_dir: str | Path, figures: bool = True) -> Path:
-    """Write summary.json, timeseries.npz/.csv, replay.npz, scenario.yaml and figures/ into
-    `out_dir`."""
+    """Write timeseries.npz/.csv, replay.npz, scenario.yaml, figures/ and, last, summary.json
+    into `out_dir`, each file whole or not at all. SpotsimError if a file cannot be written
+    (a full disk): it names the files kept, and no summary.json is written."""
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    clear_summary(out)
+    prepare(out)
     ts = result.timeseries
-    _atomic_npz(out / "timeseries.npz", ts)
+    kept: list[str] = []
+    writes = [("timeseries.npz", lambda: atomic(out / "timeseries.npz", lambda f: np.savez_compressed(f, **ts)))]
     if result.replay:
-        _atomic_npz(out / REPLAY, result.replay)
-    _atomic_write(out / "timeseries.csv", _csv(ts, result.summary.get("fingers", [])))
-    _atomic_write(out / "scenario.yaml", to_yaml(result.scenario))
+        writes.append((REPLAY, lambda: atomic(out / REPLAY, lambda f: np.savez_compressed(f, **result.replay))))
+    writes += [("timeseries.csv", lambda: atomic_write(out / "timeseries.csv",
+                                                       _csv(ts, result.summary.get("fingers", [])))),
+               ("scenario.yaml", lambda: atomic_write(out / "scenario.yaml", to_yaml(result.scenario)))]
     if figures and len(ts["t"]) > 1:
-        plot_figures(ts, out / "figures", result.scenario.name)
-    _atomic_write(out / SUMMARY, json.dumps(result.summary, indent=2) + "\n")
+        writes.append(("figures/", lambda: plot_figures(ts, out / "figures", result.scenario.name)))
+    writes.append((SUMMARY, lambda: atomic_write(out / SUMMARY, json.dumps(result.summary, indent=2) + "\n")))
+    for name, write in writes:
+        try:
+            write()
+        except OSError as e:
+            raise SpotsimError(f"{out}: cannot write results: {e.strerror} (writing {name}); kept: "
+                               f"{', '.join(kept) or 'nothing'}; no {SUMMARY}: the run's results are not "
+                               "complete") from e
+        kept.append(name)
     return out
 
 
@@ -105,7 +116,7 @@ def plot_figures(ts: dict, fig_dir: Path, title: str) -> None:
     ax.grid(alpha=0.3)
     ax.legend()
     fig.tight_layout()
-    fig.savefig(fig_dir / "active_pairs.png", dpi=110)
+    save_figure(fig, fig_dir / "active_pairs.png")
     plt.close(fig)
     for name, key, unit, label in (("offset", "offset_mm", "mm", "offset of $O_b$ from $O_a$ (Fig. 11)"),
                                    ("contact_force", "force_N", "N", "combined contact force (Fig. 12)"),
@@ -119,7 +130,7 @@ def plot_figures(ts: dict, fig_dir: Path, title: str) -> None:
         axes[0].set_title(f"{title}: {label}")
         axes[-1].set_xlabel("time (s)")
         fig.tight_layout()
-        fig.savefig(fig_dir / f"{name}.png", dpi=110)
+        save_figure(fig, fig_dir / f"{name}.png")
         plt.close(fig)
 
 
@@ -138,7 +149,7 @@ def _dual_arm_figures(ts: dict, fig_dir: Path, title: str, plt) -> None:
         ax.legend()
     fig.suptitle(f"{title}: robot centroid displacement per grasp (Fig. 20)")
     fig.tight_layout()
-    fig.savefig(fig_dir / "robot_centroid_displacement.png", dpi=110)
+    save_figure(fig, fig_dir / "robot_centroid_displacement.png")
     plt.close(fig)
 
     fig, axes = plt.subplots(2, len(grasps), figsize=(6 * len(grasps), 6), squeeze=False, sharex="col")
@@ -155,7 +166,7 @@ def _dual_arm_figures(ts: dict, fig_dir: Path, title: str, plt) -> None:
         axes[1, col].set_xlabel("time (s)")
     fig.suptitle(f"{title}: contact forces and torques per grasp (Fig. 21)")
     fig.tight_layout()
-    fig.savefig(fig_dir / "contact_forces_torques.png", dpi=110)
+    save_figure(fig, fig_dir / "contact_forces_torques.png")
     plt.close(fig)
 
 
@@ -164,38 +175,77 @@ FIGURES_DUAL = FIGURES_SINGLE + ("robot_centroid_displacement.png", "contact_for
 
 
 def read_arrays(path: Path) -> dict:
-    """The arrays of an .npz file; OSError or ValueError for a file that is missing, cut short
-    or not an .npz (numpy's and zipfile's own errors, made one)."""
+    """The arrays of an .npz file; OSError for a file that cannot be read, ValueError for one
+    cut short, corrupt or not an .npz (numpy's, zipfile's and zlib's own errors, made one)."""
     import zipfile
+    import zlib
+
+    def bad(e):
+        return ValueError(f"{path.name}: not a readable .npz ({type(e).__name__}: {e})")
 
     try:
-        with np.load(path) as f:
+        f = np.load(path, allow_pickle=False)
+    except (zipfile.BadZipFile, EOFError, ValueError) as e:
+        raise bad(e) from e
+    if not isinstance(f, np.lib.npyio.NpzFile):
+        raise ValueError(f"{path.name}: a single array, not an .npz archive of them")
+    with f:
+        try:
             return {k: f[k] for k in f.files}
-    except (zipfile.BadZipFile, EOFError, KeyError) as e:
-        raise ValueError(f"{path.name}: not a readable .npz ({type(e).__name__}: {e})") from e
+        except (zipfile.BadZipFile, EOFError, KeyError, ValueError, zlib.error) as e:
+            raise bad(e) from e
 
 
-def read_results(result_dir: str | Path) -> tuple[dict, dict]:
+class Loaded(NamedTuple):
+    """A results directory as read: its summary.json and its time series (arrays by name)."""
+
+    summary: dict
+    timeseries: dict
+
+
+#: The series every run records (the figures draw them).
+SERIES = ("t", "offset_mm", "force_N", "torque_Nm", "pairs_slipping", "pairs_sticking")
+
+
+def read_results(result_dir: str | Path) -> Loaded:
     """A results directory's summary.json and time series, or SpotsimError naming what is
-    missing or unreadable."""
-    from .errors import SpotsimError
-
+    missing, unreadable, foreign or of another results format."""
     d = Path(result_dir)
+    if not d.is_dir():
+        raise SpotsimError(f"{d}: no such results directory")
+    if not (d / SUMMARY).is_file():
+        raise SpotsimError(f"{d}: no {SUMMARY}: not a spotsim results directory, or its run has not finished "
+                           "writing it")
     try:
         summary = json.loads((d / SUMMARY).read_text())
-        ts = read_arrays(d / "timeseries.npz")
-    except (OSError, ValueError) as e:
-        raise SpotsimError(f"{d}: not a spotsim results directory (needs {SUMMARY} and "
-                           f"timeseries.npz): {e}") from e
+    except UnicodeDecodeError:
+        raise SpotsimError(f"{d}: {SUMMARY} is not text") from None
+    except json.JSONDecodeError as e:
+        raise SpotsimError(f"{d}: {SUMMARY} is not valid JSON ({e.msg} at line {e.lineno} column {e.colno})") from None
+    except OSError as e:
+        raise SpotsimError(f"{d}: cannot read {SUMMARY}: {e.strerror}") from None
     if not isinstance(summary, dict):
         raise SpotsimError(f"{d}: {SUMMARY} is not a run's summary (a JSON object)")
-    return summary, ts
+    found = summary.get("results_format")
+    if found != RESULTS_FORMAT:
+        written = f"spotsim {summary['spotsim_version']}" if "spotsim_version" in summary else "another program"
+        layout = "no results_format" if found is None else f"results format {found!r}"
+        raise SpotsimError(f"{d}: {SUMMARY} has {layout} (written by {written}); this spotsim reads format "
+                           f"{RESULTS_FORMAT}: run the scenario again")
+    try:
+        ts = read_arrays(d / "timeseries.npz")
+    except OSError as e:
+        raise SpotsimError(f"{d}: cannot read timeseries.npz: {e.strerror}") from None
+    except ValueError as e:
+        raise SpotsimError(f"{d}: {e}") from None
+    missing = [k for k in SERIES if k not in ts]
+    if missing:
+        raise SpotsimError(f"{d}: timeseries.npz lacks {', '.join(missing)}: not a run's time series")
+    return Loaded(summary, ts)
 
 
 def replot(result_dir: str | Path) -> list[Path]:
     """Regenerate a results directory's figures from its timeseries.npz and summary.json."""
-    from .errors import SpotsimError
-
     d = Path(result_dir)
     summary, ts = read_results(d)
     if len(ts.get("t", ())) < 2:

@@ -78,18 +78,9 @@ def static_html(commands: list[dict], info: ReplayInfo, title: str) -> str:
 
 def write_html(path: Path, text: str) -> None:
     """Write the page atomically: an interrupted write leaves no half page."""
-    import os
-    import tempfile
+    from ..files import atomic_write
 
-    fd, tmp = tempfile.mkstemp(dir=Path(path).parent, prefix=f".{Path(path).name}.")
-    try:
-        with os.fdopen(fd, "w") as f:
-            f.write(text)
-        os.chmod(tmp, 0o644)  # a page to share (mkstemp makes it private)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    atomic_write(Path(path), text)
 
 
 def commands_of_html(text: str) -> list[dict]:

@@ -45,7 +45,7 @@ def load_run(result_dir: str | Path) -> Run:
         try:
             snapshots = read_arrays(d / REPLAY)
         except (OSError, ValueError) as e:
-            raise SpotsimError(f"{d / REPLAY}: unreadable: {e}") from e
+            raise SpotsimError(f"{d}: {e}") from e
         names = model.face_names
         if not {"master_faces", "slave_faces"} <= set(snapshots):
             raise SpotsimError(f"{d / REPLAY}: not a replay file (no contact faces); was it written by another "

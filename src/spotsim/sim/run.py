@@ -32,6 +32,8 @@ from .step import step
 from .weld import weld
 
 COMPLETED, INCOMPLETE, DIVERGED, INTERRUPTED = "completed", "incomplete", "diverged", "interrupted"
+#: The layout of summary.json and timeseries.npz; a reader refuses any other (`results.read_results`).
+RESULTS_FORMAT = 1
 #: A run stopped when its wall-time budget was spent (`simulate(wall_limit_s=...)`): no verdict.
 WALL_LIMIT = "wall limit"
 
@@ -246,6 +248,7 @@ def _summary(s, model, v, rec, series, status, message, wall, welds) -> dict:
     return {
         "scenario": s.name,
         "spotsim_version": __version__,
+        "results_format": RESULTS_FORMAT,
         "status": status,
         "message": message,
         "wall_time_s": wall,

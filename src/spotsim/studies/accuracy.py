@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..files import atomic_write, save_figure
 from ..scenario import Integrator, modules_of, replace, to_dict
 from ..sim.integrators import ADAPTIVE, METHODS
 from .runs import (
@@ -381,6 +382,7 @@ def accuracy_study(scenario, settings: list[Setting], reference: Setting, out_di
                                        progress=progress, plot=plot)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    (out / "accuracy.md").unlink(missing_ok=True)  # a previous study's, until this one is written
     dt = scenario.simulation.dt_s
     confirmation = reference.refined()
     sphere_sweep = any(s.sphere_scale != 1.0 for s in settings)
@@ -441,7 +443,7 @@ def accuracy_study(scenario, settings: list[Setting], reference: Setting, out_di
         bar.close()
         writer.close()
     report.files = [writer.path, out / "accuracy.md"]
-    (out / "accuracy.md").write_text(accuracy_markdown(scenario, report))
+    atomic_write(out / "accuracy.md", accuracy_markdown(scenario, report))
     if plot and report.rows:
         work_precision_plot(scenario, report, out / "work_precision.png")
         report.files.append(out / "work_precision.png")
@@ -560,7 +562,7 @@ def work_precision_plot(scenario, report: AccuracyReport, path: Path) -> None:
     fig.suptitle(f"{report.scenario}: error against wall time\n{textwrap.shorten(report.confirmation_text(), 150)}",
                  fontsize=9)
     fig.tight_layout(rect=(0, 0.14, 1, 1))
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path)
     plt.close(fig)
 
 

@@ -32,6 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..files import atomic_write, save_figure
 from ..scenario import modules_of
 from .ensemble import (
     OFFSET_TOL_MM,
@@ -286,6 +287,7 @@ def accuracy_ensemble_study(scenario, settings: list, reference, out_dir, n: int
 
     out = Path(out_dir)
     (out / "members").mkdir(parents=True, exist_ok=True)
+    (out / "accuracy_ensemble.md").unlink(missing_ok=True)  # a previous study's, until this one is written
     dt = scenario.simulation.dt_s
     confirmation = reference.refined()
     k = min(confirmation_members or n, n)
@@ -306,7 +308,7 @@ def accuracy_ensemble_study(scenario, settings: list, reference, out_dir, n: int
             e = ensemble(setting.apply(scenario), size, seed=seed, workers=workers, progress=progress,
                          source=source)
             report.ensembles[label] = e
-            (out / "members" / f"{slug(label)}.csv").write_text(members_csv(e))
+            atomic_write(out / "members" / f"{slug(label)}.csv", members_csv(e))
             if e.interrupted:
                 report.interrupted = True
                 break
@@ -317,7 +319,7 @@ def accuracy_ensemble_study(scenario, settings: list, reference, out_dir, n: int
     finally:
         writer.close()
     md = out / "accuracy_ensemble.md"
-    md.write_text(ensemble_markdown(scenario, report))
+    atomic_write(md, ensemble_markdown(scenario, report))
     report.files = [writer.path, md]
     if plot and report.rows:
         work_precision_ensemble_plot(report, out / "work_precision_ensemble.png")
@@ -461,6 +463,6 @@ def work_precision_ensemble_plot(report: EnsembleAccuracyReport, path: Path) -> 
     fig.suptitle(f"{report.scenario}: ensembles of {report.members} (seed {report.seed}), error against wall time\n"
                  f"{textwrap.shorten(report.confirmation_text(), 160)}", fontsize=9)
     fig.tight_layout(rect=(0, 0.1, 1, 1))
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path)
     plt.close(fig)
 

@@ -444,16 +444,16 @@ def members_csv(e: EnsembleResult) -> str:
 def write_ensemble(e: EnsembleResult, out_dir) -> list[Path]:
     """Write ensemble.json, members.csv and scenario.yaml (the nominal scenario) into out_dir;
     ensemble.json last and atomically."""
-    from ..results import _atomic_write
+    from ..files import atomic_write
     from ..scenario import to_yaml
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     (out / ENSEMBLE_JSON).unlink(missing_ok=True)
     files = [out / "members.csv", out / "scenario.yaml", out / ENSEMBLE_JSON]
-    _atomic_write(files[0], members_csv(e))
-    _atomic_write(files[1], to_yaml(e.scenario))
-    _atomic_write(files[2], json.dumps(ensemble_json(e), indent=2, allow_nan=True) + "\n")
+    atomic_write(files[0], members_csv(e))
+    atomic_write(files[1], to_yaml(e.scenario))
+    atomic_write(files[2], json.dumps(ensemble_json(e), indent=2, allow_nan=True) + "\n")
     return files
 
 

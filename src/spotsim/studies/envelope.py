@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ScenarioError
+from ..files import atomic_write, save_figure
 from ..scenario import TOLERANCE_DEG, TOLERANCE_OFFSET_MM, from_dict, set_value, to_dict
 from .sweep import (
     CONVERGED,
@@ -200,7 +201,8 @@ def envelope(config, out_dir, search: Search = Search(), *, cluster: Cluster = C
     todo = search.rays()
     done = read_records(out / POINTS_FILE)  # before anything is written: a foreign file stays as it is
     out.mkdir(parents=True, exist_ok=True)
-    (out / "envelope.yaml").write_text(yaml.safe_dump({"scenario": str(config), "set": list(sets),
+    (out / "envelope.md").unlink(missing_ok=True)  # a previous envelope's, until this one is written
+    atomic_write(out / "envelope.yaml", yaml.safe_dump({"scenario": str(config), "set": list(sets),
                                                        "precision_mm": search.precision_mm,
                                                        "rays": [{"name": r.name, "direction": r.direction,
                                                                  "resolution": r.resolution, "limit": r.limit}
@@ -325,16 +327,18 @@ def write_envelope(report: EnvelopeReport) -> None:
     """envelope.csv (a row per ray: its direction, bracket, boundary and runs), envelope.md
     (claimed against measured per axis) and envelope.png."""
     import csv
+    import io
 
     out = report.out
-    with (out / "envelope.csv").open("w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(["ray", *(f"dir_{a}" for a in AXES), "resolution", "limit", "captured_up_to", "not_captured_from",
-                    "boundary", "beyond", "runs", "capture_fraction_at_captured", "capture_fraction_at_not_captured"])
-        for r in report.rays:
-            w.writerow([r.name, *(r.direction.get(a, 0.0) for a in AXES), r.resolution, r.limit, r.lo,
-                        "" if r.hi is None else r.hi, r.boundary, r.beyond, len(r.probes),
-                        *(_fraction(r.chance.get(m)) for m in (r.lo, r.hi))])
+    f = io.StringIO()
+    w = csv.writer(f)
+    w.writerow(["ray", *(f"dir_{a}" for a in AXES), "resolution", "limit", "captured_up_to", "not_captured_from",
+                "boundary", "beyond", "runs", "capture_fraction_at_captured", "capture_fraction_at_not_captured"])
+    for r in report.rays:
+        w.writerow([r.name, *(r.direction.get(a, 0.0) for a in AXES), r.resolution, r.limit, r.lo,
+                    "" if r.hi is None else r.hi, r.boundary, r.beyond, len(r.probes),
+                    *(_fraction(r.chance.get(m)) for m in (r.lo, r.hi))])
+    atomic_write(out / "envelope.csv", f.getvalue())
     lines = ["| axis | claimed | measured + | measured − | beyond + / − | runs |",
              "| --- | --- | --- | --- | --- | --- |"]
     for row in report.axis_table():
@@ -343,7 +347,7 @@ def write_envelope(report: EnvelopeReport) -> None:
             return f"≥ {lo:.3g}" if hi is None else f"{lo:.3g}–{hi:.3g}"
         lines.append(f"| {row['axis']} ({row['unit']}) | ±{row['claimed']:g} | {fmt('+')} | {fmt('-')} | "
                      f"{row['beyond+'] or '–'} / {row['beyond-'] or '–'} | {row['runs']} |")
-    (out / "envelope.md").write_text("\n".join(lines) + "\n")
+    atomic_write(out / "envelope.md", "\n".join(lines) + "\n")
     try:
         plot_envelope(report, out / "envelope.png")
     except Exception:  # noqa: BLE001 - a figure never costs the envelope's results
@@ -397,5 +401,5 @@ def plot_envelope(report: EnvelopeReport, path: Path) -> None:
         ax.legend(loc="upper right", fontsize=8)
         fig.colorbar(sc, ax=ax, label="residual offset (mm)")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path)
     plt.close(fig)

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import SpotsimError
+from ..files import atomic_write
 from ..scenario import TOLERANCE_DEG, TOLERANCE_OFFSET_MM, modules_of, replace, to_dict
 from ..sim.integrators import ADAPTIVE
 from .runs import (
@@ -316,6 +317,7 @@ def stability_study(scenario, cases: list[Case], out_dir, *, source: str = "<stu
     Ctrl-C stops the study and keeps the rows written."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    (out / "stability.md").unlink(missing_ok=True)  # a previous study's, until this one is written
     writer = RowWriter(out / "stability.csv", STABILITY_COLUMNS)
     report = StabilityReport(scenario.name, writer.rows)
     from ..sim.run import progress_bar
@@ -345,7 +347,7 @@ def stability_study(scenario, cases: list[Case], out_dir, *, source: str = "<stu
     finally:
         bar.close()
         writer.close()
-    (out / "stability.md").write_text(stability_markdown(scenario, report))
+    atomic_write(out / "stability.md", stability_markdown(scenario, report))
     report.files = [writer.path, out / "stability.md"]
     return report
 

@@ -49,6 +49,7 @@ import numpy as np
 import yaml
 
 from ..errors import ScenarioError, SpotsimError
+from ..files import atomic_write
 from ..scenario import from_dict, modules_of, parse_yaml, read_yaml, set_value, to_dict, to_yaml
 from ..sim.run import WALL_LIMIT
 from .ensemble import Member, Start, grasp_prefix, member_row
@@ -547,7 +548,7 @@ def run_sweep(config, spec: SweepSpec, out_dir, *, cluster: Cluster = Cluster(),
     done = read_records(out / POINTS_FILE)  # before anything is written: a foreign file stays as it is
     try:
         out.mkdir(parents=True, exist_ok=True)
-        (out / SPEC_FILE).write_text(yaml.safe_dump(
+        atomic_write(out / SPEC_FILE, yaml.safe_dump(
             {"scenario": str(config), "set": spec.sets, "keys": keys,
              "points": [{"key": p.key, **{k: _plain(v) if isinstance(v, np.generic) else v
                                           for k, v in p.values.items()}} for p in points]}, sort_keys=False))
