@@ -196,6 +196,9 @@ CORPUS = {
         "{tmp}/bad.yaml: simulation.substeps = 100000: 2e+08 dynamics steps (duration_s / dt_s x substeps) of "
         "rk4, more than the 1e+08 a run may take: lower substeps or use adaptive_euler",
     )),
+    "substeps beyond a million": Bad(config({"simulation": {"dt_s": 1e-3, "duration_s": 2.0, "substeps": 10**30}}), (
+        "{tmp}/bad.yaml: simulation.substeps = 1000000000000000000000000000000: must be in [1, 1000000]",
+    )),
     "dual arm without TM-2": Bad(config({"tm2": None}, DUAL), (
         "{tmp}/bad.yaml: tm2 = (missing): required key",
     )),
@@ -377,3 +380,34 @@ def test_each_bad_input_gives_its_exact_message(name, tmp_path, capsys):
 
 def test_the_corpus_holds_at_least_40_inputs():
     assert len(CORPUS) >= 40
+
+
+def numeric_keys(raw: dict, prefix: str = ""):
+    """Every numeric key path of a scenario's resolved mapping, list items by index."""
+    for k, v in raw.items():
+        path = f"{prefix}{k}"
+        if isinstance(v, dict):
+            yield from numeric_keys(v, path + ".")
+        elif isinstance(v, (list, tuple)):
+            yield from (f"{path}.{i}" for i, x in enumerate(v) if isinstance(x, (int, float)))
+        elif isinstance(v, (int, float)) and not isinstance(v, bool):
+            yield path
+
+
+EXTREMES = ("1e300", "-1e300", "1e-300", "123456789012345678901234567890")
+
+
+@pytest.mark.parametrize("value", EXTREMES)
+def test_an_extreme_number_in_any_key_ends_in_an_exit_code_never_an_exception(value, tmp_path, capsys):
+    """Each numeric key of Case I set to an extreme value: refused (2), or run for 50 ms to a
+    status (0, 3, 4); no exception escapes (a closing speed of 1e300 m/s raised OverflowError
+    in the stable-step prediction, 1e30 substeps in the compiled loop)."""
+    from spotsim.scenario import to_dict
+
+    codes = {}
+    for key in numeric_keys(to_dict(spotsim.load_scenario(CASE_I))):
+        duration = [] if key == "simulation.duration_s" else ["--set", "simulation.duration_s=0.05"]
+        codes[key] = main(["run", str(CASE_I), "--set", f"{key}={value}", *duration, "--out", str(tmp_path / "out"),
+                           "--quiet", "--no-figures", "--no-error-estimate"])
+    capsys.readouterr()
+    assert set(codes.values()) <= {0, 2, 3, 4}, codes

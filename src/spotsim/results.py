@@ -176,23 +176,24 @@ FIGURES_DUAL = FIGURES_SINGLE + ("robot_centroid_displacement.png", "contact_for
 
 def read_arrays(path: Path) -> dict:
     """The arrays of an .npz file; OSError for a file that cannot be read, ValueError for one
-    cut short, corrupt or not an .npz (numpy's, zipfile's and zlib's own errors, made one)."""
-    import zipfile
-    import zlib
-
+    cut short, corrupt or not an .npz (whatever numpy, zipfile or zlib raise on it)."""
     def bad(e):
         return ValueError(f"{path.name}: not a readable .npz ({type(e).__name__}: {e})")
 
     try:
         f = np.load(path, allow_pickle=False)
-    except (zipfile.BadZipFile, EOFError, ValueError) as e:
+    except OSError:
+        raise
+    except Exception as e:  # a corrupt file makes the zip and npy readers raise many kinds
         raise bad(e) from e
     if not isinstance(f, np.lib.npyio.NpzFile):
         raise ValueError(f"{path.name}: a single array, not an .npz archive of them")
     with f:
         try:
             return {k: f[k] for k in f.files}
-        except (zipfile.BadZipFile, EOFError, KeyError, ValueError, zlib.error) as e:
+        except OSError:
+            raise
+        except Exception as e:
             raise bad(e) from e
 
 

@@ -68,6 +68,14 @@ def _text(x):
     return None if len(x) <= MAX_TEXT else f"must be at most {MAX_TEXT} characters, not {len(x)}"
 
 
+#: The most dynamics steps per recorded step (the accuracy study's finest reference takes 2,560).
+MAX_SUBSTEPS = 1_000_000
+
+
+def _substeps(x):
+    return None if 1 <= x <= MAX_SUBSTEPS else f"must be in [1, {MAX_SUBSTEPS}]"
+
+
 def _choice(*options):
     def rule(x):
         return None if x in options else f"must be one of {', '.join(options)}"
@@ -102,7 +110,7 @@ class Integrator:
 @dataclass(frozen=True, kw_only=True)
 class Simulation:
     dt_s: float = key(rule=_positive, doc="recorded step; the paper's is 1 ms")
-    substeps: int = key(10, _positive, "dynamics steps per recorded step (dynamics at dt_s/substeps)")
+    substeps: int = key(10, _substeps, "dynamics steps per recorded step (dynamics at dt_s/substeps)")
     duration_s: float = key(rule=_positive, doc="time-out: a grasp not complete by then is incomplete")
     integrator: Integrator = key(Integrator(), doc="time integrator")
     gravity_m_s2: tuple[float, float, float] = key((0.0, 0.0, 0.0), doc="gravity in world, m/s^2")
