@@ -273,6 +273,18 @@ CORPUS = {
     "--set into a number": Bad(override("contact.restitution.x=1"), (
         "{root}/config/single_arm_case_I.yaml: contact.restitution = {x: 1}: must be a number",
     )),
+    # ------------------------------------------------------------------ options
+    "unknown option": Bad(lambda tmp: ["run", "--bogus"], ("spotsim: unrecognized arguments: --bogus",)),
+    "negative seed": Bad(lambda tmp: ["run", str(CASE_I), "--ensemble", "2", "--seed", "-1"],
+                         ("spotsim run: argument --seed: -1: must be >= 0",)),
+    "no workers": Bad(lambda tmp: ["sweep", str(CASE_I), "--vary", "contact.restitution=0.7,0.8", "--workers", "0"],
+                      ("spotsim sweep: argument --workers: 0: must be >= 1",)),
+    "workers without an ensemble": Bad(lambda tmp: ["run", str(CASE_I), "--workers", "2"],
+                                       ("--workers: only with --ensemble N",)),
+    "scheduler without a port": Bad(lambda tmp: ["sweep", str(CASE_I), "--vary", "contact.restitution=0.7,0.8",
+                                                 "--scheduler", "nonsense", "--out", str(tmp / "out"), "--quiet"],
+                                    ("--scheduler nonsense: cannot connect: missing port number in address "
+                                     "'nonsense'",)),
     # ------------------------------------------------------------------ geometries
     "finger wider than the mouth": Bad(config({"geometry": {"finger_slant_mm": 16.0}}), (
         "{tmp}/bad.yaml: geometry.finger_slant_mm = 16.0: a finger must fit its groove's mouth "

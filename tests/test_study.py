@@ -204,7 +204,7 @@ def test_ctrl_c_inside_a_compiled_callback_still_stops_the_study():
     (["stability", "--duration", "-1"], "must be > 0"),
     (["accuracy", "--set", "contact.restitution=1.7"], "must be in (0, 1]"),
     (["accuracy", "--seed", "3"], "only with --ensemble"),
-    (["accuracy", "--ensemble", "0"], "--ensemble 0: must be >= 1"),
+    (["accuracy", "--ensemble", "0"], "spotsim study accuracy: argument --ensemble: 0: must be >= 1"),
     (["accuracy", "--ensemble", "4", "--wall-limit", "10"], "not with --ensemble"),
 ])
 def test_bad_study_input_is_exit_2(argv, message, capsys, tmp_path):

@@ -20,8 +20,32 @@ DEFAULT_SCENARIO = "single_arm_case_I.yaml"
 EXIT = {"completed": 0, "incomplete": 3, "diverged": 4, "interrupted": 130}
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse's parser, its errors one line (`spotsim run: argument --seed: -1: must be >= 0`)
+    and exit code 2, without the usage block."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: {message}\n")
+
+
+def _at_least(minimum: int):
+    """An argparse type: a whole number >= `minimum`."""
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text}: must be a whole number") from None
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f"{text}: must be >= {minimum}")
+        return value
+    return parse
+
+
+COUNT, SEED = _at_least(1), _at_least(0)
+
+
 def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="spotsim", description=__doc__.splitlines()[0])
+    p = _Parser(prog="spotsim", description=__doc__.splitlines()[0])
     sub = p.add_subparsers(dest="command", required=True)
     run = sub.add_parser("run", help="run a scenario and write its results")
     run.add_argument("config", nargs="?", help=f"scenario YAML (default: config/{DEFAULT_SCENARIO})")
@@ -35,12 +59,12 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--quiet", action="store_true", help="no progress bar")
     run.add_argument("--replay", action="store_true", help="replay the run in Meshcat when it ends")
     run.add_argument("--zmq-url", help="with --replay: the Meshcat server to use (default: start one)")
-    run.add_argument("--ensemble", type=int, metavar="N",
+    run.add_argument("--ensemble", type=COUNT, metavar="N",
                      help="run N members from starts perturbed within +-10 um and +-0.01 deg (member 0 "
                           "unperturbed) and write their statistics (ensemble.json, members.csv)")
-    run.add_argument("--seed", type=int, default=0, metavar="S", help="with --ensemble: the perturbations' seed "
+    run.add_argument("--seed", type=SEED, default=0, metavar="S", help="with --ensemble: the perturbations' seed "
                                                                       "(default 0)")
-    run.add_argument("--workers", type=int, metavar="W", help="with --ensemble: processes (default: CPU count)")
+    run.add_argument("--workers", type=COUNT, metavar="W", help="with --ensemble: processes (default: CPU count)")
     val = sub.add_parser("validate", help="print the resolved scenario, or every problem in it")
     val.add_argument("config")
     val.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE")
@@ -72,7 +96,7 @@ def _envelope_parser(sub) -> None:
     en.add_argument("--axes", default=",".join(AXES), help=f"axes searched both ways (default {','.join(AXES)})")
     en.add_argument("--planes", default="x-y,roll-yaw", help="planes fanned with rays, or 'none' (default "
                                                              "x-y,roll-yaw)")
-    en.add_argument("--rays", type=int, default=PLANE_RAYS, metavar="N",
+    en.add_argument("--rays", type=COUNT, default=PLANE_RAYS, metavar="N",
                     help=f"rays around each plane (default {PLANE_RAYS})")
     en.add_argument("--resolution-mm", type=float, default=RESOLUTION["mm"], metavar="MM")
     en.add_argument("--resolution-deg", type=float, default=RESOLUTION["deg"], metavar="DEG")
@@ -83,14 +107,14 @@ def _envelope_parser(sub) -> None:
     en.add_argument("--out", help="output directory (default results/<scenario name>/envelope); started again "
                                   "over it, probes already run are not run again")
     en.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="an existing Dask scheduler")
-    en.add_argument("--workers", type=int, metavar="W", help="local cluster: worker processes")
+    en.add_argument("--workers", type=COUNT, metavar="W", help="local cluster: worker processes")
     en.add_argument("--wall-limit", type=float, default=WALL_LIMIT_S, metavar="S", help="budget of each probe")
     en.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE",
                     help="override a scenario key for every probe (repeatable)")
-    en.add_argument("--members", type=int, default=1, metavar="N",
+    en.add_argument("--members", type=COUNT, default=1, metavar="N",
                     help="near each boundary, run its bracket as ensembles of N perturbed starts and report the "
                          "capture fraction (default 1: the bisection alone)")
-    en.add_argument("--seed", type=int, default=0, metavar="S", help="with --members: the perturbations' seed")
+    en.add_argument("--seed", type=SEED, default=0, metavar="S", help="with --members: the perturbations' seed")
     en.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
@@ -108,7 +132,7 @@ def _envelope(args) -> int:
         if bad:
             raise ScenarioError([f"--axes/--planes: {', '.join(bad)}: not one of {', '.join(AXES)} / "
                                  f"{', '.join('-'.join(p) for p in PLANES)}"])
-        for name in ("rays", "members", "resolution_mm", "resolution_deg", "limit_mm", "limit_deg"):
+        for name in ("resolution_mm", "resolution_deg", "limit_mm", "limit_deg"):
             if not getattr(args, name) > 0:
                 raise ScenarioError([f"--{name.replace('_', '-')} = {getattr(args, name)}: must be positive"])
         cluster = _cluster(args)
@@ -142,7 +166,7 @@ def _sweep_parser(sub) -> None:
                                   "again over it runs only the points it lacks")
     sw.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="an existing Dask scheduler (default: a "
                                                                      "local cluster)")
-    sw.add_argument("--workers", type=int, metavar="W", help="local cluster: worker processes (default: one "
+    sw.add_argument("--workers", type=COUNT, metavar="W", help="local cluster: worker processes (default: one "
                                                              "per core)")
     sw.add_argument("--wall-limit", type=float, default=WALL_LIMIT_S, metavar="S",
                     help=f"wall-time budget of each point (default {WALL_LIMIT_S:g} s)")
@@ -216,17 +240,17 @@ def _study_parser(sub) -> None:
                           "refinement confirms it")
     acc.add_argument("--wall-limit", type=float, metavar="S", help="wall-time budget of each run (default: none)")
     acc.add_argument("--no-plot", action="store_true", help="skip the work-precision plot")
-    est.add_argument("--members", type=int, default=8, metavar="N", help="starts compared (default 8)")
+    est.add_argument("--members", type=COUNT, default=8, metavar="N", help="starts compared (default 8)")
     est.add_argument("--reference", metavar="METHOD:VALUE", default="symplectic_euler:1280",
                      help="the converged setting (default symplectic_euler:1280, 0.78125 us at dt 1 ms: the "
                           "ensemble accuracy studies' confirmed reference)")
-    est.add_argument("--workers", type=int, metavar="W", help="parallel processes (default: one per core)")
-    acc.add_argument("--ensemble", type=int, metavar="N",
+    est.add_argument("--workers", type=COUNT, metavar="W", help="parallel processes (default: one per core)")
+    acc.add_argument("--ensemble", type=COUNT, metavar="N",
                      help="run every setting as an N-member ensemble from the same perturbed starts and compare "
                           "distributions (KS test, medians) with the reference's ensemble")
-    acc.add_argument("--seed", type=int, default=0, metavar="S", help="with --ensemble: the starts' seed (default 0)")
-    acc.add_argument("--workers", type=int, metavar="W", help="with --ensemble: processes (default: CPU count)")
-    acc.add_argument("--confirmation-members", type=int, metavar="K",
+    acc.add_argument("--seed", type=SEED, default=0, metavar="S", help="with --ensemble: the starts' seed (default 0)")
+    acc.add_argument("--workers", type=COUNT, metavar="W", help="with --ensemble: processes (default: CPU count)")
+    acc.add_argument("--confirmation-members", type=COUNT, metavar="K",
                      help="with --ensemble: run the confirmation on the first K starts only (default: N)")
     stab.add_argument("--cases", metavar="NAME,NAME",
                       help="cases or groups (stiff, extreme, baseline); spaces ignored, e.g. 'Ex100,y_a+10mm'")
@@ -278,10 +302,6 @@ def _study(args) -> int:
                 if given:
                     raise ValueError(f"{', '.join(given)}: only with --ensemble N")
             else:
-                for option, value in (("--ensemble", args.ensemble), ("--workers", args.workers),
-                                      ("--confirmation-members", args.confirmation_members)):
-                    if value is not None and value < 1:
-                        raise ValueError(f"{option} {value}: must be >= 1")
                 if args.wall_limit is not None:
                     raise ValueError("--wall-limit: not with --ensemble")
             fixed = {m: substeps or n for m, n in grid.substeps.items()}
@@ -294,10 +314,6 @@ def _study(args) -> int:
                                 tols=(tols or grid.tols) if not methods or "adaptive_euler" in methods else ())
             duration = duration or grid.duration_s
         elif args.study == "estimate":
-            if args.members < 1:
-                raise ValueError(f"--members {args.members}: must be >= 1")
-            if args.workers is not None and args.workers < 1:
-                raise ValueError(f"--workers {args.workers}: must be >= 1")
             reference = accuracy.parse_setting(args.reference)
         else:
             if args.wall_limit is not None and not args.wall_limit > 0:
@@ -467,10 +483,6 @@ def _ensemble(args, scenario, model, path: Path, out: Path) -> int:
     from .studies.ensemble import ensemble, report_lines, write_ensemble
 
     bad = []
-    if args.ensemble < 1:
-        bad.append(f"--ensemble {args.ensemble}: must be >= 1")
-    if args.workers is not None and args.workers < 1:
-        bad.append(f"--workers {args.workers}: must be >= 1")
     if args.replay:
         bad.append("--replay: not with --ensemble (replay a member by running its start from ensemble.json)")
     if bad:
@@ -562,7 +574,10 @@ def _load_or_report(path: Path, overrides):
 
 
 def main(argv=None) -> int:
-    args = _parser().parse_args(argv)
+    try:
+        args = _parser().parse_args(argv)
+    except SystemExit as e:  # --help (0) or a bad option (2, one line printed)
+        return e.code
     if args.command == "replay":
         return _replay(args.result_dir, args)
     if args.command == "study":
@@ -581,6 +596,11 @@ def main(argv=None) -> int:
             print(e, file=sys.stderr)
             return 2
         return 0
+    if args.command == "run" and args.ensemble is None:
+        given = [o for o, v in (("--seed", args.seed != 0), ("--workers", args.workers is not None)) if v]
+        if given:
+            print(f"{', '.join(given)}: only with --ensemble N", file=sys.stderr)
+            return 2
     path = _config_path(getattr(args, "config", None))
     loaded = _load_or_report(path, args.set)
     if loaded is None:

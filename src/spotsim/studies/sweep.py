@@ -615,7 +615,7 @@ def dask_client(cluster: Cluster):
         if cluster.scheduler:
             try:
                 client = Client(cluster.scheduler, timeout="30s")
-            except OSError as e:
+            except (OSError, ValueError) as e:  # no answer; an address distributed cannot parse
                 raise SpotsimError(f"--scheduler {cluster.scheduler}: cannot connect: {e}") from e
         else:
             local = LocalCluster(n_workers=cluster.workers or os.cpu_count() or 1, threads_per_worker=1,
