@@ -975,16 +975,17 @@ def stability_table(r: Results) -> str:
     rows = []
     for x in r.stability:
         finer = x["finer_verdict"] if x["finer_verdict"] != "not run" else ""
+        gradient = x.get("gradient_verdict", "not run")
         rows.append([x["case"], f"{num(x['predicted_stable_step_ms'])}, {num(x['omega_h'], 2)}", x["verdict"],
-                     x["prediction_held"], finer, num(x["residual_offset_mm"]), num(x["peak_force_N"]),
-                     _short_message(x["message"])])
+                     x["prediction_held"], finer, "" if gradient == "not run" else gradient,
+                     num(x["residual_offset_mm"]), num(x["peak_force_N"]), _short_message(x["message"])])
     counts: dict[str, int] = {}
     for x in r.stability:
         counts[x["verdict"]] = counts.get(x["verdict"], 0) + 1
     summary = "; ".join(f"{v}: {n}" for v, n in counts.items())
     failed = counts.get("FAILED", 0)
     return (table(["case", "predicted stable step (ms), ω·h", "verdict", "prediction held", "at h/4",
-                   "residual e (mm)", "peak force (N)", "outcome"], rows)
+                   "gradient law", "residual e (mm)", "peak force (N)", "outcome"], rows)
             + f"\n\nVerdicts: {summary}. "
             + ("No case ended in an exception or a silent NaN." if not failed else
                f"**{failed} case(s) FAILED** (an exception or a silent NaN)."))

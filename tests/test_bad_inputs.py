@@ -301,7 +301,7 @@ CORPUS = {
         "on its shorter side",
     )),
     "too many spheres": Bad(config({"contact": {"sphere_radius_groove_mm": 0.01}}), (
-        "{tmp}/bad.yaml: contact.sphere_radius_groove_mm = 0.01: the sphere layers would hold about 3.2e+07 "
+        "{tmp}/bad.yaml: contact.sphere_radius_groove_mm = 0.01: the sphere layers would hold about 4.8e+07 "
         "spheres, more than the 2e+06 a run may allocate: use larger spheres",
     )),
     "groove deeper than the adapter": Bad(config({"geometry": {"upper_depth_mm": 17.0}}), (

@@ -73,3 +73,36 @@ def test_action_equals_reaction_about_any_point(model_I, recorded_states):
             world = pin.SE3(data.R_W[j], data.p_W[j]).act(pin.Force(loads.f_local[j]))
             assert np.allclose(world.linear, loads.force_W[j], rtol=0, atol=BALANCE_RTOL * scale)
             assert np.allclose(world.angular, loads.torque_O_W[j], rtol=0, atol=BALANCE_RTOL * scale)
+
+
+def test_a_finger_beside_its_groove_lands_on_the_adapter_and_both_searches_agree(case_I):
+    """A start 12 mm off along x_a (the lower finger's 4 mm tip across its groove's mouth edge,
+    13 mm off the mid-plane): the tip comes down on the land beside the mouth, which holds it
+    (the run ends complete with the finger out of its groove, not captured) instead of letting
+    it pass through the adapter. On states with tip-land pairs, the culled search finds exactly
+    the all-pairs search's."""
+    import spotsim
+    from spotsim.sim.run import Stepper
+    from spotsim.studies.sweep import NOT_CAPTURED, verdict
+
+    s = spotsim.replace(case_I, module={"initial_offset_mm": (12.0, 0.0, 0.0)},
+                        end_effector={"start_gap_mm": 12.0})
+    result = spotsim.simulate(s)
+    grasp = result.grasp
+    assert result.status == "completed" and grasp["in_grooves"] is False
+    assert verdict(result.status, result.summary) == NOT_CAPTURED
+    assert abs(grasp["residual_offset_mm"][0]) > 11.0  # the tip's inner edge past the 13 mm half-mouth
+    assert result.timeseries["max_penetration_um"].max() < 100  # held: a sphere's radius is 700 um
+
+    model = result.model
+    tips = {i for i, n in enumerate(model.face_names[0]) if n.endswith("_tip")}
+    stepper, h, on_land = Stepper(model), s.simulation.dt_s / s.simulation.substeps, 0
+    while stepper.data.t < 0.9 and on_land < 5:
+        stepper.step(h)
+        d = stepper.data.view()
+        if any(model.master.face[k] in tips for k in d.contacts.master):
+            on_land += 1
+            culled = contacts_by(model, stepper.data, "culled").contacts
+            literal = contacts_by(model, stepper.data, "literal").contacts
+            assert np.array_equal(culled.key, literal.key) and len(literal.key) > 0
+    assert on_land == 5

@@ -101,8 +101,8 @@ def test_stability_study_fills_every_column(stability):
             assert float(r[column]) >= 0.0 and math.isfinite(float(r[column])), (r["case"], column)
         assert float(r["dynamics_step_ms"]) > 0 and float(r["predicted_stable_step_ms"]) > 0
         assert r["predicted_stable"] in ("yes", "no") and r["finite"] in ("yes", "no", "n/a")  # n/a: never ran
-        assert r["verdict"] in ("converged", "converged, off centre", "not captured", "diverged (detected)",
-                                "rejected at start", "FAILED: exception", "FAILED: silent NaN")
+        assert r["verdict"] in ("converged", "converged, off centre", "not captured", "not captured (on a land)",
+                                "diverged (detected)", "rejected at start", "FAILED: exception", "FAILED: silent NaN")
     assert (out / "stability.md").exists()
 
 
@@ -117,8 +117,9 @@ def test_stability_verdicts(stability):
     assert "interpenetrate" in by["y_a +10 mm"]["message"]
     assert by["y_a +10 mm, gap 12 mm"]["verdict"] != "rejected at start"
     assert float(by["E x100"]["predicted_stable_step_ms"]) < float(by["baseline"]["predicted_stable_step_ms"])
-    for r in rows:  # a diverged case is run again at a finer step, and only a diverged one
+    for r in rows:  # a diverged case is run again at a finer step and with the gradient law, only a diverged one
         assert (r["finer_verdict"] != "not run") == (r["status"] == "diverged"), r["case"]
+        assert (r["gradient_verdict"] != "not run") == (r["status"] == "diverged"), r["case"]
 
 
 def test_an_exception_out_of_simulate_is_a_failed_row_not_a_crash(case_I, tmp_path, monkeypatch, capsys):

@@ -377,8 +377,14 @@ def _budget(s, where: str) -> list[str]:
     grooves = sum((g.bevel_edge_length_mm / c.sphere_radius_groove_mm + 1)
                   * (getattr(g, f"{side}_depth_mm") / math.cos(math.radians(getattr(g, f"{side}_bevel_deg")))
                      / c.sphere_radius_groove_mm + 1) * 2 for side in ("upper", "lower"))
+    for side in ("upper", "lower"):  # the lands beside each mouth
+        land = 0.5 * g.bevel_edge_length_mm - getattr(g, f"{side}_depth_mm") * math.tan(
+            math.radians(getattr(g, f"{side}_bevel_deg")))
+        if land > 0:
+            r2 = c.sphere_radius_groove_mm
+            grooves += 2 * (g.bevel_edge_length_mm / r2 + 1) * (land / r2 + 1)
     r1 = c.sphere_radius_finger_mm
-    fingers = 4 * (g.finger_length_mm / r1 + 1) * (g.finger_slant_mm / r1 + 1)
+    fingers = 2 * (g.finger_length_mm / r1 + 1) * (2 * g.finger_slant_mm / r1 + 2 * g.finger_tip_half_width_mm / r1 + 3)
     spheres = len(modules_of(s)) * (grooves + fingers)  # a module and an end-effector per grasp
     if spheres > MAX_SPHERES:
         key = "sphere_radius_groove_mm" if grooves >= fingers else "sphere_radius_finger_mm"
@@ -438,7 +444,7 @@ def _cross_checks(s: Scenario, where: str) -> list[str]:
                             f"geometry.adapter_half_thickness_mm = {_fmt(g.adapter_half_thickness_mm)}")
         # the finger seats in its groove: its flanks, up from the truncated tip, fit the mouth
         bevel = math.radians(getattr(g, f"{side}_bevel_deg"))
-        mouth = depth * math.tan(bevel)
+        mouth = half_mouth_mm(g, side)
         finger = g.finger_tip_half_width_mm + g.finger_slant_mm * math.sin(bevel)
         if finger > mouth:
             wide.append(f"the {side} finger is {finger:.3g} mm wide each side of its ridge, its groove's mouth "
@@ -458,6 +464,22 @@ def _cross_checks(s: Scenario, where: str) -> list[str]:
                         f"must fit a finger's flank: it is {min(g.finger_length_mm, g.finger_slant_mm):.3g} mm on its "
                         f"shorter side")
     return problems
+
+
+def half_mouth_mm(g: Geometry, side: str) -> float:
+    """Half the width of a groove's mouth, mm: its depth times the tangent of its bevel."""
+    return getattr(g, f"{side}_depth_mm") * math.tan(math.radians(getattr(g, f"{side}_bevel_deg")))
+
+
+def in_grooves(g: Geometry, offset_mm) -> bool:
+    """Whether both fingers' flat tips lie wholly within their grooves' mouths at an offset of
+    O_b from O_a (mm, in O_a): the upper groove centres y, the lower one the direction its
+    frame's y takes (turned by groove_angle about z). Otherwise a finger rests on the land or
+    the mouth's edge beside its groove: the module is not captured, however still it lies."""
+    gamma = math.radians(g.groove_angle_deg)
+    upper = abs(offset_mm[1]) + g.finger_tip_half_width_mm
+    lower = abs(offset_mm[0] * math.sin(gamma) - offset_mm[1] * math.cos(gamma)) + g.finger_tip_half_width_mm
+    return bool(upper <= half_mouth_mm(g, "upper") and lower <= half_mouth_mm(g, "lower"))
 
 
 def modules_of(s) -> dict[str, Module]:

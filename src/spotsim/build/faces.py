@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import functools
 import io
+import re
 from dataclasses import dataclass
 
 import numpy as np
@@ -20,15 +21,28 @@ from ..errors import ModelError
 EDGE_TOLERANCE = 1e-9
 
 
+#: The kinds of contact face, by the end of their collision's name: a groove's or a finger's
+#: flank (`*_flank_pos`, `*_flank_neg`), a finger's truncated tip (`*_tip`) and the adapter's
+#: land beside a groove's mouth (`*_land_pos`, `*_land_neg`).
+FACE_KINDS = {"flank": re.compile(r"_flank_(pos|neg)$"), "tip": re.compile(r"_tip$"),
+              "land": re.compile(r"_land_(pos|neg)$")}
+#: The kinds of master (finger) and slave (module) face that can touch: a flank its groove's
+#: flank, a tip the land it comes down on beside a mouth. A tip's edge spheres stand past its
+#: flank's plane, so a tip is not paired with a groove's flank: at the seat they would press it.
+TOUCHING_KINDS = (("flank", "flank"), ("tip", "land"))
+
+
 @dataclass(frozen=True)
 class Face:
-    """A planar contact face: `vertices_L` (k, 3) in the frame of link `link`, m."""
+    """A planar contact face: `vertices_L` (k, 3) in the frame of link `link`, m; its `kind`
+    one of FACE_KINDS."""
 
     name: str
     link: str
     vertices_L: np.ndarray
     box_size: np.ndarray
     T_LC: np.ndarray  # (4, 4) pose of the face's box in the link frame
+    kind: str = "flank"
 
 
 @dataclass(frozen=True)
@@ -112,8 +126,9 @@ def box_top_face(size: np.ndarray, T_LC: np.ndarray) -> np.ndarray:
     return corners @ T_LC[:3, :3].T + T_LC[:3, 3]
 
 
-def contact_faces(urdf: str, marker: str = "_flank_") -> list[Face]:
-    """The contact faces of a URDF: every box collision whose name contains `marker`.
+def contact_faces(urdf: str) -> list[Face]:
+    """The contact faces of a URDF: every box collision whose name ends as one of FACE_KINDS,
+    the flanks first (in the URDF's order, then the other kinds in theirs).
 
     Read with yourdfpy, which keeps collision names (Pinocchio renames them).
     """
@@ -127,11 +142,12 @@ def contact_faces(urdf: str, marker: str = "_flank_") -> list[Face]:
     faces = []
     for link in robot.robot.links:
         for col in link.collisions:
-            if not col.name or marker not in col.name:
+            kind = next((k for k, pattern in FACE_KINDS.items() if col.name and pattern.search(col.name)), None)
+            if kind is None:
                 continue
             if col.geometry.box is None:
                 raise ModelError(f"contact face {col.name} on {link.name} must be a box collision")
             T = np.eye(4) if col.origin is None else np.asarray(col.origin)
             size = np.asarray(col.geometry.box.size, dtype=float)
-            faces.append(Face(col.name, link.name, box_top_face(size, T), size, T))
-    return faces
+            faces.append(Face(col.name, link.name, box_top_face(size, T), size, T, kind))
+    return sorted(faces, key=lambda f: f.kind != "flank")

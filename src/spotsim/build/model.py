@@ -42,7 +42,7 @@ from ..sim.model import (
 )
 from ..sim.record import REPLAY_RATE_HZ, Layout
 from . import assets
-from .faces import contact_faces, sphere_layer
+from .faces import TOUCHING_KINDS, contact_faces, sphere_layer
 from .scene import FINGER_NAMES, SceneSpec, check_inertials, check_inertias, frame, lock_joints, scene_spec, weld_urdf
 
 
@@ -312,6 +312,7 @@ class _Layers:
     faces: FaceTable
     finger_geoms: tuple[tuple[int, int], ...]
     contact_joints: tuple[int, ...]
+    kinds: tuple[tuple[str, ...], tuple[str, ...]]  # each master face's and each slave face's kind (FACE_KINDS)
 
 
 def _contact_layers(model, faces, finger_links, module_prefixes, law) -> _Layers:
@@ -319,8 +320,8 @@ def _contact_layers(model, faces, finger_links, module_prefixes, law) -> _Layers
 
     Master faces: those on `finger_links`, placed at opening 0 on the joint the finger is
     mounted on. Slave faces: those on links of the modules named by `module_prefixes`. Every
-    master face may touch every slave face: one coal collision pair (and one FaceTable row)
-    each.
+    master face may touch every slave face of a kind it can touch (`faces.TOUCHING_KINDS`):
+    one coal collision pair (and one FaceTable row) each.
     """
     geom = pin.GeometryModel()
     roles = {"master": [], "slave": []}
@@ -342,7 +343,7 @@ def _contact_layers(model, faces, finger_links, module_prefixes, law) -> _Layers
         T = face.T_LC
         placement = jMl * pin.SE3(T[:3, :3], T[:3, 3])
         gid = geom.addGeometryObject(pin.GeometryObject(face.name, j, placement, coal.Box(*face.box_size)))
-        roles[role].append((gid, j, layer))
+        roles[role].append((gid, j, layer, face.kind))
     if not roles["master"] or not roles["slave"]:
         raise ModelError("the scene needs contact faces on both the fingers and a module")
 
@@ -360,14 +361,16 @@ def _contact_layers(model, faces, finger_links, module_prefixes, law) -> _Layers
     starts_s = np.cumsum([0] + [len(e[2].centres) for e in roles["slave"]])
     shapes = np.array([e[2].index_map.shape for e in roles["slave"]])
     maps = -np.ones((len(shapes), *shapes.max(axis=0)), dtype=np.int64)
-    for b, (_, _, lay) in enumerate(roles["slave"]):
+    for b, (_, _, lay, _) in enumerate(roles["slave"]):
         ni, nj = lay.index_map.shape
         maps[b, :ni, :nj] = np.where(lay.index_map >= 0, lay.index_map + starts_s[b], -1)
     rows = []  # one per face pair, in the order of coal's collision pairs
-    for a, (gid_m, jm, _) in enumerate(roles["master"]):
+    for a, (gid_m, jm, _, kind_m) in enumerate(roles["master"]):
         centres = m_centres[starts_m[a]:starts_m[a + 1]]
         middle = centres.mean(axis=0)
-        for b, (gid_s, js, lay) in enumerate(roles["slave"]):
+        for b, (gid_s, js, lay, kind_s) in enumerate(roles["slave"]):
+            if (kind_m, kind_s) not in TOUCHING_KINDS:
+                continue
             geom.addCollisionPair(pin.CollisionPair(gid_m, gid_s))
             rows.append((starts_m[a], starts_m[a + 1], jm, js, b, lay.origin, lay.t1, lay.t2, lay.normal,
                          lay.index_map.shape, middle, np.linalg.norm(centres - middle, axis=1).max()))
@@ -379,13 +382,14 @@ def _contact_layers(model, faces, finger_links, module_prefixes, law) -> _Layers
     contact_joints = tuple(sorted({*m_joint.tolist(), *s_joint.tolist()}))
     return _Layers(geom, m_centres, m_normals, m_joint, m_face, master_finger,
                    SlaveSpheres(s_centres, s_normals, s_joint, s_face, maps), table, tuple(finger_geoms),
-                   contact_joints)
+                   contact_joints, tuple(tuple(e[3] for e in roles[r]) for r in ("master", "slave")))
 
 
 def _opening_at_touch(model, parent_joint, axis_J, layers, on_finger, ee, module, law):
-    """The finger opening (m) at which its sphere layer first touches its groove, centred.
+    """The finger opening (m) at which its flanks' sphere layers first touch its groove's,
+    centred.
 
-    For each of the finger's faces opposed to a groove face (normals anti-parallel), the
+    For each of the finger's flanks opposed to a groove face (normals anti-parallel), the
     sphere envelopes touch when the face planes are 2 (r1 + r2) apart; the finger moves
     along its axis, so that distance is linear in the opening.
     on_finger: (|S1|,) bool, the master spheres of this finger (given at opening 0).
@@ -403,11 +407,16 @@ def _opening_at_touch(model, parent_joint, axis_J, layers, on_finger, ee, module
     slave = layers.slave
     on_module = slave.joint == module.joint
     best = None
+    master_kind, slave_kind = layers.kinds
     for fm in np.unique(layers.master_face[on_finger]):
+        if master_kind[fm] != "flank":
+            continue
         k = np.flatnonzero(layers.master_face == fm)[0]
         n_f = oMf.rotation @ layers.master_normal_J[k]
         x_f = oMf.act(layers.master_centre_J[k] - law.r1 * layers.master_normal_J[k])
         for fs in np.unique(slave.face[on_module]):
+            if slave_kind[fs] != "flank":
+                continue
             i = np.flatnonzero(slave.face == fs)[0]
             n_g = oMm.rotation @ slave.normal_J[i]
             if n_f @ n_g > -1 + 1e-9 or abs(axis_W @ n_g) < 1e-9:

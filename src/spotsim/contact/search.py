@@ -482,8 +482,9 @@ def _touches(chi, w, R):
 
 @njit
 def literal_search(m, d):
-    """The paper's literal search: every master sphere against every slave sphere, Eq. (6)-(10),
-    as Candidates (a superset by SEARCH_SLACK; `penetration` decides).
+    """The paper's literal search: every master sphere against every slave sphere of a face
+    that can touch its own (m.faces' pairs), Eq. (6)-(10), as Candidates (a superset by
+    SEARCH_SLACK; `penetration` decides).
 
     The spheres of one face share its normal, so each block of two faces has one common
     normal; no pair is skipped. Coordinates are taken relative to a point of the slave face, so
@@ -493,35 +494,35 @@ def literal_search(m, d):
     """
     C1, N1, C2, N2 = world_spheres(m, d)
     R = m.law.r1 + m.law.r2
-    master_runs, slave_runs = _runs(m.master.face), _runs(m.slave.face)
+    table, slave_runs = m.faces, _runs(m.slave.face)
     found_m = np.empty(64, dtype=np.int64)
     found_s = np.empty(64, dtype=np.int64)
     n_found = 0
-    for b in range(slave_runs.shape[0] - 1):
+    for f in range(table.master_start.shape[0]):  # every pair of faces that can touch
+        b = table.slave_face[f]
         s0, s1 = slave_runs[b], slave_runs[b + 1]
         C2b = C2[s0:s1] - C2[s0]
         w2 = (C2b * C2b).sum(axis=1) - R * R  # |c2|^2 - R^2 of Eq. (10)
-        for a in range(master_runs.shape[0] - 1):
-            a0, a1 = master_runs[a], master_runs[a + 1]
-            dn = (N2[s0, 0] - N1[a0, 0], N2[s0, 1] - N1[a0, 1], N2[s0, 2] - N1[a0, 2])
-            norm = math.sqrt(dot3(dn, dn))
-            if norm <= NORMAL_EPS:
-                continue  # faces facing the same way: Eq. (6) undefined, no pair
-            n_c = np.array((dn[0] / norm, dn[1] / norm, dn[2] / norm))
-            C1b = C1[a0:a1] - C2[s0]
-            products = C1b @ C2b.T  # every c1 . c2 of the block (BLAS)
-            chi1, chi2, w1 = C1b @ n_c, C2b @ n_c, (C1b * C1b).sum(axis=1)
-            for i in range(a1 - a0):
-                row = products[i]
-                hits = 0
-                for j in range(s1 - s0):  # chi (Eq. 9) and w (Eq. 10) of each pair
-                    hits += _touches(chi1[i] - chi2[j], w1[i] - 2.0 * row[j] + w2[j], R)
-                if hits == 0:
-                    continue
-                for j in range(s1 - s0):
-                    if _touches(chi1[i] - chi2[j], w1[i] - 2.0 * row[j] + w2[j], R):
-                        found_m, found_s = _push(found_m, found_s, n_found, a0 + i, s0 + j)
-                        n_found += 1
+        a0, a1 = table.master_start[f], table.master_stop[f]
+        dn = (N2[s0, 0] - N1[a0, 0], N2[s0, 1] - N1[a0, 1], N2[s0, 2] - N1[a0, 2])
+        norm = math.sqrt(dot3(dn, dn))
+        if norm <= NORMAL_EPS:
+            continue  # faces facing the same way: Eq. (6) undefined, no pair
+        n_c = np.array((dn[0] / norm, dn[1] / norm, dn[2] / norm))
+        C1b = C1[a0:a1] - C2[s0]
+        products = C1b @ C2b.T  # every c1 . c2 of the block (BLAS)
+        chi1, chi2, w1 = C1b @ n_c, C2b @ n_c, (C1b * C1b).sum(axis=1)
+        for i in range(a1 - a0):
+            row = products[i]
+            hits = 0
+            for j in range(s1 - s0):  # chi (Eq. 9) and w (Eq. 10) of each pair
+                hits += _touches(chi1[i] - chi2[j], w1[i] - 2.0 * row[j] + w2[j], R)
+            if hits == 0:
+                continue
+            for j in range(s1 - s0):
+                if _touches(chi1[i] - chi2[j], w1[i] - 2.0 * row[j] + w2[j], R):
+                    found_m, found_s = _push(found_m, found_s, n_found, a0 + i, s0 + j)
+                    n_found += 1
     key = found_m[:n_found] * C2.shape[0] + found_s[:n_found]
     order = np.argsort(key)
     return Candidates(found_m[:n_found][order], found_s[:n_found][order], key[order])

@@ -17,7 +17,7 @@ import numpy as np
 from ..build.model import Model, build_model
 from ..contact.search import literal_search
 from ..errors import ScenarioError
-from ..scenario import modules_of, tolerance_warnings
+from ..scenario import in_grooves, modules_of, tolerance_warnings
 from ..version import __version__
 from .bodies import kinematics
 from .broadphase import BroadPhase, StateOverflow
@@ -94,7 +94,8 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
             rows = rec.collect(model, out, near)
             done += rows
             bar.update(rows)
-            if out.event == REFRESH:
+            spent = wall_limit_s is not None and time.perf_counter() - wall0 > wall_limit_s
+            if out.event == REFRESH and not spent:
                 continue
             message = _divergence(model, data, out.event)
             if message:
@@ -113,7 +114,7 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
             elif out.elapsed > model.sim.completion.phase_timeout:
                 message = _why_incomplete(model, data, "the phase time-out")
                 break
-            if wall_limit_s is not None and time.perf_counter() - wall0 > wall_limit_s:
+            if spent:  # checked at every return of the compiled loop, a refresh of the broad phase's too
                 status, message = WALL_LIMIT, f"wall-time budget of {wall_limit_s:g} s spent at t = {out.t:.4f} s"
                 break
         else:
@@ -225,6 +226,9 @@ def _summary(s, model, v, rec, series, status, message, wall, welds) -> dict:
             "residual_offset_mm": None if offset is None else [float(x) for x in offset],
             "residual_offset_norm_mm": None if offset is None else float(np.linalg.norm(offset)),
             "residual_rpy_deg": None if not done else [float(x) for x in series["rpy_deg"][last]],
+            # both fingers' ridges ended within their grooves' mouths: captured (False: a finger
+            # rests on a land beside its groove)
+            "in_grooves": None if offset is None else in_grooves(s.geometry, offset),
             "peak_force_N": [float(x) for x in v.peak_force[g]],
             "peak_torque_Nm": [float(x) for x in v.peak_torque[g]],
             "peak_force_norm_N": float(v.peak_force_norm[g]),

@@ -50,6 +50,7 @@ class Outcome:
     angular_drift_rel: float = math.nan
     finite: bool = True  # every recorded number finite
     prediction: object = None  # stability.StepPrediction of the run's model
+    in_grooves: list = field(default_factory=list)  # per grasp, the summary's (None where not completed)
 
     @property
     def comparable(self) -> bool:
@@ -162,7 +163,7 @@ def _run_once(scenario, source: str) -> Outcome:
         s["momentum"]["linear_drift_rel"], s["momentum"]["angular_drift_rel"],
         all(bool(np.all(np.isfinite(a))) for a in result.timeseries.values()
             if np.issubdtype(np.asarray(a).dtype, np.floating)),
-        prediction)
+        prediction, [g["in_grooves"] for g in s["grasps"]])
 
 
 # ----------------------------------------------------------------------------- comparing

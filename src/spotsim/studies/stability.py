@@ -234,11 +234,13 @@ CENTRED_MM = 0.3
 
 
 def verdict(o: Outcome) -> str:
-    """converged (or converged, off centre) / not captured / diverged (detected) / rejected at
-    start, or a failure of the simulator that the study exists to catch (an exception, a
-    silent NaN)."""
+    """converged (or converged, off centre) / not captured (incomplete, or complete with a finger
+    on a land beside its groove) / diverged (detected) / rejected at start, or a failure of the
+    simulator that the study exists to catch (an exception, a silent NaN)."""
     if o.status in COMPARABLE and not o.finite:
         return "FAILED: silent NaN"
+    if o.status == "completed" and not all(x for x in o.in_grooves if x is not None):
+        return "not captured (on a land)"
     if o.status == "completed" and max(float(np.linalg.norm(x)) for x in o.offsets if x is not None) > CENTRED_MM:
         return "converged, off centre"
     return {"completed": "converged", "incomplete": "not captured", "diverged": "diverged (detected)",
@@ -249,7 +251,7 @@ def verdict(o: Outcome) -> str:
 STABILITY_COLUMNS = ["case", "group", "change", "dynamics_step_ms", "predicted_stable_step_ms", "omega_h",
                      "damping_h", "predicted_stable", "verdict", "prediction_held", "status", "completed_s",
                      "residual_offset_mm", "final_offset_mm", "peak_force_N", "sim_time_s", "wall_time_s",
-                     "finite", "message", "finer_verdict", "finer_message"]
+                     "finite", "message", "finer_verdict", "finer_message", "gradient_verdict", "gradient_message"]
 #: A diverged case runs again this many times finer (fixed step; dopri5: rtol / this): if it
 #: still diverges, the cause is not the step.
 FINER = 4
@@ -260,9 +262,11 @@ def finer(s):
     return step_scaled(s, 1 / FINER)
 
 
-def stability_row(case: Case, o: Outcome, changed=None, fine: Outcome | None = None) -> dict:
-    """A stability CSV row: the case, its prediction, verdict and outcome, and (`fine`) the
-    verdict of the same case FINER times finer when it diverged ("not run" otherwise)."""
+def stability_row(case: Case, o: Outcome, changed=None, fine: Outcome | None = None,
+                  gradient: Outcome | None = None) -> dict:
+    """A stability CSV row: the case, its prediction, verdict and outcome, and, when it
+    diverged ("not run" otherwise), the verdicts of the same case FINER times finer (`fine`)
+    and with the energy-consistent pair law (`gradient`)."""
     p = o.prediction
     v = verdict(o)
     if p is None or o.status not in (*COMPARABLE, "diverged"):
@@ -287,7 +291,9 @@ def stability_row(case: Case, o: Outcome, changed=None, fine: Outcome | None = N
             "sim_time_s": o.sim_time_s, "wall_time_s": o.wall_time_s,
             "finite": "n/a" if o.status not in COMPARABLE else ("yes" if o.finite else "no"),
             "message": o.message, "finer_verdict": "not run" if fine is None else verdict(fine),
-            "finer_message": "not run" if fine is None else fine.message}
+            "finer_message": "not run" if fine is None else fine.message,
+            "gradient_verdict": "not run" if gradient is None else verdict(gradient),
+            "gradient_message": "not run" if gradient is None else gradient.message}
 
 
 @dataclass
@@ -301,6 +307,21 @@ class StabilityReport:
     def failures(self) -> list[dict]:
         """Cases that ended in what the simulator must never do: an exception or a silent NaN."""
         return [r for r in self.rows if r["verdict"].startswith("FAILED")]
+
+
+def check_gradient(o: Outcome, s, source: str, wall_limit_s) -> Outcome | None:
+    """A case that diverged under the paper's pair law, again with the energy-consistent one
+    (`contact.normal_direction: gradient`): the paper's law gains energy on strongly tilted
+    faces, which the run's energy check stops as diverged; None for any other outcome."""
+    if o.status != "diverged" or s.contact.normal_direction == "gradient":
+        return None
+    return run_once(replace(s, contact={"normal_direction": "gradient"}), source, wall_limit_s)
+
+
+def checked_row(case: Case, o: Outcome, s, source: str, wall_limit_s) -> dict:
+    """The row of a case's run, with its diverged checks (`check_finer`, `check_gradient`)."""
+    return stability_row(case, o, s, check_finer(o, s, source, wall_limit_s),
+                         check_gradient(o, s, source, wall_limit_s))
 
 
 def check_finer(o: Outcome, s, source: str, wall_limit_s) -> Outcome | None:
@@ -333,14 +354,14 @@ def stability_study(scenario, cases: list[Case], out_dir, *, source: str = "<stu
                 s, o = None, Outcome(REJECTED, str(e).replace("\n", "; "))
             else:
                 o = run_once(s, source, wall_limit_s)
-            writer.write(stability_row(case, o, s, check_finer(o, s, source, wall_limit_s)))
+            writer.write(checked_row(case, o, s, source, wall_limit_s))
             gap = clearing_gap(s) if case.misalignment and o.status == REJECTED and s is not None else None
             if gap is not None:  # the same start, with fingers opened wide enough to clear it
                 wide = dc_replace(case, name=f"{case.name}, gap {gap:g} mm",
                                   what=f"{case.what}; start gap {s.end_effector.start_gap_mm:g} -> {gap:g} mm")
                 s = widened(s, gap)
                 o = run_once(s, source, wall_limit_s)
-                writer.write(stability_row(wide, o, s, check_finer(o, s, source, wall_limit_s)))
+                writer.write(checked_row(wide, o, s, source, wall_limit_s))
             bar.update(1)
     except KeyboardInterrupt:
         report.interrupted = True
@@ -354,11 +375,13 @@ def stability_study(scenario, cases: list[Case], out_dir, *, source: str = "<stu
 
 def stability_markdown(scenario, report: StabilityReport) -> str:
     header = ["case", "change", "predicted stable step (ms)", "ω·h", "verdict", "prediction held",
-              "residual offset (mm)", "peak force (N)", "sim / wall (s)", "outcome", f"diverged: at h/{FINER}"]
+              "residual offset (mm)", "peak force (N)", "sim / wall (s)", "outcome", f"diverged: at h/{FINER}",
+              "diverged: gradient law"]
     rows = [[r["case"], r["change"], sig(r["predicted_stable_step_ms"]), sig(r["omega_h"]), r["verdict"],
              r["prediction_held"],
              sig(r["residual_offset_mm"]), sig(r["peak_force_N"]), f"{sig(r['sim_time_s'])} / {sig(r['wall_time_s'])}",
-             r["message"], "" if r["finer_verdict"] == "not run" else f"{r['finer_verdict']}: {r['finer_message']}"]
+             r["message"], "" if r["finer_verdict"] == "not run" else f"{r['finer_verdict']}: {r['finer_message']}",
+             "" if r["gradient_verdict"] == "not run" else f"{r['gradient_verdict']}: {r['gradient_message']}"]
             for r in report.rows]
     counts = {}
     for r in report.rows:
@@ -369,7 +392,8 @@ def stability_markdown(scenario, report: StabilityReport) -> str:
              f"is stability.predict_step's; ω·h is the stiffest contact mode times the step (the integrator's "
              f"limit on the imaginary axis is 2 for symplectic Euler). A converged grasp left more than "
              f"{CENTRED_MM:g} mm off is \"converged, off centre\". A diverged case runs again with a step "
-             f"{FINER} times smaller: if it still diverges, the step is not the cause."), "",
+             f"{FINER} times smaller: if it still diverges, the step is not the cause; and with the "
+             f"energy-consistent pair law (contact.normal_direction: gradient)."), "",
             "- verdicts: " + ", ".join(f"{n} {v}" for v, n in counts.items())]
     if report.failures:
         text.append(f"- **{len(report.failures)} case(s) FAILED** (an exception or a silent NaN): "

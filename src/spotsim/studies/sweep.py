@@ -381,8 +381,8 @@ def verdict(status: str, summary: dict | None, precision_mm: float = PRECISION_M
         return DIVERGED
     if summary is None or status not in ("completed", "incomplete"):
         return ""
-    if status == "incomplete":
-        return NOT_CAPTURED
+    if status == "incomplete" or not all(g.get("in_grooves", True) is not False for g in summary["grasps"]):
+        return NOT_CAPTURED  # never closed, or closed with a finger on a land beside its groove
     worst = max(g["residual_offset_norm_mm"] for g in summary["grasps"])
     return CONVERGED if worst <= precision_mm else OFF_CENTRE
 
