@@ -42,7 +42,7 @@ from ..sim.model import (
 )
 from ..sim.record import REPLAY_RATE_HZ, Layout
 from . import assets
-from .faces import TOUCHING_KINDS, contact_faces, sphere_layer
+from .faces import INSET_KINDS, TOUCHING_KINDS, contact_faces, inset, sphere_layer
 from .scene import FINGER_NAMES, SceneSpec, check_inertials, check_inertias, frame, lock_joints, scene_spec, weld_urdf
 
 
@@ -335,11 +335,16 @@ def _contact_layers(model, faces, finger_links, module_prefixes, law) -> _Layers
             continue  # an idle or welded pair of faces: no contact work
         f = frame(model, face.link)
         j, jMl = f.parentJoint, f.placement
+        verts_J = face.vertices_L @ jMl.rotation.T + jMl.translation
+        radius = law.r1 if role == "master" else law.r2
+        if face.kind in INSET_KINDS:
+            verts_J = inset(verts_J, radius)
+            if verts_J is None:
+                continue  # a tip or a land narrower than a sphere: no layer
         if role == "master":
             finger_of_face.append(finger_links.index(face.link))
             finger_geoms.append((len(geom.geometryObjects), finger_of_face[-1]))
-        verts_J = face.vertices_L @ jMl.rotation.T + jMl.translation
-        layer = sphere_layer(verts_J, law.r1 if role == "master" else law.r2)
+        layer = sphere_layer(verts_J, radius)
         T = face.T_LC
         placement = jMl * pin.SE3(T[:3, :3], T[:3, 3])
         gid = geom.addGeometryObject(pin.GeometryObject(face.name, j, placement, coal.Box(*face.box_size)))
