@@ -344,3 +344,27 @@ def test_a_worker_reuses_a_model_across_starts_and_a_compiled_scene_across_conta
     for cached, scenario in ((mb, b), (mc, c)):
         fresh = build_model(scenario)
         assert np.array_equal(cached.q0, fresh.q0) and cached.law == fresh.law
+
+
+def test_a_point_that_cannot_be_written_is_cut_back_off_and_one_clear_error(tmp_path, monkeypatch):
+    """A full disk while a point's line is written: the part written is cut back off (the file
+    keeps whole lines, and resumes), and the sweep stops with one line naming the file."""
+    import errno
+
+    points = tmp_path / sw.POINTS_FILE
+    first = {"key": "a", "status": "completed", "values": {}}
+    sw._append(points, first)
+    real_write, calls = os.write, []
+
+    def full(fd, data):  # writes 10 bytes, then the disk is full
+        calls.append(len(data))
+        if len(calls) == 1:
+            return real_write(fd, bytes(data[:10]))
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(sw.os, "write", full)
+    with pytest.raises(SpotsimError, match=f"{points}: cannot write a finished point: No space left on device; "
+                                           "the points before it are kept"):
+        sw._append(points, {"key": "b", "status": "completed", "values": {}})
+    monkeypatch.undo()
+    assert list(sw.read_records(points)) == ["a"] and points.read_text().count("\n") == 1

@@ -454,11 +454,24 @@ def read_records(path: Path) -> dict[str, dict]:
 
 
 def _append(path: Path, record: dict) -> None:
-    line = json.dumps(record, default=_plain) + "\n"
-    with path.open("a") as f:
-        f.write(line)
-        f.flush()
-        os.fsync(f.fileno())
+    """Append a finished point's record as one line, synced to disk. A write that fails (a full
+    disk) is cut back off, so that the file keeps whole lines only, and is a SpotsimError."""
+    data = memoryview((json.dumps(record, default=_plain) + "\n").encode())
+    fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
+    size = os.fstat(fd).st_size
+    try:
+        while data:
+            data = data[os.write(fd, data):]
+        os.fsync(fd)
+    except OSError as e:
+        try:
+            os.ftruncate(fd, size)
+        except OSError:
+            pass  # a line cut short is dropped when the file is read (`read_records`)
+        raise SpotsimError(f"{path}: cannot write a finished point: {e.strerror}; the points before it are "
+                           "kept: free some space and run the sweep again to resume") from e
+    finally:
+        os.close(fd)
 
 
 def _plain(x):
@@ -569,7 +582,11 @@ def run_sweep(config, spec: SweepSpec, out_dir, *, cluster: Cluster = Cluster(),
     # a record may come from an earlier sweep over the directory: this spec's index and values
     rows = [table_row({**done[p.key], "index": p.index, "values": p.values}, p.scenario, keys, precision_mm)
             for p in points if p.key in done]
-    table = write_table(rows, out)
+    try:
+        table = write_table(rows, out)
+    except OSError as e:
+        raise SpotsimError(f"{out}: cannot write the sweep's table: {e.strerror}; every point is kept in "
+                           f"{POINTS_FILE}: free some space and run the sweep again to write it") from e
     return SweepReport(table, ran, reused, interrupted, time.perf_counter() - t0, out)
 
 
