@@ -64,6 +64,18 @@ def test_system_centroid_stays_put(run):
     assert np.abs(c - c[0]).max() <= CENTROID_BOUND_M
 
 
+def test_the_first_grasp_moves_ee2_against_tm2_before_the_second_starts(run):
+    """Each grasp's start offset is recorded: the first grasp's is TM-1's configured start; the
+    second's is TM-2's configured start moved by what the first grasp did to the robot (the
+    paper's Sec. 5.2 explanation of the SPOT trends), by a fraction of a millimetre."""
+    first, second = run.summary["grasps"]
+    assert np.allclose(first["start_offset_change_mm"], 0.0, atol=1e-9)
+    change = np.linalg.norm(second["start_offset_change_mm"])
+    assert 1e-3 < change < 10.0, change
+    tm2 = spotsim.load_scenario(DUAL).tm2.initial_offset_mm
+    assert np.allclose(np.subtract(second["start_offset_mm"], tm2), second["start_offset_change_mm"])
+
+
 @pytest.mark.slow
 def test_second_grasp_disturbs_the_robot_less(run):
     """The heavier composite moves less and is hit less hard in the second grasp."""

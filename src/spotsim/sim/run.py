@@ -207,6 +207,7 @@ def _time(x: float) -> float | None:
 def _summary(s, model, v, rec, series, status, message, wall, welds) -> dict:
     """The summary.json of a run from its last model, its Data's fields v and its record."""
     grasps, phases = [], []
+    starts = [m.initial_offset_mm for m in modules_of(s).values()]  # in the order of model.modules
     for g, (ee, k) in enumerate(model.grasps):
         completed = _time(v.t_complete[g])
         rows = np.flatnonzero(series["grasp"] == g)
@@ -226,9 +227,15 @@ def _summary(s, model, v, rec, series, status, message, wall, welds) -> dict:
             "residual_offset_mm": None if offset is None else [float(x) for x in offset],
             "residual_offset_norm_mm": None if offset is None else float(np.linalg.norm(offset)),
             "residual_rpy_deg": None if not done else [float(x) for x in series["rpy_deg"][last]],
-            # both fingers' ridges ended within their grooves' mouths: captured (False: a finger
-            # rests on a land beside its groove)
+            # both fingers' flat tips ended within their grooves' mouths: captured (False: a
+            # finger rests on a land or a mouth's edge beside its groove)
             "in_grooves": None if offset is None else in_grooves(s.geometry, offset),
+            # the offset of O_b from O_a at the grasp's first record, and how far the earlier
+            # grasps moved it from the module's configured start (the second grasp's: what the
+            # first did to EE-2's offset to TM-2, the paper's Sec. 5.2 explanation)
+            "start_offset_mm": None if not len(rows) else [float(x) for x in series["offset_mm"][rows[0]]],
+            "start_offset_change_mm": None if not len(rows) else
+            [float(x) for x in series["offset_mm"][rows[0]] - np.asarray(starts[k])],
             "peak_force_N": [float(x) for x in v.peak_force[g]],
             "peak_torque_Nm": [float(x) for x in v.peak_torque[g]],
             "peak_force_norm_N": float(v.peak_force_norm[g]),
