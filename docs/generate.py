@@ -695,11 +695,13 @@ def spot_table(r: Results) -> str:
         g1, g2 = s["grasps"]
         d1, d2 = g1["robot_centroid_displacement_mm"], g2["robot_centroid_displacement_mm"]
         rows.append([f"{vec(offset, 2)} mm", f"{vec(d1)} / {vec(d2)}", f"{num(norm(d1))} / {num(norm(d2))}",
+                     f"{vec(g2['start_offset_mm'])} mm" if g2.get("start_offset_mm") else "–",
                      f"{num(g1['residual_offset_norm_mm'], 2)} / {num(g2['residual_offset_norm_mm'], 2)}",
                      s["status"] if s["status"] != "completed" else fixed(g2["completed_s"], 3),
                      num(s["wall_time_s"], 2)])
     return table(["offset of both modules", "FDR centroid displacement, first / second grasp (mm)",
-                  "|d1| / |d2| (mm)", "residual TM-1 / TM-2 (mm)", "complete (s)", "wall (s)"], rows)
+                  "|d1| / |d2| (mm)", "EE-2 to TM-2 as the second grasp starts",
+                  "residual TM-1 / TM-2 (mm)", "complete (s)", "wall (s)"], rows)
 
 
 def _outcome(row: dict) -> str:
