@@ -195,10 +195,11 @@ def test_interrupted_run_keeps_what_it_recorded(case_I, tmp_path, monkeypatch):
 
 def test_results_are_written_atomically(case_I, tmp_path):
     """A new run into an old directory first removes the old summary; no temp files remain."""
-    from spotsim.results import prepare
+    from spotsim.files import prepare
+    from spotsim.results import SUMMARY
 
     (tmp_path / "summary.json").write_text('{"status": "completed"}')
-    prepare(tmp_path)
+    prepare(tmp_path, SUMMARY)
     assert not (tmp_path / "summary.json").exists()
     r = spotsim.simulate(spotsim.replace(case_I, simulation={"duration_s": 0.01}))
     spotsim.write_results(r, tmp_path, figures=False)

@@ -364,6 +364,8 @@ def _study(args) -> int:
     except OSError as e:
         print(f"{out}: cannot write results: {e.strerror}", file=sys.stderr)
         return 2
+    except SpotsimError as e:  # a results directory it cannot prepare (`files.prepare`)
+        return _bad_input(e)
     for f in report.files:
         print(f"  {f}")
     if report.interrupted:
@@ -488,7 +490,7 @@ def _ensemble(args, scenario, model, path: Path, out: Path) -> int:
     if bad:
         print("\n".join(bad), file=sys.stderr)
         return 2
-    from .results import prepare
+    from .files import prepare
     from .studies.ensemble import ENSEMBLE_JSON
 
     try:
@@ -615,7 +617,8 @@ def main(argv=None) -> int:
         print(to_yaml(scenario), end="")
         return 0
 
-    from .results import disk_need, prepare, write_results
+    from .files import prepare
+    from .results import SUMMARY, disk_need, write_results
     from .sim.run import simulate
 
     if args.replay:  # before the run: a missing meshcat is bad input, found before anything ran
@@ -629,7 +632,7 @@ def main(argv=None) -> int:
         return _ensemble(args, scenario, model, path, out)
     out = Path(args.out) if args.out else Path("results") / scenario.name
     try:
-        prepare(out, need_bytes=disk_need(scenario))
+        prepare(out, SUMMARY, disk_need(scenario))
     except SpotsimError as e:
         return _bad_input(e)
     result = simulate(scenario, model=model, progress=not args.quiet, source=str(path))

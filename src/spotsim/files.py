@@ -32,6 +32,20 @@ def atomic(path: Path, write) -> None:
         raise
 
 
+def prepare(out_dir: str | Path, summary: str, need_bytes: float = 0.0) -> Path:
+    """Make `out_dir`, remove a previous result's `summary` file (so that a run or a study
+    killed before it writes its own leaves none beside its new files), and check that
+    `need_bytes` fit on its disk: SpotsimError before anything runs if not."""
+    out = Path(out_dir)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        (out / summary).unlink(missing_ok=True)
+    except OSError as e:
+        raise SpotsimError(f"{out}: cannot write results: {e.strerror}") from e
+    check_space(out, need_bytes, "the results")
+    return out
+
+
 def check_space(out: Path, need_bytes: float, what: str) -> None:
     """SpotsimError if `out`'s disk has less than `need_bytes` free (checked before a run, so
     that a full disk is found before the computing is spent)."""

@@ -11,7 +11,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .errors import SpotsimError
-from .files import atomic, atomic_write, check_space, save_figure
+from .files import atomic, atomic_write, prepare, save_figure
 from .scenario import to_yaml
 from .sim.run import RESULTS_FORMAT, Result
 
@@ -23,20 +23,6 @@ DISK_PER_RECORD_B = 1000
 DISK_FIXED_B = 2e6
 
 
-def prepare(out_dir: str | Path, summary: str = SUMMARY, need_bytes: float = 0.0) -> Path:
-    """Make `out_dir`, remove a previous result's `summary` file (so that a run killed before
-    it writes its own leaves none), and check that `need_bytes` fit on its disk: SpotsimError
-    before anything runs if not."""
-    out = Path(out_dir)
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-        (out / summary).unlink(missing_ok=True)
-    except OSError as e:
-        raise SpotsimError(f"{out}: cannot write results: {e.strerror}") from e
-    check_space(out, need_bytes, "the results")
-    return out
-
-
 def disk_need(scenario) -> float:
     """Bytes a run's results may take on disk (`DISK_PER_RECORD_B` a recorded interval)."""
     return scenario.simulation.duration_s / scenario.simulation.dt_s * DISK_PER_RECORD_B + DISK_FIXED_B
@@ -46,8 +32,7 @@ def write_results(result: Result, out_dir: str | Path, figures: bool = True) -> 
     """Write timeseries.npz/.csv, replay.npz, scenario.yaml, figures/ and, last, summary.json
     into `out_dir`, each file whole or not at all. SpotsimError if a file cannot be written
     (a full disk): it names the files kept, and no summary.json is written."""
-    out = Path(out_dir)
-    prepare(out)
+    out = prepare(out_dir, SUMMARY)
     ts = result.timeseries
     kept: list[str] = []
     writes = [("timeseries.npz", lambda: atomic(out / "timeseries.npz", lambda f: np.savez_compressed(f, **ts)))]

@@ -378,8 +378,7 @@ def _budget(s, where: str) -> list[str]:
                   * (getattr(g, f"{side}_depth_mm") / math.cos(math.radians(getattr(g, f"{side}_bevel_deg")))
                      / c.sphere_radius_groove_mm + 1) * 2 for side in ("upper", "lower"))
     for side in ("upper", "lower"):  # the lands beside each mouth
-        land = 0.5 * g.bevel_edge_length_mm - getattr(g, f"{side}_depth_mm") * math.tan(
-            math.radians(getattr(g, f"{side}_bevel_deg")))
+        land = 0.5 * g.bevel_edge_length_mm - half_mouth_mm(g, side)
         if land > 0:
             r2 = c.sphere_radius_groove_mm
             grooves += 2 * (g.bevel_edge_length_mm / r2 + 1) * (land / r2 + 1)

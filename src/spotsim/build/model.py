@@ -340,7 +340,7 @@ def _contact_layers(model, faces, finger_links, module_prefixes, law) -> _Layers
         if face.kind in INSET_KINDS:
             verts_J = inset(verts_J, radius)
             if verts_J is None:
-                continue  # a tip or a land narrower than a sphere: no layer
+                continue  # a land narrower than a sphere: no layer
         if role == "master":
             finger_of_face.append(finger_links.index(face.link))
             finger_geoms.append((len(geom.geometryObjects), finger_of_face[-1]))

@@ -495,14 +495,19 @@ def literal_search(m, d):
     C1, N1, C2, N2 = world_spheres(m, d)
     R = m.law.r1 + m.law.r2
     table, slave_runs = m.faces, _runs(m.slave.face)
+    # each slave centre relative to its face's first, and |c2|^2 - R^2 of Eq. (10): once per face,
+    # however many master faces it pairs with
+    C2_rel = np.empty_like(C2)
+    for b in range(slave_runs.shape[0] - 1):
+        C2_rel[slave_runs[b]:slave_runs[b + 1]] = C2[slave_runs[b]:slave_runs[b + 1]] - C2[slave_runs[b]]
+    W2 = (C2_rel * C2_rel).sum(axis=1) - R * R
     found_m = np.empty(64, dtype=np.int64)
     found_s = np.empty(64, dtype=np.int64)
     n_found = 0
     for f in range(table.master_start.shape[0]):  # every pair of faces that can touch
         b = table.slave_face[f]
         s0, s1 = slave_runs[b], slave_runs[b + 1]
-        C2b = C2[s0:s1] - C2[s0]
-        w2 = (C2b * C2b).sum(axis=1) - R * R  # |c2|^2 - R^2 of Eq. (10)
+        C2b, w2 = C2_rel[s0:s1], W2[s0:s1]
         a0, a1 = table.master_start[f], table.master_stop[f]
         dn = (N2[s0, 0] - N1[a0, 0], N2[s0, 1] - N1[a0, 1], N2[s0, 2] - N1[a0, 2])
         norm = math.sqrt(dot3(dn, dn))

@@ -68,7 +68,7 @@ class StepPrediction:
 def impact_peak_force(K_phi: float, mass: float, speed: float) -> float:
     """Peak force of an undamped Hertz impact, F = K_phi phi^1.5, of a mass at a speed, N:
     K_phi d_max^1.5 with d_max = (5 m v^2 / (4 K_phi))^(2/5)."""
-    with np.errstate(over="ignore", invalid="ignore"):  # past the float range the force is inf, and the step predicted 0
+    with np.errstate(over="ignore", invalid="ignore"):  # past the float range: an inf force, a 0 step
         d_max = (5.0 * mass * speed * speed / (4.0 * K_phi)) ** 0.4
         return K_phi * d_max**1.5
 

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..files import atomic_write, save_figure
+from ..files import atomic_write, prepare, save_figure
 from ..scenario import Integrator, modules_of, replace, to_dict
 from ..sim.integrators import ADAPTIVE, METHODS
 from .runs import (
@@ -381,8 +381,7 @@ def accuracy_study(scenario, settings: list[Setting], reference: Setting, out_di
                                        confirmation_members=confirmation_members, source=source,
                                        progress=progress, plot=plot)
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "accuracy.md").unlink(missing_ok=True)  # a previous study's, until this one is written
+    prepare(out, "accuracy.md")
     dt = scenario.simulation.dt_s
     confirmation = reference.refined()
     sphere_sweep = any(s.sphere_scale != 1.0 for s in settings)

@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..files import atomic_write, save_figure
+from ..files import atomic_write, prepare, save_figure
 from ..scenario import modules_of
 from .ensemble import (
     OFFSET_TOL_MM,
@@ -286,8 +286,8 @@ def accuracy_ensemble_study(scenario, settings: list, reference, out_dir, n: int
     from .accuracy import setting_of
 
     out = Path(out_dir)
-    (out / "members").mkdir(parents=True, exist_ok=True)
-    (out / "accuracy_ensemble.md").unlink(missing_ok=True)  # a previous study's, until this one is written
+    prepare(out, "accuracy_ensemble.md")
+    (out / "members").mkdir(exist_ok=True)
     dt = scenario.simulation.dt_s
     confirmation = reference.refined()
     k = min(confirmation_members or n, n)

@@ -444,12 +444,10 @@ def members_csv(e: EnsembleResult) -> str:
 def write_ensemble(e: EnsembleResult, out_dir) -> list[Path]:
     """Write ensemble.json, members.csv and scenario.yaml (the nominal scenario) into out_dir;
     ensemble.json last and atomically."""
-    from ..files import atomic_write
+    from ..files import atomic_write, prepare
     from ..scenario import to_yaml
 
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / ENSEMBLE_JSON).unlink(missing_ok=True)
+    out = prepare(out_dir, ENSEMBLE_JSON)
     files = [out / "members.csv", out / "scenario.yaml", out / ENSEMBLE_JSON]
     atomic_write(files[0], members_csv(e))
     atomic_write(files[1], to_yaml(e.scenario))

@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ScenarioError
-from ..files import atomic_write, save_figure
+from ..files import atomic_write, prepare, save_figure
 from ..scenario import TOLERANCE_DEG, TOLERANCE_OFFSET_MM, from_dict, set_value, to_dict
 from .sweep import (
     CONVERGED,
@@ -200,8 +200,7 @@ def envelope(config, out_dir, search: Search = Search(), *, cluster: Cluster = C
         set_value(raw0, AXES[axis][0], 0.0)
     todo = search.rays()
     done = read_records(out / POINTS_FILE)  # before anything is written: a foreign file stays as it is
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "envelope.md").unlink(missing_ok=True)  # a previous envelope's, until this one is written
+    prepare(out, "envelope.md")
     atomic_write(out / "envelope.yaml", yaml.safe_dump({"scenario": str(config), "set": list(sets),
                                                        "precision_mm": search.precision_mm,
                                                        "rays": [{"name": r.name, "direction": r.direction,

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import SpotsimError
-from ..files import atomic_write
+from ..files import atomic_write, prepare
 from ..scenario import TOLERANCE_DEG, TOLERANCE_OFFSET_MM, modules_of, replace, to_dict
 from ..sim.integrators import ADAPTIVE
 from .runs import (
@@ -337,8 +337,7 @@ def stability_study(scenario, cases: list[Case], out_dir, *, source: str = "<stu
     times finer (`finer_verdict`): one that still diverges does not diverge for its step.
     Ctrl-C stops the study and keeps the rows written."""
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "stability.md").unlink(missing_ok=True)  # a previous study's, until this one is written
+    prepare(out, "stability.md")
     writer = RowWriter(out / "stability.csv", STABILITY_COLUMNS)
     report = StabilityReport(scenario.name, writer.rows)
     from ..sim.run import progress_bar
