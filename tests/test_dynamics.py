@@ -14,12 +14,14 @@ from spotsim.sim.dynamics import accelerations
 ABA_RTOL = 1e-13
 
 
-@pytest.mark.parametrize("config", ["dual_arm_sequential.yaml", "single_arm_case_I.yaml"])
+@pytest.mark.parametrize("config, overrides", [("dual_arm_sequential.yaml", []), ("single_arm_case_I.yaml", []),
+                                               ("dual_arm_sequential.yaml", ["testbed.mount=air_bearing"])])
 @pytest.mark.parametrize("gravity", [(0.0, 0.0, 0.0), (0.3, -9.81, 2.0)])
-def test_free_body_dynamics_is_pinocchios_aba(config, gravity):
+def test_free_body_dynamics_is_pinocchios_aba(config, overrides, gravity):
     """On random states and wrenches of a scene (the dual arm: robot and two modules, each a
-    free body; Case I: one module), the compiled accelerations are Pinocchio's ABA."""
-    s = spotsim.load_scenario(ROOT / "config" / config)
+    free body, in space or on the testbed's planar joints; Case I: one module), the compiled
+    accelerations are Pinocchio's ABA."""
+    s = spotsim.load_scenario(ROOT / "config" / config, overrides)
     model = spotsim.build_model(spotsim.replace(s, simulation={"gravity_m_s2": gravity}))
     m = model.pin_model
     pd = m.createData()

@@ -6,7 +6,7 @@ import pytest
 
 from spotsim.build import assets
 from spotsim.build.robot import DUAL_ARM_XACRO, TABLE5, TABLE6, locked_robot
-from spotsim.sim.weld import twist_for_momentum, world_momentum
+from spotsim.sim.weld import PLANAR_COMPONENTS, joint_velocity_for_momentum, world_momentum
 
 #: Momentum is summed and solved once: round-off on O(1) numbers.
 ROUND_OFF = 1e-12
@@ -27,9 +27,30 @@ def test_weld_keeps_linear_and_angular_momentum():
         before = world_momentum(M_A, I_A, v_A) + world_momentum(M_B, I_B, v_B)
         # one body, in A's frame: inertia Y_A + Y_B, twist Y^-1 (h_A + h_B)
         I_C = M_A.actInv(M_A.act(I_A) + M_B.act(I_B))
-        after = world_momentum(M_A, I_C, twist_for_momentum(M_A, I_C, before))
+        after = world_momentum(M_A, I_C, pin.Motion(joint_velocity_for_momentum(M_A, I_C, before, planar=False)))
         assert np.linalg.norm(after.vector - before.vector) <= ROUND_OFF * np.linalg.norm(before.vector)
         assert I_C.mass == pytest.approx(I_A.mass + I_B.mass, rel=1e-15)
+
+
+def test_planar_weld_keeps_in_plane_momentum():
+    """Two bodies moving in parallel planes (normal: A's z), joined: the composite on A's planar
+    joint keeps the in-plane linear momentum and the angular momentum about the normal."""
+    rng = np.random.default_rng(12)
+    S = PLANAR_COMPONENTS
+    for _ in range(20):
+        M_A = pin.SE3.Random()
+        # B: A's frame turned about z and moved, so that its planar motion is A's
+        turn = pin.SE3(pin.exp3(np.array([0.0, 0.0, rng.uniform(-3, 3)])), rng.normal(size=3))
+        M_B = M_A * turn
+        I_A, I_B = random_body(rng), random_body(rng)
+        v_A, v_B = np.zeros(6), np.zeros(6)
+        v_A[S], v_B[S] = rng.normal(size=3), rng.normal(size=3)
+        before = M_A.actInv(world_momentum(M_A, I_A, pin.Motion(v_A)) + world_momentum(M_B, I_B, pin.Motion(v_B)))
+        I_C = M_A.actInv(M_A.act(I_A) + M_B.act(I_B))
+        v_C = np.zeros(6)
+        v_C[S] = joint_velocity_for_momentum(M_A, I_C, M_A.act(before), planar=True)
+        after = M_A.actInv(world_momentum(M_A, I_C, pin.Motion(v_C)))
+        assert np.linalg.norm(after.vector[S] - before.vector[S]) <= ROUND_OFF * np.linalg.norm(before.vector)
 
 
 def test_welded_robot_against_table_5_body_4():

@@ -11,10 +11,12 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from pathlib import Path
 
 from .errors import ScenarioError, SpotsimError
+from .measures import CAMERA_HZ
 
 DEFAULT_SCENARIO = "single_arm_case_I.yaml"
 EXIT = {"completed": 0, "incomplete": 3, "diverged": 4, "interrupted": 130}
@@ -44,6 +46,21 @@ def _at_least(minimum: int):
 COUNT, SEED = _at_least(1), _at_least(0)
 
 
+def _rate(text: str) -> float:
+    """An argparse type: a positive, finite rate (Hz)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text}: must be a number") from None
+    if not (math.isfinite(value) and 0 < value <= MAX_SAMPLE_HZ):
+        raise argparse.ArgumentTypeError(f"{text}: must be in (0, {MAX_SAMPLE_HZ:g}] Hz")
+    return value
+
+
+#: The fastest camera rate `--sample-hz` takes: ten times a run's default record rate.
+MAX_SAMPLE_HZ = 10_000.0
+
+
 def _parser() -> argparse.ArgumentParser:
     p = _Parser(prog="spotsim", description=__doc__.splitlines()[0])
     sub = p.add_subparsers(dest="command", required=True)
@@ -65,11 +82,18 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--seed", type=SEED, default=0, metavar="S", help="with --ensemble: the perturbations' seed "
                                                                       "(default 0)")
     run.add_argument("--workers", type=COUNT, metavar="W", help="with --ensemble: processes (default: CPU count)")
+    run.add_argument("--sample-hz", type=_rate, default=CAMERA_HZ, metavar="HZ",
+                     help=f"a dual-arm run's markers.csv: its bodies' displacements sampled at this rate, as a "
+                          f"motion camera records them (default {CAMERA_HZ:g} Hz, the SPOT testbed's)")
     val = sub.add_parser("validate", help="print the resolved scenario, or every problem in it")
     val.add_argument("config")
     val.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE")
     plot = sub.add_parser("plot", help="regenerate the figures of a run's results directory")
     plot.add_argument("result_dir")
+    plot.add_argument("--sample-hz", type=_rate, default=CAMERA_HZ, metavar="HZ",
+                      help=f"the camera rate of the displacement figure's samples (default {CAMERA_HZ:g} Hz)")
+    plot.add_argument("--markers", metavar="CSV", help="a measured marker record (time_s, then <body>_x_mm, "
+                      "<body>_y_mm, <body>_yaw_deg displacements): plotted against the run, with the error per grasp")
     rep = sub.add_parser("replay", help="replay a run in Meshcat, in the browser or as one HTML file")
     rep.add_argument("result_dir")
     rep.add_argument("--html", metavar="FILE", help="write a self-contained HTML file instead (no server)")
@@ -592,11 +616,18 @@ def main(argv=None) -> int:
         from .results import replot
 
         try:
-            for figure in replot(args.result_dir):
-                print(figure)
+            figures, errors = replot(args.result_dir, args.sample_hz, args.markers)
         except SpotsimError as e:
             print(e, file=sys.stderr)
             return 2
+        for figure in figures:
+            print(figure)
+        if errors:
+            print("simulated - measured, per grasp (RMS, largest), over the markers within each grasp:")
+            for e in errors:
+                unit = e["column"].rsplit("_", 1)[1]
+                text = "no markers" if e["samples"] == 0 else f"{e['rms']:.4g} {unit}, {e['max']:.4g} {unit}"
+                print(f"  grasp {e['grasp']} {e['column']}: {text} ({e['samples']} markers)")
         return 0
     if args.command == "run" and args.ensemble is None:
         given = [o for o, v in (("--seed", args.seed != 0), ("--workers", args.workers is not None)) if v]
@@ -644,7 +675,7 @@ def main(argv=None) -> int:
         except KeyboardInterrupt:
             result.summary["error_estimate"] = {"note": "interrupted by the user"}
     try:
-        write_results(result, out, figures=not args.no_figures)
+        write_results(result, out, figures=not args.no_figures, sample_hz=args.sample_hz)
     except SpotsimError as e:
         return _bad_input(e)
     s = result.summary

@@ -10,12 +10,14 @@ from typing import NamedTuple
 
 import numpy as np
 
+from . import measures
 from .errors import SpotsimError
 from .files import atomic, atomic_write, prepare, save_figure
 from .scenario import to_yaml
 from .sim.run import RESULTS_FORMAT, Result
 
 SUMMARY = "summary.json"
+MARKERS = "markers.csv"  # a dual-arm run's bodies' displacements at a camera's rate (`measures`)
 REPLAY = "replay.npz"  # what `spotsim replay` draws besides the timeseries
 #: What a recorded interval takes on disk at most (timeseries.npz and .csv; Case I writes
 #: 222 B, the dual arm ...), and the figures and the rest.
@@ -28,10 +30,12 @@ def disk_need(scenario) -> float:
     return scenario.simulation.duration_s / scenario.simulation.dt_s * DISK_PER_RECORD_B + DISK_FIXED_B
 
 
-def write_results(result: Result, out_dir: str | Path, figures: bool = True) -> Path:
-    """Write timeseries.npz/.csv, replay.npz, scenario.yaml, figures/ and, last, summary.json
-    into `out_dir`, each file whole or not at all. SpotsimError if a file cannot be written
-    (a full disk): it names the files kept, and no summary.json is written."""
+def write_results(result: Result, out_dir: str | Path, figures: bool = True,
+                  sample_hz: float = measures.CAMERA_HZ) -> Path:
+    """Write timeseries.npz/.csv, replay.npz, scenario.yaml, a dual-arm run's markers.csv (its
+    bodies' displacements sampled at `sample_hz`, a motion camera's record), figures/ and,
+    last, summary.json into `out_dir`, each file whole or not at all. SpotsimError if a file
+    cannot be written (a full disk): it names the files kept, and no summary.json is written."""
     out = prepare(out_dir, SUMMARY)
     ts = result.timeseries
     kept: list[str] = []
@@ -41,8 +45,14 @@ def write_results(result: Result, out_dir: str | Path, figures: bool = True) -> 
     writes += [("timeseries.csv", lambda: atomic_write(out / "timeseries.csv",
                                                        _csv(ts, result.summary.get("fingers", [])))),
                ("scenario.yaml", lambda: atomic_write(out / "scenario.yaml", to_yaml(result.scenario)))]
+    normal = _table_normal(result.summary)
+    if normal is not None and len(ts["t"]) > 1:
+        camera = measures.sample(ts["t"], measures.displacements(ts, normal), sample_hz)
+        result.summary["markers"] = {"file": MARKERS, "sample_hz": sample_hz, "table_axes": _axes_note(normal)}
+        writes.append((MARKERS, lambda: atomic_write(out / MARKERS, measures.markers_csv(*camera))))
     if figures and len(ts["t"]) > 1:
-        writes.append(("figures/", lambda: plot_figures(ts, out / "figures", result.scenario.name)))
+        writes.append(("figures/", lambda: plot_figures(ts, out / "figures", result.scenario.name, result.summary,
+                                                        sample_hz)))
     writes.append((SUMMARY, lambda: atomic_write(out / SUMMARY, json.dumps(result.summary, indent=2) + "\n")))
     for name, write in writes:
         try:
@@ -80,10 +90,23 @@ def _csv(ts: dict, fingers: list[str]) -> str:
     return buf.getvalue()
 
 
-def plot_figures(ts: dict, fig_dir: Path, title: str) -> None:
+def _table_normal(summary: dict):
+    """The table's normal a dual-arm run is measured in (`measures`), or None (single arm)."""
+    testbed = summary.get("testbed")
+    return testbed.get("table_normal") if isinstance(testbed, dict) else None
+
+
+def _axes_note(normal) -> str:
+    x, y, z = measures.table_axes(normal).round(6).tolist()
+    return f"x_T {x}, y_T {y}, normal {z} (world)"
+
+
+def plot_figures(ts: dict, fig_dir: Path, title: str, summary: dict | None = None,
+                 sample_hz: float = measures.CAMERA_HZ, markers=None) -> None:
     """The paper's Fig. 11 (offset of O_b from O_a per axis) and Fig. 12 (combined force); for
-    a dual-arm run also Fig. 20 (robot centroid displacement per grasp) and Fig. 21 (contact
-    forces and torques per grasp)."""
+    a dual-arm run also Fig. 20 (robot centroid displacement per grasp), Fig. 21 (contact
+    forces and torques per grasp) and the SPOT experiment's displacements (Figs. 23-29; with a
+    measured marker record (times, columns), against it)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -92,6 +115,9 @@ def plot_figures(ts: dict, fig_dir: Path, title: str) -> None:
     fig_dir.mkdir(parents=True, exist_ok=True)
     if "robot_centroid_m" in ts:
         _dual_arm_figures(ts, fig_dir, title, plt)
+        normal = _table_normal(summary or {})
+        if normal is not None:
+            _displacement_figure(ts, summary, normal, sample_hz, markers, fig_dir, title, plt)
     fig, ax = plt.subplots(figsize=(7, 3.5))
     ax.plot(ts["t"], ts["pairs_slipping"], lw=1, color="tab:red", label="slipping")
     ax.plot(ts["t"], ts["pairs_sticking"], lw=1, color="tab:cyan", label="sticking")
@@ -155,8 +181,36 @@ def _dual_arm_figures(ts: dict, fig_dir: Path, title: str, plt) -> None:
     plt.close(fig)
 
 
+def _displacement_figure(ts, summary, normal, sample_hz, markers, fig_dir, title, plt) -> None:
+    """Each body's displacement in the table's plane and its yaw: the record (lines), its
+    camera samples (dots), a measured marker record if given (crosses); grasps shaded."""
+    moved = measures.displacements(ts, normal)
+    t_cam, cam = measures.sample(ts["t"], moved, sample_hz)
+    bodies = [b for b in measures.BODIES if f"{b}_x_mm" in moved]
+    fig, axes = plt.subplots(len(bodies), 3, figsize=(13, 2.1 * len(bodies)), sharex=True, squeeze=False)
+    windows = measures.grasp_windows(summary, float(ts["t"][-1]))
+    for r, body in enumerate(bodies):
+        for c, (q, unit) in enumerate(measures.QUANTITIES):
+            ax, col = axes[r, c], f"{body}_{q}_{unit}"
+            for k, (a, b) in enumerate(windows):
+                ax.axvspan(a, b, color=("tab:blue", "tab:orange")[k % 2], alpha=0.08)
+            ax.plot(ts["t"], moved[col], lw=1, color="k", label="simulated")
+            ax.plot(t_cam, cam[col], ".", ms=2, color="tab:green", label=f"at {sample_hz:g} Hz")
+            if markers is not None and col in markers[1]:
+                ax.plot(markers[0], markers[1][col], "x", ms=3, color="tab:red", label="measured")
+            ax.set_ylabel(f"{body} {q} ({unit})")
+            ax.grid(alpha=0.3)
+    axes[0, 0].legend(fontsize=7)
+    for c in range(3):
+        axes[-1, c].set_xlabel("time (s)")
+    fig.suptitle(f"{title}: displacements in the table's plane from the start (shaded: grasps; Figs. 23-29)")
+    fig.tight_layout()
+    save_figure(fig, fig_dir / ("markers_comparison.png" if markers is not None else "displacements.png"))
+    plt.close(fig)
+
+
 FIGURES_SINGLE = ("offset.png", "contact_force.png", "contact_torque.png", "active_pairs.png")
-FIGURES_DUAL = FIGURES_SINGLE + ("robot_centroid_displacement.png", "contact_forces_torques.png")
+FIGURES_DUAL = FIGURES_SINGLE + ("robot_centroid_displacement.png", "contact_forces_torques.png", "displacements.png")
 
 
 def read_arrays(path: Path) -> dict:
@@ -230,12 +284,30 @@ def read_results(result_dir: str | Path) -> Loaded:
     return Loaded(summary, ts)
 
 
-def replot(result_dir: str | Path) -> list[Path]:
-    """Regenerate a results directory's figures from its timeseries.npz and summary.json."""
+def replot(result_dir: str | Path, sample_hz: float = measures.CAMERA_HZ, markers: str | Path | None = None
+           ) -> tuple[list[Path], list[dict]]:
+    """Regenerate a results directory's figures from its timeseries.npz and summary.json: the
+    figures' paths and, with a measured marker record (`measures.read_markers`), the error of
+    the simulation against it per grasp and column (`measures.compare`), also written to
+    markers_comparison.csv beside figures/."""
     d = Path(result_dir)
     summary, ts = read_results(d)
     if len(ts.get("t", ())) < 2:
         raise SpotsimError(f"{d}: the run recorded fewer than two samples; nothing to plot")
-    plot_figures(ts, d / "figures", summary.get("scenario", d.name))
-    names = FIGURES_DUAL if "robot_centroid_m" in ts else FIGURES_SINGLE
-    return [d / "figures" / n for n in names]
+    normal = _table_normal(summary)
+    measured = None
+    if markers is not None:
+        if normal is None:
+            raise SpotsimError(f"{d}: a single-arm run has no marker measures to compare with {markers}")
+        measured = measures.read_markers(markers)
+    plot_figures(ts, d / "figures", summary.get("scenario", d.name), summary, sample_hz, measured)
+    names = list(FIGURES_DUAL if normal is not None else FIGURES_SINGLE)
+    errors = []
+    if measured is not None:
+        errors = measures.compare(ts["t"], measures.displacements(ts, normal), *measured,
+                                  measures.grasp_windows(summary, float(ts["t"][-1])))
+        names.append("markers_comparison.png")
+        lines = ["grasp,column,samples,rms,max"] + [
+            f"{e['grasp']},{e['column']},{e['samples']},{e['rms']},{e['max']}" for e in errors]
+        atomic_write(d / "markers_comparison.csv", "\n".join(lines) + "\n")
+    return [d / "figures" / n for n in names], errors

@@ -252,6 +252,26 @@ class Robot:
         TABLE6_ARM2, doc="arm 2 locked at Table 6's joint states")
 
 
+def _direction(x):
+    return None if math.sqrt(sum(c * c for c in x)) > 1e-6 else "must be a direction (not the zero vector)"
+
+
+#: How the dual-arm scene's bodies move: in space, or on the paper's air-bearing testbed.
+MOUNTS = ("free_floating", "air_bearing")
+
+
+@dataclass(frozen=True, kw_only=True)
+class Testbed:
+    mount: str = key("free_floating", _choice(*MOUNTS),
+                     "free_floating (in orbit: the base, TM-1 and TM-2 move in 3-D) or air_bearing (the "
+                     "SPOT testbed, paper Sec. 5.2: each floats on a planar joint, moving in the table's "
+                     "plane through its start and turning about the table's normal)")
+    table_normal: tuple[float, float, float] = key(
+        (0.0, 1.0, 0.0), _direction, "the table's normal in world (normalised); a dual-arm run's displacements are "
+        "measured in its plane. World y is both grasp frames' y_a at config/spot_testbed_*.yaml's arm angles: their "
+        "x_a and closing axes z_a lie in the plane")
+
+
 @dataclass(frozen=True, kw_only=True)
 class DualArmScenario:
     """The free-flying dual-arm robot grasping TM-1 with EE-1, then TM-2 with EE-2 (Sec. 5)."""
@@ -268,6 +288,7 @@ class DualArmScenario:
     contact: Contact = key(Contact(), doc="sphere layers, search and the normal contact law (Table 1)")
     friction: Friction = key(Friction(), doc="bristle friction (Table 2)")
     completion: Completion = key(Completion(), doc="when a grasp is complete, and its time-out")
+    testbed: Testbed = key(Testbed(), doc="in orbit, or on the air-bearing testbed")
 
 
 SCENARIO_KINDS = {"single_arm": Scenario, "dual_arm": DualArmScenario}

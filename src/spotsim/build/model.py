@@ -44,6 +44,7 @@ from ..sim.record import REPLAY_RATE_HZ, Layout
 from . import assets
 from .faces import INSET_KINDS, TOUCHING_KINDS, contact_faces, inset, sphere_layer
 from .scene import FINGER_NAMES, SceneSpec, check_inertials, check_inertias, frame, lock_joints, scene_spec, weld_urdf
+from .table import mount_on_table
 
 
 @dataclass(frozen=True)
@@ -202,17 +203,13 @@ def build_model(s, source: str = "<scenario>", welded: dict | None = None, urdf:
     model.gravity = pin.Motion(np.array(s.simulation.gravity_m_s2), np.zeros(3))
     robot_joint = model.getJointId(spec.robot_joint) if spec.robot_joint else 0
 
-    end_effectors = []
-    for name, prefix in spec.end_effectors:
-        f = frame(model, f"{prefix}grasp")
-        end_effectors.append(EndEffector(name, f.parentJoint, f.placement))
-    modules = []
-    for k, (name, prefix, _, _) in enumerate(spec.modules):
-        f = frame(model, f"{prefix}module")
-        joint = 0 if k in spec.welded_modules else f.parentJoint
-        modules.append(ModuleBody(name, prefix, joint, f.placement))
+    end_effectors, modules = _scene_frames(model, spec)
     free = tuple(m.joint for m in modules if m.joint) + ((robot_joint,) if robot_joint else ())
     check_inertias(model, joints=set(free))
+    q0 = start_configuration(model, spec, end_effectors, modules)
+    if on_table(s):
+        model, q0 = mount_on_table(model, q0, free, s.testbed.table_normal)
+        end_effectors, modules = _scene_frames(model, spec)
 
     law = contact_law(s)
     active = [k for k in range(len(modules)) if k not in spec.welded_modules]
@@ -222,12 +219,10 @@ def build_model(s, source: str = "<scenario>", welded: dict | None = None, urdf:
     module_prefixes = [modules[k].prefix for k in active]
     faces = tuple(contact_faces(urdf)) if faces is None else faces
     layers = _contact_layers(model, faces, finger_links, module_prefixes, law)
-    movable = [j for j in layers.contact_joints if j and model.joints[j].shortname() != "JointModelFreeFlyer"]
-    if movable:  # the compiled kinematics reads contact bodies' poses from free-flyers only
+    movable = [j for j in layers.contact_joints if j and j not in free]
+    if movable:  # the compiled kinematics reads contact bodies' poses from free bodies only
         raise ModelError(f"contact faces on joints {[model.names[j] for j in movable]}, which are neither "
                          "fixed nor free-flyers: lock them (reduced away) or make them free")
-
-    q0 = start_configuration(model, spec, end_effectors, modules)
 
     fingers = []
     for link in finger_links:
@@ -245,6 +240,26 @@ def build_model(s, source: str = "<scenario>", welded: dict | None = None, urdf:
     return Model(s, spec, urdf, model, layers.geom, tuple(end_effectors), tuple(modules), spec.grasps, robot_joint,
                  tuple(fingers), layers.finger_geoms, layers.contact_joints, q0, np.zeros(model.nv), free,
                  faces, layout, sim_model(model_fields(parts)))
+
+
+def _scene_frames(model: pin.Model, spec: SceneSpec) -> tuple[list[EndEffector], list[ModuleBody]]:
+    """The end-effectors' grasp frames and the modules' groove frames of `model`, by the
+    spec's link names."""
+    end_effectors = []
+    for name, prefix in spec.end_effectors:
+        f = frame(model, f"{prefix}grasp")
+        end_effectors.append(EndEffector(name, f.parentJoint, f.placement))
+    modules = []
+    for k, (name, prefix, _, _) in enumerate(spec.modules):
+        f = frame(model, f"{prefix}module")
+        joint = 0 if k in spec.welded_modules else f.parentJoint
+        modules.append(ModuleBody(name, prefix, joint, f.placement))
+    return end_effectors, modules
+
+
+def on_table(s) -> bool:
+    """The scenario's bodies float on the air-bearing testbed's table (`build.table`)."""
+    return getattr(getattr(s, "testbed", None), "mount", None) == "air_bearing"
 
 
 def start_configuration(model: pin.Model, spec: SceneSpec, end_effectors, modules) -> np.ndarray:
@@ -272,7 +287,8 @@ def with_start(model: Model, s) -> Model:
     `model.scenario` only in the modules' `initial_offset_mm` and `initial_rpy_deg`.
 
     Nothing else of a Model depends on those starts (the fingers' openings at touch are
-    computed with the module centred, `_opening_at_touch`), so only `q0`, the spec's module
+    computed with the module centred, `_opening_at_touch`) but, on the air-bearing testbed,
+    the planar joints (built again, from the compiled URDF), so only `q0`, the spec's module
     sections and the scenario change; the Pinocchio model, the sphere layers and the compiled
     Model are shared, not copied. Raises ValueError for any other difference, or a welded model.
     """
@@ -291,6 +307,8 @@ def with_start(model: Model, s) -> Model:
 
     if type(s) is not type(model.scenario) or without_starts(s) != without_starts(model.scenario):
         raise ValueError("with_start: the scenarios differ in more than the modules' starts")
+    if on_table(s):  # each body's planar joint lies in the plane through its start
+        return build_model(s, urdf=model.urdf, faces=model.faces)
     sections = list(modules_of(s).values())
     spec = replace(model.spec, modules=tuple((name, prefix, sections[k], e)
                                              for k, (name, prefix, _, e) in enumerate(model.spec.modules)))
@@ -403,11 +421,15 @@ def _opening_at_touch(model, parent_joint, axis_J, layers, on_finger, ee, module
     data = model.createData()
     pin.forwardKinematics(model, data, q)
     oMa = data.oMi[ee.joint] * ee.placement
-    jMb = model.jointPlacements[module.joint].inverse() * oMa * module.placement.inverse()
-    iq = model.idx_qs[module.joint]
-    q[iq:iq + 7] = pin.SE3ToXYZQUAT(jMb)
-    pin.forwardKinematics(model, data, q)
-    oMf, oMm = data.oMi[parent_joint], data.oMi[module.joint]
+    if model.nqs[module.joint] == 7:  # a free-flyer: the module placed by its configuration
+        jMb = model.jointPlacements[module.joint].inverse() * oMa * module.placement.inverse()
+        iq = model.idx_qs[module.joint]
+        q[iq:iq + 7] = pin.SE3ToXYZQUAT(jMb)
+        pin.forwardKinematics(model, data, q)
+        oMm = data.oMi[module.joint]
+    else:  # a planar joint cannot leave its plane: the centred pose is taken as it is
+        oMm = oMa * module.placement.inverse()
+    oMf = data.oMi[parent_joint]
     axis_W = oMf.rotation @ axis_J
     slave = layers.slave
     on_module = slave.joint == module.joint
@@ -485,7 +507,10 @@ def model_fields(p: _Parts) -> ModelFields:
     integrator = IntegratorParams(METHODS.index(i.method), i.method in ADAPTIVE, A, b, c_nodes, e, i.rtol, i.atol,
                                   i.h_min_s, i.h_max_s, i.velocity_tol_m_s, i.onset_depth_m,
                                   _error_levers(bodies, master, layers.slave, p.fingers))
-    return ModelFields(bodies, np.array(model.gravity.linear), master, layers.slave, layers.faces, law,
+    table = np.array(s.testbed.table_normal, dtype=float) if on_table(s) else np.zeros(3)
+    if table.any():
+        table /= np.linalg.norm(table)
+    return ModelFields(bodies, np.array(model.gravity.linear), table, master, layers.slave, layers.faces, law,
                     s.contact.broad_phase == "none", fingers, grasps,
                     drive_params(ee),
                     CompletionParams(c.hold_s, c.max_contact_speed_m_s, c.max_net_force_N, c.phase_timeout_s),

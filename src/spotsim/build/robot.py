@@ -79,3 +79,44 @@ def fit_base(args: dict | None = None) -> dict[str, float]:
                          f"inertia eigenvalues {eig}")
     return {"base_mass_kg": m_b, "base_ixx": I_b[0, 0], "base_iyy": I_b[1, 1], "base_izz": I_b[2, 2],
             "base_ixy": I_b[0, 1], "base_ixz": I_b[0, 2], "base_iyz": I_b[1, 2]}
+
+
+#: How closely `level_arms` brings each grasp frame's y_a to the table's normal, rad.
+LEVEL_TOL_RAD = 1e-9
+
+
+def grasp_axes(urdf: str, angles) -> list[np.ndarray]:
+    """Each end-effector's grasp frame O_a (its rotation in the robot's base frame, columns
+    x_a, y_a, z_a) with the arms locked at `angles` ({prefix: six angles})."""
+    model, _ = locked_robot(urdf, angles)
+    data = model.createData()
+    pin.framesForwardKinematics(model, data, pin.neutral(model))
+    return [data.oMf[model.getFrameId(f"ee{k}_grasp")].rotation.copy() for k in (1, 2)]
+
+
+def level_arms(normal=(0.0, 1.0, 0.0), angles=TABLE6) -> dict[str, tuple[float, ...]]:
+    """The arms' joint angles nearest `angles` (least squares, rad) at which both grasp frames'
+    y_a lie along the table's `normal` (base frame, the robot at its start): their x_a (the
+    SPOT offsets' axis) and z_a (the fingers' closing axis) then lie in the table's plane, as
+    on the testbed. UR3 at Table 6's own angles tilts them 7.6 and 7.1 deg from world y."""
+    from scipy.optimize import least_squares
+
+    for prefix in angles:
+        assets.prefixed_arm(ARM, prefix)
+    urdf = assets.compile_xacro(DUAL_ARM_XACRO, {})
+    n = np.asarray(normal, dtype=float) / np.linalg.norm(normal)
+    prefixes = list(angles)
+    start = np.concatenate([angles[p] for p in prefixes])
+
+    def as_angles(x):
+        return {p: tuple(float(a) for a in x[6 * i:6 * i + 6]) for i, p in enumerate(prefixes)}
+
+    def misalignment(x):
+        return np.concatenate([np.cross(R[:, 1], n) for R in grasp_axes(urdf, as_angles(x))])
+
+    # the nearest angles: a small weight on the change, then the alignment alone from there
+    near = least_squares(lambda x: np.r_[misalignment(x), 1e-2 * (x - start)], start, xtol=1e-12).x
+    exact = least_squares(misalignment, near, xtol=1e-15, ftol=1e-15, gtol=1e-15).x
+    if np.abs(misalignment(exact)).max() > LEVEL_TOL_RAD:
+        raise ValueError(f"no arm angles near {angles} level both grasp frames to the normal {normal}")
+    return as_angles(exact)

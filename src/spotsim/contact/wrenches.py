@@ -158,7 +158,16 @@ def contact_summary(m, d):
 
 
 @njit_inline
-def net_force(summary):
-    """|the combined contact force on the module|, N."""
-    f = summary.force_A
-    return math.sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2])
+def net_force(m, d):
+    """|the combined contact force on the active grasp's module| that can move it, N: all of
+    it in space; on the air-bearing table its part in the table's plane (the table reacts the
+    rest)."""
+    f = d.summary.force_A
+    total = f[0] * f[0] + f[1] * f[1] + f[2] * f[2]
+    n_W = m.table_normal
+    if n_W[0] == 0.0 and n_W[1] == 0.0 and n_W[2] == 0.0:
+        return math.sqrt(total)
+    g = d.active
+    along = (dot3(_grasp_axis(m, d, g, 0), n_W) * f[0] + dot3(_grasp_axis(m, d, g, 1), n_W) * f[1]
+             + dot3(_grasp_axis(m, d, g, 2), n_W) * f[2])
+    return math.sqrt(max(0.0, total - along * along))

@@ -1,9 +1,15 @@
-"""Free bodies (free-flyer joints) as arrays: their kinematics, centroid states and momenta.
+"""Free bodies (free-flyer or planar joints) as arrays: their kinematics, centroid states and
+momenta.
 
 After the locked joints are reduced away every body of a scene is either fixed (joint 0) or
-free (a free-flyer child of the world), so the placements and velocities the contact needs
-follow from q and v directly. Quaternions are Pinocchio's XYZQUAT order: (x, y, z, qx, qy, qz,
-qw). Pinocchio keeps a free-flyer's velocity in its body frame: v = (v_O, omega).
+free: a free-flyer child of the world, or, on the air-bearing testbed, a planar joint child of
+the world (in-plane translation and rotation about the joint's z, the table's normal). The
+placements and velocities the contact needs follow from q and v directly. A free-flyer's q is
+Pinocchio's XYZQUAT order, (x, y, z, qx, qy, qz, qw); a planar joint's is (x, y, cos theta,
+sin theta). Pinocchio keeps both velocities in the body frame: v = (v_O, omega) for a
+free-flyer, (v_O,x, v_O,y, omega_z) for a planar joint, whose other three components are zero.
+Everything below reads and writes a body's motion through `twist`, `twist_rate`, `joint_quat`
+and `set_centroid_state`, so that the integrators treat both kinds alike.
 """
 
 from __future__ import annotations
@@ -42,21 +48,26 @@ class FreeBodies(NamedTuple):
     lever: np.ndarray  # (n, 3) the body's centroid in its joint frame, m
     mass: np.ndarray  # (n,) kg
     inertia_G: np.ndarray  # (n, 3, 3) rotational inertia about the centroid, joint axes, kg m^2
+    planar: np.ndarray  # (n,) bool: a planar joint (its plane the joint's xy, its normal the joint's z)
+
+
+#: The joint kinds the compiled core integrates, by Pinocchio's short names.
+FREE_FLYER, PLANAR = "JointModelFreeFlyer", "JointModelPlanar"
 
 
 def free_flyers(model: pin.Model) -> list[int]:
-    """The joints of `model` that are free-flyers."""
-    return [j for j in range(1, model.njoints) if model.joints[j].shortname() == "JointModelFreeFlyer"]
+    """The joints of `model` that are free-flyers or planar joints."""
+    return [j for j in range(1, model.njoints) if model.joints[j].shortname() in (FREE_FLYER, PLANAR)]
 
 
 def free_bodies(model: pin.Model) -> FreeBodies:
-    """The free-flyer joints of `model`, which must be all its joints, each a child of the
-    world (raises ModelError otherwise)."""
+    """The free-flyer and planar joints of `model`, which must be all its joints, each a child
+    of the world (raises ModelError otherwise)."""
     joints = free_flyers(model)
     others = [model.names[j] for j in range(1, model.njoints) if j not in joints or model.parents[j] != 0]
     if others:
-        raise ModelError(f"joints {others} are neither locked nor free-flyers on the world: the compiled "
-                         "core integrates free bodies only")
+        raise ModelError(f"joints {others} are neither locked nor free-flyers or planar joints on the world: the "
+                         "compiled core integrates free bodies only")
     ints = lambda values: np.array(values, dtype=np.int64)
     return FreeBodies(ints(joints), ints([model.idx_qs[j] for j in joints]),
                       ints([model.idx_vs[j] for j in joints]),
@@ -64,7 +75,60 @@ def free_bodies(model: pin.Model) -> FreeBodies:
                       np.array([model.jointPlacements[j].translation for j in joints]).reshape(-1, 3),
                       np.array([model.inertias[j].lever for j in joints]).reshape(-1, 3),
                       np.array([model.inertias[j].mass for j in joints], dtype=float),
-                      np.array([model.inertias[j].inertia for j in joints]).reshape(-1, 3, 3))
+                      np.array([model.inertias[j].inertia for j in joints]).reshape(-1, 3, 3),
+                      np.array([model.joints[j].shortname() == PLANAR for j in joints], dtype=bool))
+
+
+# ------------------------------------------------------------------------------- joints
+
+
+@njit_inline
+def twist(bodies, b, v):
+    """Free body b's velocity in its joint frame, (v_O, omega), two 3-tuples: a planar joint's
+    out-of-plane components are zero."""
+    iv = bodies.idx_v[b]
+    if bodies.planar[b]:
+        return (v[iv], v[iv + 1], 0.0), (0.0, 0.0, v[iv + 2])
+    return (v[iv], v[iv + 1], v[iv + 2]), (v[iv + 3], v[iv + 4], v[iv + 5])
+
+
+@njit_inline
+def twist_rate(bodies, b, a):
+    """`twist` of the accelerations a: (a_O, alpha), two 3-tuples."""
+    return twist(bodies, b, a)
+
+
+@njit_inline
+def set_twist_rate(bodies, b, a, a_O, alpha):
+    """Write free body b's (a_O, alpha) into the accelerations a (nv,): a planar joint keeps
+    the in-plane ones (its constraint carries the others)."""
+    iv = bodies.idx_v[b]
+    if bodies.planar[b]:
+        a[iv], a[iv + 1], a[iv + 2] = a_O[0], a_O[1], alpha[2]
+        return
+    put3(a, iv, a_O)
+    put3(a, iv + 3, alpha)
+
+
+@njit_inline
+def joint_quat(bodies, b, q):
+    """The rotation of free body b's joint as a unit quaternion (x, y, z, w), a 4-tuple: a
+    free-flyer's own, or a planar joint's turn about its z."""
+    iq = bodies.idx_q[b]
+    if bodies.planar[b]:
+        half = 0.5 * math.atan2(q[iq + 3], q[iq + 2])
+        return 0.0, 0.0, math.sin(half), math.cos(half)
+    return q[iq + 3], q[iq + 4], q[iq + 5], q[iq + 6]
+
+
+@njit_inline
+def _joint_rotation9(bodies, b, q):
+    """The rotation of free body b's joint as a 9-tuple, row by row."""
+    iq = bodies.idx_q[b]
+    if bodies.planar[b]:
+        c, s = q[iq + 2], q[iq + 3]
+        return c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0
+    return quat_rotation9(q[iq + 3], q[iq + 4], q[iq + 5], q[iq + 6])
 
 
 # ------------------------------------------------------------------------------- poses
@@ -73,9 +137,8 @@ def free_bodies(model: pin.Model) -> FreeBodies:
 @njit
 def body_rotation9(bodies, b, q):
     """Rotation of free body b in the world as a 9-tuple, row by row: R_P times the rotation
-    of the joint's quaternion."""
-    iq = bodies.idx_q[b]
-    return mm9(bodies.R_P[b], quat_rotation9(q[iq + 3], q[iq + 4], q[iq + 5], q[iq + 6]))
+    of its joint."""
+    return mm9(bodies.R_P[b], _joint_rotation9(bodies, b, q))
 
 
 @njit
@@ -96,7 +159,8 @@ def body_rotation(bodies, b, q):
 def body_origin3(bodies, b, q):
     """Origin of free body b in the world, from q, as a 3-tuple."""
     iq = bodies.idx_q[b]
-    return add3(mv3(bodies.R_P[b], q[iq:iq + 3]), bodies.p_P[b])
+    z = 0.0 if bodies.planar[b] else q[iq + 2]
+    return add3(mv3(bodies.R_P[b], (q[iq], q[iq + 1], z)), bodies.p_P[b])
 
 
 @njit
@@ -105,11 +169,12 @@ def kinematics(m, d):
     world, into rows m.bodies.joint of d.R_W, d.p_W, d.w_W, d.vo_W (fixed bodies stay at the
     identity)."""
     for b in range(m.bodies.joint.shape[0]):
-        j, iv = m.bodies.joint[b], m.bodies.idx_v[b]
+        j = m.bodies.joint[b]
         body_rotation_into(m.bodies, b, d.q, d.R_W[j])
         put3(d.p_W[j], 0, body_origin3(m.bodies, b, d.q))
-        put3(d.vo_W[j], 0, mv3(d.R_W[j], d.v[iv:iv + 3]))
-        put3(d.w_W[j], 0, mv3(d.R_W[j], d.v[iv + 3:iv + 6]))
+        v_O, w = twist(m.bodies, b, d.v)
+        put3(d.vo_W[j], 0, mv3(d.R_W[j], v_O))
+        put3(d.w_W[j], 0, mv3(d.R_W[j], w))
 
 
 # ------------------------------------------------------------------------------- centroids
@@ -119,10 +184,9 @@ def kinematics(m, d):
 def centroid_state_at(bodies, b, R, q, v):
     """World centroid position and velocity, rotation, and body angular velocity of free body
     b, given its rotation R (from q): 3-tuple, 3-tuple, R, 3-tuple."""
-    iv = bodies.idx_v[b]
     c = bodies.lever[b]
-    v_O, w = v[iv:iv + 3], v[iv + 3:iv + 6]
-    return add3(body_origin3(bodies, b, q), mv3(R, c)), mv3(R, add3(v_O, cross3(w, c))), R, (w[0], w[1], w[2])
+    v_O, w = twist(bodies, b, v)
+    return add3(body_origin3(bodies, b, q), mv3(R, c)), mv3(R, add3(v_O, cross3(w, c))), R, w
 
 
 @njit
@@ -141,15 +205,23 @@ def centroid_acceleration(R, c, v_O, w, a_O, alpha):
 @njit
 def set_centroid_state(bodies, b, q, v, p_G, v_G, quat, w):
     """Write free body b's configuration and velocity from its world centroid state and its
-    joint's quaternion (x, y, z, w), in place."""
+    joint's quaternion (x, y, z, w), in place. A planar joint keeps the in-plane components:
+    the integrators give it a centroid state in its plane and a turn about its normal."""
     iq, iv = bodies.idx_q[b], bodies.idx_v[b]
     c = bodies.lever[b]
     Rq = quat_rotation9(quat[0], quat[1], quat[2], quat[3])
     R_P = bodies.R_P[b]
     # p_G = p_P + R_P (x + Rq c)
-    put3(q, iq, sub3(mtv3(R_P, sub3(p_G, bodies.p_P[b])), mv9(Rq, c)))
+    x = sub3(mtv3(R_P, sub3(p_G, bodies.p_P[b])), mv9(Rq, c))
+    v_O = sub3(mtv9(mm9(R_P, Rq), v_G), cross3(w, c))
+    if bodies.planar[b]:
+        turn = math.sqrt(Rq[0] * Rq[0] + Rq[3] * Rq[3])
+        q[iq], q[iq + 1], q[iq + 2], q[iq + 3] = x[0], x[1], Rq[0] / turn, Rq[3] / turn
+        v[iv], v[iv + 1], v[iv + 2] = v_O[0], v_O[1], w[2]
+        return
+    put3(q, iq, x)
     q[iq + 3], q[iq + 4], q[iq + 5], q[iq + 6] = quat[0], quat[1], quat[2], quat[3]
-    put3(v, iv, sub3(mtv9(mm9(R_P, Rq), v_G), cross3(w, c)))
+    put3(v, iv, v_O)
     put3(v, iv + 3, w)
 
 
@@ -160,11 +232,10 @@ def set_centroid_state(bodies, b, q, v, p_G, v_G, quat, w):
 def body_momentum3(bodies, b, q, v):
     """Free body b's linear momentum, its angular momentum about the world origin and its
     centroid (world), as 3-tuples."""
-    iv = bodies.idx_v[b]
     R = body_rotation9(bodies, b, q)
     m, lever = bodies.mass[b], bodies.lever[b]
-    w = v[iv + 3:iv + 6]
-    v_G = mv9(R, add3(v[iv:iv + 3], cross3(w, lever)))
+    v_O, w = twist(bodies, b, v)
+    v_G = mv9(R, add3(v_O, cross3(w, lever)))
     p_G = add3(body_origin3(bodies, b, q), mv9(R, lever))
     p_b = (m * v_G[0], m * v_G[1], m * v_G[2])
     l_b = add3(cross3(p_G, p_b), mv9(R, mv3(bodies.inertia_G[b], w)))
@@ -211,9 +282,8 @@ def kinetic_energy(bodies, q, v):
     """Kinetic energy of all free bodies, J: 1/2 m |v_G|^2 + 1/2 omega . I_G omega."""
     total = 0.0
     for b in range(bodies.joint.shape[0]):
-        iv = bodies.idx_v[b]
-        w = v[iv + 3:iv + 6]
-        v_G = add3(v[iv:iv + 3], cross3(w, bodies.lever[b]))  # body axes; the norm is frame-free
+        v_O, w = twist(bodies, b, v)
+        v_G = add3(v_O, cross3(w, bodies.lever[b]))  # body axes; the norm is frame-free
         Iw = mv3(bodies.inertia_G[b], w)
         total += 0.5 * bodies.mass[b] * (v_G[0] * v_G[0] + v_G[1] * v_G[1] + v_G[2] * v_G[2]) + \
             0.5 * (w[0] * Iw[0] + w[1] * Iw[1] + w[2] * Iw[2])
@@ -231,8 +301,8 @@ def travel_rate(m, d):
     for i in range(d.opening_rate.shape[0]):
         rate = max(rate, abs(d.opening_rate[i]))
     for i in range(m.limits.reach_rows.shape[0]):
-        # a free-flyer's v = (v_O, omega) in its frame; norms are frame-free
-        iv = m.bodies.idx_v[m.limits.reach_rows[i]]
-        rate += math.sqrt(d.v[iv] ** 2 + d.v[iv + 1] ** 2 + d.v[iv + 2] ** 2) + \
-            math.sqrt(d.v[iv + 3] ** 2 + d.v[iv + 4] ** 2 + d.v[iv + 5] ** 2) * m.limits.reach[i]
+        # v = (v_O, omega) in the body's frame; norms are frame-free
+        v_O, w = twist(m.bodies, m.limits.reach_rows[i], d.v)
+        rate += math.sqrt(v_O[0] ** 2 + v_O[1] ** 2 + v_O[2] ** 2) + \
+            math.sqrt(w[0] ** 2 + w[1] ** 2 + w[2] ** 2) * m.limits.reach[i]
     return rate

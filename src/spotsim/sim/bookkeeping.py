@@ -8,11 +8,13 @@ import math
 from ..jit import njit
 from ..linalg import cross, mv
 from .drive import current_speed
+from .dynamics import table_load
 
 
 @njit
-def raise_peaks(d):
-    """Raise the active grasp's peaks to include the last step's contact wrench and pairs."""
+def raise_peaks(m, d):
+    """Raise the active grasp's peaks to include the last step's contact wrench and pairs, and
+    on the air-bearing table what the free bodies' contact wrenches press into it."""
     g = d.active
     f, tau = d.summary.force_A, d.summary.torque_A
     for a in range(3):
@@ -21,6 +23,11 @@ def raise_peaks(d):
     d.peak_force_norm[g] = max(d.peak_force_norm[g], math.sqrt(f[0] ** 2 + f[1] ** 2 + f[2] ** 2))
     d.peak_torque_norm[g] = max(d.peak_torque_norm[g], math.sqrt(tau[0] ** 2 + tau[1] ** 2 + tau[2] ** 2))
     d.peak_pairs[g] = max(d.peak_pairs[g], d.contacts.key.shape[0])
+    for b in range(m.bodies.joint.shape[0]):
+        if m.bodies.planar[b]:
+            force, moment = table_load(m.bodies, b, d.loads.f_local)
+            d.peak_table_force[g] = max(d.peak_table_force[g], force)
+            d.peak_table_moment[g] = max(d.peak_table_moment[g], moment)
 
 
 @njit
@@ -35,7 +42,7 @@ def bookkeeping(m, d, h):
     d.pair_steps += n
     d.drive_work += h * d.drive_power
     if n:
-        raise_peaks(d)
+        raise_peaks(m, d)
     if m.limits.fixed_contact:
         for i in range(3):
             d.impulse_W[i] += h * d.external_force_W[i]

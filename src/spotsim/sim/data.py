@@ -92,6 +92,10 @@ class DataFields(NamedTuple):
     peak_force_norm: np.ndarray  # (n_g,) N
     peak_torque_norm: np.ndarray  # (n_g,) N m
     peak_pairs: np.ndarray  # (n_g,) most pairs in contact at once
+    # (n_g,) on the air-bearing table, the most any free body's contact wrench pressed into it:
+    # the force along its normal, N, and the moment about the body's centroid in its plane, N m
+    peak_table_force: np.ndarray
+    peak_table_moment: np.ndarray
     # the run's bookkeeping
     impulse_W: np.ndarray  # (3,) external impulse on the free bodies (fixed contacts, gravity), N s
     impulse_moment_O_W: np.ndarray  # (3,) its moment about the world origin, N m s
@@ -180,7 +184,8 @@ def make_data(model, rows: int = ROWS_PER_CALL) -> Data:
         drive_resumes=ints(n_g), drive_jump=np.zeros(n_g), phase=ints(n_g), held_since=math.nan,
         t_start=np.r_[0.0, nan(n_g - 1)], t_contact=nan(n_g), t_complete=nan(n_g),
         peak_force=np.zeros((n_g, 3)), peak_torque=np.zeros((n_g, 3)), peak_force_norm=np.zeros(n_g),
-        peak_torque_norm=np.zeros(n_g), peak_pairs=ints(n_g),
+        peak_torque_norm=np.zeros(n_g), peak_pairs=ints(n_g), peak_table_force=np.zeros(n_g),
+        peak_table_moment=np.zeros(n_g),
         impulse_W=np.zeros(3), impulse_moment_O_W=np.zeros(3), drive_power=0.0, drive_work=0.0,
         steps=0, pair_steps=0, flights=0, evaluations=0, accepted=0, rejected=0,
         energy_start=0.0, energy_now=0.0, energy_passive=math.nan, momentum_start=np.zeros(3),

@@ -11,8 +11,10 @@ the model's method; a new integrator is one more such function and its code.
   (Euler against Heun's trapezoid, from the end's forces, which start the next step).
 - `rk4`, `dopri5`: explicit Runge-Kutta, fixed and error-controlled.
 
-Free bodies hang on free-flyer joints, whose velocity Pinocchio keeps in the body frame. The
-integrators advance each free body's centroid in the world frame instead: contact forces come
+Free bodies hang on free-flyer or planar joints, whose velocity Pinocchio keeps in the body
+frame. The integrators advance each free body's centroid in the world frame instead (a planar
+body's stays in its plane: its accelerations have no other component, and `set_centroid_state`
+keeps its in-plane coordinates): contact forces come
 in equal and opposite pairs, so the sum of m_i a_G,i is zero to round-off and the total linear
 momentum, and the system's centroid velocity, stay exact. A body-frame twist update does not
 keep them: its error grows with (omega h)^2.
@@ -32,9 +34,12 @@ from .bodies import (
     centroid_acceleration,
     centroid_state,
     centroid_state_at,
+    joint_quat,
     kinematics,
     set_centroid_state,
     travel_rate,
+    twist,
+    twist_rate,
 )
 from .data import RK_STATE
 from .dynamics import accelerations
@@ -72,14 +77,12 @@ def _euler_body(bodies, b, R, q, v, a_O, alpha, h):
     """Free body b's symplectic Euler step, in place, given its rotation R (from q) and its
     twist's derivative (a_O, alpha): v_G += h a_G and omega += h alpha, then x_G += h v_G and
     R <- R exp(h omega), centroid in world, rotation in body."""
-    iq = bodies.idx_q[b]
-    iv = bodies.idx_v[b]
     p_G, v_G, R, w = centroid_state_at(bodies, b, R, q, v)
-    a_G = centroid_acceleration(R, bodies.lever[b], v[iv:iv + 3], w, a_O, alpha)
+    a_G = centroid_acceleration(R, bodies.lever[b], twist(bodies, b, v)[0], w, a_O, alpha)
     v_G = axpy3(h, a_G, v_G)
     w = axpy3(h, alpha, w)
     # a unit quaternion, or the round-off in R compounds from step to step
-    quat = quat_times_exp4(q[iq + 3:iq + 7], h * w[0], h * w[1], h * w[2])
+    quat = quat_times_exp4(joint_quat(bodies, b, q), h * w[0], h * w[1], h * w[2])
     set_centroid_state(bodies, b, q, v, axpy3(h, v_G, p_G), v_G, quat, w)
 
 
@@ -88,8 +91,8 @@ def _euler_bodies(m, d, q, v, h):
     """Every free body's symplectic Euler step of h (s) from (q, v), in place, with the
     accelerations d.a and rotations d.R_W of the last evaluation (made at (q, v))."""
     for b in range(m.bodies.joint.shape[0]):
-        iv = m.bodies.idx_v[b]
-        _euler_body(m.bodies, b, d.R_W[m.bodies.joint[b]], q, v, d.a[iv:iv + 3], d.a[iv + 3:iv + 6], h)
+        a_O, alpha = twist_rate(m.bodies, b, d.a)
+        _euler_body(m.bodies, b, d.R_W[m.bodies.joint[b]], q, v, a_O, alpha, h)
 
 
 @njit
@@ -126,12 +129,12 @@ def _centroid_accelerations(m, d, out):
     """Each free body's centroid acceleration (world) and angular acceleration (body) at d's
     last evaluation, into out (n_bodies, 6)."""
     for b in range(m.bodies.joint.shape[0]):
-        iv = m.bodies.idx_v[b]
-        a_G = centroid_acceleration(d.R_W[m.bodies.joint[b]], m.bodies.lever[b], d.v[iv:iv + 3], d.v[iv + 3:iv + 6],
-                                    d.a[iv:iv + 3], d.a[iv + 3:iv + 6])
+        v_O, w = twist(m.bodies, b, d.v)
+        a_O, alpha = twist_rate(m.bodies, b, d.a)
+        a_G = centroid_acceleration(d.R_W[m.bodies.joint[b]], m.bodies.lever[b], v_O, w, a_O, alpha)
         for x in range(3):
             out[b, x] = a_G[x]
-            out[b, 3 + x] = d.a[iv + 3 + x]
+            out[b, 3 + x] = alpha[x]
 
 
 @njit
@@ -239,9 +242,11 @@ def pack(bodies, q, v):
     y = np.empty(RK_STATE * bodies.joint.shape[0])
     for b in range(bodies.joint.shape[0]):
         p_G, v_G, _, w = centroid_state(bodies, b, q, v)
-        iq, o = bodies.idx_q[b], RK_STATE * b
+        o = RK_STATE * b
         put3(y, o, p_G)
-        y[o + 3:o + 7] = q[iq + 3:iq + 7]
+        quat = joint_quat(bodies, b, q)
+        for i in range(4):
+            y[o + 3 + i] = quat[i]
         put3(y, o + 7, v_G)
         put3(y, o + 10, w)
     return y
@@ -261,9 +266,10 @@ def derivative(bodies, y, q, v, a):
     """dy/dt at the state y = (q, v) given the accelerations a there."""
     dy = np.empty_like(y)
     for b in range(bodies.joint.shape[0]):
-        o, iv = RK_STATE * b, bodies.idx_v[b]
+        o = RK_STATE * b
         R = body_rotation(bodies, b, q)
-        w = v[iv + 3:iv + 6]
+        v_O, w = twist(bodies, b, v)
+        a_O, alpha = twist_rate(bodies, b, a)
         x, qy, z, qw = y[o + 3], y[o + 4], y[o + 5], y[o + 6]
         dy[o:o + 3] = y[o + 7:o + 10]
         # q' = q (x) (omega, 0) / 2, omega in the body frame
@@ -271,8 +277,8 @@ def derivative(bodies, y, q, v, a):
         dy[o + 4] = 0.5 * (qw * w[1] + z * w[0] - x * w[2])
         dy[o + 5] = 0.5 * (qw * w[2] + x * w[1] - qy * w[0])
         dy[o + 6] = -0.5 * (x * w[0] + qy * w[1] + z * w[2])
-        put3(dy, o + 7, centroid_acceleration(R, bodies.lever[b], v[iv:iv + 3], w, a[iv:iv + 3], a[iv + 3:iv + 6]))
-        dy[o + 10:o + 13] = a[iv + 3:iv + 6]
+        put3(dy, o + 7, centroid_acceleration(R, bodies.lever[b], v_O, w, a_O, alpha))
+        put3(dy, o + 10, alpha)
     return dy
 
 

@@ -114,6 +114,9 @@ class ModelFields(NamedTuple):
 
     bodies: FreeBodies
     gravity_W: np.ndarray  # (3,) m/s^2
+    # (3,) the air-bearing table's unit normal in world, which every free body's planar joint
+    # turns about; zero in space (`build.table`)
+    table_normal: np.ndarray
     master: MasterSpheres
     slave: SlaveSpheres
     faces: FaceTable

@@ -5,7 +5,8 @@ load and has come to rest (its fingers close no faster than the contact speed li
 actuator within that speed's share of its torque-speed line below the grasp load, the relay
 stalled), every active contact's relative speed is below the contact speed limit, and the net
 contact force on the module is below the net force limit: the paper's rule (Sec. 3.2 step 3,
-Sec. 5.1; model.md Sec. 6).
+Sec. 5.1; model.md Sec. 6). On the air-bearing table the net force is its part in the table's
+plane: the table reacts the rest.
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ def completion_checks(m, d):
     the contact speeds and the net force on the module within their limits."""
     c = m.completion
     return (current_speed(m, d) <= c.max_contact_speed, d.summary.max_speed <= c.max_contact_speed,
-            net_force(d.summary) <= c.max_net_force)
+            net_force(m, d) <= c.max_net_force)
 
 
 @njit

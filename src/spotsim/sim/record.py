@@ -17,13 +17,14 @@ import numpy as np
 from ..contact.friction import SLIPPING, STICKING
 from ..contact.search import grow
 from ..jit import njit, njit_inline
-from ..linalg import add3, mm_into, mtv3, mv3, sub3
+from ..linalg import add3, dot3, mm_into, mtv3, mv3, sub3
 from .bodies import (
     bodies_centroid3,
     bodies_momentum,
     body_origin3,
     body_rotation_into,
     kinetic_energy,
+    twist,
 )
 from .data import Snapshots
 from .drive import current_speed
@@ -163,10 +164,10 @@ def sample(m, d, row):
     # the module's velocity and angular velocity, world
     b = m.record.module_row[k]
     if b >= 0:
-        iv = m.bodies.idx_v[b]
+        v_O, w = twist(m.bodies, b, d.v)
         body_rotation_into(m.bodies, b, d.q, work)
-        at = _put(row, at, mv3(work, d.v[iv:iv + 3]))
-        at = _put(row, at, mv3(work, d.v[iv + 3:iv + 6]))
+        at = _put(row, at, mv3(work, v_O))
+        at = _put(row, at, mv3(work, w))
     else:
         row[at:at + 6] = 0.0
         at += 6
@@ -287,6 +288,14 @@ def close_interval(m, d):
     dL = (L[0] - d.angular_momentum_start[0] - d.impulse_moment_O_W[0],
           L[1] - d.angular_momentum_start[1] - d.impulse_moment_O_W[1],
           L[2] - d.angular_momentum_start[2] - d.impulse_moment_O_W[2])
+    n = m.table_normal
+    if n[0] != 0.0 or n[1] != 0.0 or n[2] != 0.0:
+        # on the air-bearing table the table's reactions (along its normal, and moments about
+        # axes in its plane) change the rest: the in-plane momentum and the angular momentum
+        # about the normal are the balance's
+        P_n, L_n = dot3(dP, n), dot3(dL, n)
+        dP = (dP[0] - P_n * n[0], dP[1] - P_n * n[1], dP[2] - P_n * n[2])
+        dL = (L_n * n[0], L_n * n[1], L_n * n[2])
     d.momentum_drift = max(d.momentum_drift, math.sqrt(dP[0] ** 2 + dP[1] ** 2 + dP[2] ** 2))
     d.angular_momentum_drift = max(d.angular_momentum_drift, math.sqrt(dL[0] ** 2 + dL[1] ** 2 + dL[2] ** 2))
     return code

@@ -14,7 +14,8 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 
-from ..build.model import Model, build_model
+from .. import measures
+from ..build.model import Model, build_model, on_table
 from ..contact.search import literal_search
 from ..errors import ScenarioError
 from ..scenario import in_grooves, modules_of, tolerance_warnings
@@ -253,9 +254,35 @@ def _summary(s, model, v, rec, series, status, message, wall, welds) -> dict:
             # first grasp, the FDR + TM-1 composite after the weld)
             d = series["robot_centroid_m"][last] - series["robot_centroid_m"][rows[0]]
             entry["robot_centroid_displacement_mm"] = [float(x) for x in d * 1e3]
+        if on_table(s):
+            # what the grasp pressed into the air-bearing table: the largest contact force along
+            # its normal and moment about a body's centroid in its plane, over the free bodies
+            entry["table_force_peak_N"] = float(v.peak_table_force[g])
+            entry["table_moment_peak_Nm"] = float(v.peak_table_moment[g])
         grasps.append(entry)
+    if "base_pos_m" in series and len(series["t"]):
+        # the SPOT experiment's measures: each body's displacement in the table's plane and
+        # its turn about the normal, their amplitudes within each grasp (`measures`)
+        moved = measures.displacements(series, s.testbed.table_normal)
+        t_end = float(series["t"][-1])
+        for entry in grasps:
+            if entry["started_s"] is not None:
+                end = entry["completed_s"] if entry["completed_s"] is not None else t_end
+                entry["displacements"] = measures.amplitudes(series["t"], moved, entry["started_s"], end)
     free = bool(model.robot_joint)
     sim = s.simulation
+    testbed = {}
+    if hasattr(s, "testbed"):
+        # the mount, and the table's normal the displacements are measured about (`measures`;
+        # a free-floating run is measured in the testbed's axes too)
+        n = np.asarray(s.testbed.table_normal, dtype=float) / np.linalg.norm(s.testbed.table_normal)
+        testbed = {"testbed": {"mount": s.testbed.mount, "table_normal": [float(x) for x in n]}}
+        if on_table(s) and "base_pos_m" in series and len(series["t"]):
+            # each body's height above the table's plane through the world origin: its
+            # recorded frame's (the base's joint frame, each module's groove frame O_b)
+            heights = {"base": series["base_pos_m"][0]}
+            heights.update({m.name: series[f"{m.name}_pos_m"][0] for m in model.modules})
+            testbed["testbed"]["heights_mm"] = {k: float(p @ n * 1e3) for k, p in heights.items()}
     return {
         "scenario": s.name,
         "spotsim_version": __version__,
@@ -278,13 +305,18 @@ def _summary(s, model, v, rec, series, status, message, wall, welds) -> dict:
         "phases": phases[0] if len(phases) == 1 else phases,
         "welds_s": welds,
         "grasps": grasps,
+        **testbed,
         "momentum": {
             "linear_drift_rel": v.momentum_drift / max(v.momentum_max, 1e-300),
             "angular_drift_rel": v.angular_momentum_drift / max(v.angular_momentum_max, 1e-300),
             "definition": (
                 "max over the run of |total momentum of the free bodies - initial|, relative to "
                 "the largest single body's momentum (angular about the world origin); the robot "
-                "floats freely, so momentum is conserved" if free else
+                "floats freely, so momentum is conserved" if free and not on_table(s) else
+                "max over the run of |in-plane momentum of the free bodies - initial| and of |their "
+                "angular momentum about the table's normal - initial|, relative to the largest single "
+                "body's momentum (angular about the world origin); the bodies float on the air-bearing "
+                "table, which reacts the rest, so these are conserved" if free else
                 "max over the run of |momentum - initial - impulse of the contact forces and "
                 "gravity| of the module, relative to its largest momentum (angular about the "
                 "world origin); the base is fixed, so momentum is not conserved"),

@@ -3,7 +3,8 @@
 After the first grasp TM-1 and the robot move as one body (paper Sec. 5.1, body 4). The weld
 is a model change: the module's free-flyer is replaced by a fixed joint at its pose in the
 grasp frame, and the composite gets the velocity that keeps the pair's linear and angular
-momentum exactly (a perfectly plastic joining).
+momentum exactly (a perfectly plastic joining); on the air-bearing testbed, the in-plane
+momentum and the angular momentum about the table's normal.
 """
 
 from __future__ import annotations
@@ -11,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
+from .bodies import PLANAR
 from .drive import start_drive
 
 
@@ -19,10 +21,20 @@ def world_momentum(M_WB: pin.SE3, inertia: pin.Inertia, v_B: pin.Motion) -> pin.
     return M_WB.act(inertia * v_B)
 
 
-def twist_for_momentum(M_WA: pin.SE3, inertia_A: pin.Inertia, h_W: pin.Force) -> pin.Motion:
-    """The twist, in frame A, that gives a body of inertia `inertia_A` (frame A) the world
-    momentum h_W: Y^-1 h, both in A."""
-    return pin.Motion(np.linalg.solve(inertia_A.matrix(), M_WA.actInv(h_W).vector))
+#: A planar joint's velocity components among a twist's (v_O, omega): v_O,x, v_O,y, omega_z.
+PLANAR_COMPONENTS = [0, 1, 5]
+
+
+def joint_velocity_for_momentum(M_WA: pin.SE3, inertia_A: pin.Inertia, h_W: pin.Force, planar: bool) -> np.ndarray:
+    """The joint velocity, in frame A, that gives a body of inertia `inertia_A` (frame A) the
+    world momentum h_W: the twist Y^-1 h (6,), both in A, on a free-flyer. On a planar joint
+    (3,), the one that keeps the momentum's in-plane components and its moment about the
+    normal, S^T Y S x = S^T h; the table takes the rest."""
+    Y, h_A = inertia_A.matrix(), M_WA.actInv(h_W).vector
+    if planar:
+        S = PLANAR_COMPONENTS
+        return np.linalg.solve(Y[np.ix_(S, S)], h_A[S])
+    return np.linalg.solve(Y, h_A)
 
 
 
@@ -58,9 +70,10 @@ def weld(model, data, source: str = "<scenario>"):
     r_old, m_old = model.robot_joint, model.modules[k].joint
     h_W = (world_momentum(pd.oMi[r_old], pm.inertias[r_old], pd.v[r_old])
            + world_momentum(pd.oMi[m_old], pm.inertias[m_old], pd.v[m_old]))
-    iv = nm.idx_vs[new.robot_joint]
+    r = new.robot_joint
     # the robot's frame is kept by the weld; its new inertia is the composite's
-    v[iv:iv + 6] = twist_for_momentum(pd.oMi[r_old], nm.inertias[new.robot_joint], h_W).vector
+    v[nm.idx_vs[r]:nm.idx_vs[r] + nm.nvs[r]] = joint_velocity_for_momentum(
+        pd.oMi[r_old], nm.inertias[r], h_W, nm.joints[r].shortname() == PLANAR)
     names = [f.name for f in model.fingers]
     opening = np.array([old.opening[names.index(f.name)] for f in new.fingers], dtype=float).reshape(-1)
     t_start = old.t_start.copy()
@@ -68,7 +81,8 @@ def weld(model, data, source: str = "<scenario>"):
     new_data = make_data(new)
     carried = {name: getattr(old, name) for name in (
         "t", "stalled", "drive_stopped", "drive_resumes", "drive_jump", "phase", "t_contact", "t_complete",
-        "peak_force", "peak_torque", "peak_force_norm", "peak_torque_norm", "peak_pairs", "impulse_W",
+        "peak_force", "peak_torque", "peak_force_norm", "peak_torque_norm", "peak_pairs", "peak_table_force",
+        "peak_table_moment", "impulse_W",
         "impulse_moment_O_W", "drive_work", "steps", "pair_steps", "flights", "evaluations", "accepted", "rejected",
         "energy_start", "energy_now", "momentum_start", "angular_momentum_start", "momentum_max",
         "angular_momentum_max", "momentum_drift", "angular_momentum_drift", "row_index", "last_open")}
