@@ -34,6 +34,7 @@ import re
 import shutil
 import subprocess
 import sys
+import tempfile
 import time
 import typing
 from pathlib import Path
@@ -43,6 +44,7 @@ import yaml
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
 RESULTS = DOCS / "results"
+IMAGES = DOCS / "images"
 CONFIG = ROOT / "config"
 GENERATE = "python docs/generate.py"
 
@@ -194,6 +196,10 @@ def write_json(path: Path, data) -> None:
     path.write_text(json.dumps(data, indent=2, sort_keys=False) + "\n")
 
 
+#: The run whose displacement figure the pages show.
+TESTBED_FIGURE = "spot_testbed_3mm"
+
+
 def run_configs() -> dict:
     """Each shipped config at its default: its summary, from a run after a warm-up run (so that
     the wall time is the loop's, not numba's loading or compiling)."""
@@ -205,6 +211,10 @@ def run_configs() -> dict:
         spotsim.simulate(scenario)  # warm-up
         result = spotsim.simulate(scenario)
         write_json(RESULTS / "runs" / f"{path.stem}.json", result.summary)
+        if path.stem == TESTBED_FIGURE:  # the testbed's displacements, as `spotsim plot` draws them
+            with tempfile.TemporaryDirectory() as tmp:
+                spotsim.write_results(result, tmp)
+                shutil.copyfile(Path(tmp) / "figures" / "displacements.png", IMAGES / f"{path.stem}_displacements.png")
         out[path.stem] = result
         print(f"  {path.stem}: {result.status}, {result.summary['wall_time_s']:.3f} s", flush=True)
     return out
@@ -704,6 +714,68 @@ def spot_table(r: Results) -> str:
                   "residual TM-1 / TM-2 (mm)", "complete (s)", "wall (s)"], rows)
 
 
+#: The SPOT offsets' scenes: the testbed's planar bodies, and the same grasp free-floating in 3-D.
+SPOT_SCENES = (("spot_testbed_", "testbed"), ("spot_offset_", "free-floating"))
+
+
+def _p2p(grasp: dict, body: str, axis: str) -> float:
+    return grasp["displacements"][f"{body}_{axis}_mm"]["peak_to_peak"]
+
+
+def _spot_rows(r: Results) -> list[tuple[str, float, dict]]:
+    """(scene, offset along x_a in mm, summary) of the SPOT runs, by scene then offset."""
+    rows = []
+    for prefix, scene in SPOT_SCENES:
+        for name in (n for n in r.runs if n.startswith(prefix)):
+            offset = yaml.safe_load((CONFIG / f"{name}.yaml").read_text())["tm1"]["initial_offset_mm"][0]
+            rows.append((scene, offset, r.runs[name]))
+    return sorted(rows, key=lambda x: ([s for _, s in SPOT_SCENES].index(x[0]), x[1]))
+
+
+def spot_amplitudes_table(r: Results) -> str:
+    """The SPOT experiment's per-grasp measures for both scenes, and their trends in the offset."""
+    rows, series = [], {}
+    for scene, offset, s in _spot_rows(r):
+        g1, g2 = s["grasps"]
+        done = s["status"] == "completed"
+        values = {"base x, grasp 1": _p2p(g1, "base", "x"), "base x, grasp 2": _p2p(g2, "base", "x"),
+                  "base y, grasp 1": _p2p(g1, "base", "y"), "base y, grasp 2": _p2p(g2, "base", "y"),
+                  "TM-1 x, grasp 1": _p2p(g1, "TM-1", "x"), "TM-1 y, grasp 1": _p2p(g1, "TM-1", "y"),
+                  "TM-2 x, grasp 2": _p2p(g2, "TM-2", "x"), "TM-2 y, grasp 2": _p2p(g2, "TM-2", "y")}
+        for k, v in values.items():
+            series.setdefault((scene, k), []).append(v)
+        rows.append([f"{num(offset, 2)} mm", scene,
+                     f"{num(values['base x, grasp 1'])} / {num(values['base x, grasp 2'])}",
+                     f"{num(values['base y, grasp 1'])} / {num(values['base y, grasp 2'])}",
+                     f"{num(values['TM-1 x, grasp 1'])} / {num(values['TM-1 y, grasp 1'])}",
+                     f"{num(values['TM-2 x, grasp 2'])} / {num(values['TM-2 y, grasp 2'])}",
+                     f"{vec(g2['start_offset_mm'])}",
+                     f"{num(g1['residual_offset_norm_mm'], 2)} / {num(g2['residual_offset_norm_mm'], 2)}"
+                     if done else s["status"],
+                     (f"{num(g1['table_force_peak_N'])} / {num(g2['table_force_peak_N'])}"
+                      if "table_force_peak_N" in g1 else "–")])
+    text = table(["offset along x_a", "scene", "base x, grasp 1 / 2 (mm)", "base y, grasp 1 / 2 (mm)",
+                  "TM-1 x / y, grasp 1 (mm)", "TM-2 x / y, grasp 2 (mm)", "EE-2 to TM-2 as grasp 2 starts (mm)",
+                  "residual TM-1 / TM-2 (mm)", "table load, grasp 1 / 2 (N)"], rows)
+    trends = []
+    for (scene, k), v in series.items():
+        if len(v) < 2:
+            continue
+        way = ("grows" if all(b > a for a, b in zip(v, v[1:])) else
+               "shrinks" if all(b < a for a, b in zip(v, v[1:])) else "is not monotonic")
+        trends.append(f"{k} ({scene}): {way} with the offset, {num(v[0])} to {num(v[-1])} mm")
+    return text + "\n\nTrends from the smallest offset to the largest (peak-to-peak amplitudes):\n\n" + "\n".join(
+        f"- {t}" for t in trends)
+
+
+def testbed_momentum(r: Results) -> str:
+    rows = [[name, f"{s['momentum']['linear_drift_rel']:.2g}", f"{s['momentum']['angular_drift_rel']:.2g}",
+             num(s["wall_time_s"], 2), fixed(s["sim_time_s"], 3)]
+            for name, s in sorted(r.runs.items()) if name.startswith("spot_testbed_")]
+    return table(["config", "in-plane linear momentum drift (relative)", "angular momentum about the normal "
+                  "(relative)", "wall (s)", "simulated (s)"], rows)
+
+
 def _outcome(row: dict) -> str:
     if row["status"] == "completed":
         return f"completed at {fixed(row['completed_s'], 3)} s; e = {num(row['offset_norm_mm'])} mm"
@@ -1125,7 +1197,7 @@ def _rule(f, tp) -> str:
     rule = f.metadata.get("rule")
     if rule is None:
         return ""
-    probe = "\0" if tp is str else -1.0
+    probe = "\0" if tp is str else tuple(0.0 for _ in typing.get_args(tp)) if typing.get_origin(tp) is tuple else -1.0
     msg = rule(probe) or ""
     return msg.removeprefix("must be ").replace("one of ", "").replace("in ", "")
 
@@ -1222,6 +1294,8 @@ RENDER = {
     "dual-momentum": dual_momentum,
     "composite": composite,
     "spot-table": spot_table,
+    "spot-amplitudes": spot_amplitudes_table,
+    "testbed-momentum": testbed_momentum,
     "study-commands": study_commands,
     "timestep-table": timestep_table,
     "stable-step-table": stable_step_table,
