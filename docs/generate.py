@@ -757,15 +757,25 @@ def spot_amplitudes_table(r: Results) -> str:
     text = table(["offset along x_a", "scene", "base x, grasp 1 / 2 (mm)", "base y, grasp 1 / 2 (mm)",
                   "TM-1 x / y, grasp 1 (mm)", "TM-2 x / y, grasp 2 (mm)", "EE-2 to TM-2 as grasp 2 starts (mm)",
                   "residual TM-1 / TM-2 (mm)", "table load, grasp 1 / 2 (N)"], rows)
-    trends = []
-    for (scene, k), v in series.items():
-        if len(v) < 2:
-            continue
-        way = ("grows" if all(b > a for a, b in zip(v, v[1:])) else
-               "shrinks" if all(b < a for a, b in zip(v, v[1:])) else "is not monotonic")
-        trends.append(f"{k} ({scene}): {way} with the offset, {num(v[0])} to {num(v[-1])} mm")
-    return text + "\n\nTrends from the smallest offset to the largest (peak-to-peak amplitudes):\n\n" + "\n".join(
-        f"- {t}" for t in trends)
+    offsets = sorted({offset for _, offset, _ in _spot_rows(r)})
+    growing = {key: v[-1] / v[0] for key, v in series.items()
+               if len(v) > 1 and all(b > a for a, b in zip(v, v[1:]))}
+    others = [f"{k} ({scene}): {', '.join(num(x) for x in v)} mm" for (scene, k), v in series.items()
+              if (scene, k) not in growing and len(v) > 1]
+    lines = []
+    if growing and len(offsets) > 1:
+        ratios = sorted(growing.values())
+        lines.append(f"From {num(offsets[0], 2)} to {num(offsets[-1], 2)} mm of offset (×{num(offsets[-1] / offsets[0])}), "
+                     f"{'every' if not others else len(growing)} amplitude{'' if not others else 's'} of the table "
+                     f"grow{'s' if not others else ''} with it, by ×{num(ratios[0])} to ×{num(ratios[-1])}.")
+    lines += [f"Not monotonic in the offset: {x}." for x in others]
+    scenes = [sc for _, sc in SPOT_SCENES]
+    if all((sc, k) in series for sc in scenes for k in ("base x, grasp 1", "base x, grasp 2")):
+        for k in ("base x, grasp 1", "base x, grasp 2"):
+            ratio = [a / b for a, b in zip(series[(scenes[0], k)], series[(scenes[1], k)])]
+            lines.append(f"The {k} amplitude on the {scenes[0]} is ×{num(min(ratio))} to ×{num(max(ratio))} the "
+                         f"{scenes[1]} one's.")
+    return text + "\n\n" + " ".join(lines)
 
 
 def testbed_momentum(r: Results) -> str:
@@ -1123,6 +1133,15 @@ def sweep_speed(r=None) -> str:
                     f". Copied by `{GENERATE} pages` from `docs/results/sweep_speed.md`:")
 
 
+def bristle_damping(r=None) -> str:
+    """The bristle-damping benchmark's table (`benchmarks/bristle_damping.py`), as printed."""
+    path = RESULTS / "bristle_damping.md"
+    if not path.exists():
+        return "Not run yet: `python benchmarks/bristle_damping.py > docs/results/bristle_damping.md`."
+    head, *lines = path.read_text().strip().splitlines()
+    return f"{head}. Copied by `{GENERATE} pages` from `docs/results/bristle_damping.md`:\n\n" + "\n".join(lines)
+
+
 def design_sweep(r=None) -> str:
     """The design sweep example's printout (`examples/design_sweep.py`), verbatim."""
     return printout("design_sweep.txt", "python examples/design_sweep.py", ":")
@@ -1311,6 +1330,7 @@ RENDER = {
     "speed": speed,
     "sweep-speed": sweep_speed,
     "design-sweep": design_sweep,
+    "bristle-damping": bristle_damping,
 }
 PAGES = [ROOT / "README.md", DOCS / "usage.md", DOCS / "validation.md", DOCS / "performance.md"]
 
