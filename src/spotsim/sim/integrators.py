@@ -33,10 +33,18 @@ from .bodies import (
     body_rotation,
     centroid_acceleration,
     centroid_state,
-    centroid_state_at,
+    centroid_of,
+    free_origin3,
+    free_quat,
+    free_twist,
     joint_quat,
     kinematics,
+    planar_origin3,
+    planar_quat,
+    planar_twist,
     set_centroid_state,
+    set_free_state,
+    set_planar_state,
     travel_rate,
     twist,
     twist_rate,
@@ -73,26 +81,37 @@ def integrate(m, d, h):
 
 
 @njit_inline
-def _euler_body(bodies, b, R, q, v, a_O, alpha, h):
-    """Free body b's symplectic Euler step, in place, given its rotation R (from q) and its
-    twist's derivative (a_O, alpha): v_G += h a_G and omega += h alpha, then x_G += h v_G and
-    R <- R exp(h omega), centroid in world, rotation in body."""
-    p_G, v_G, R, w = centroid_state_at(bodies, b, R, q, v)
-    a_G = centroid_acceleration(R, bodies.lever[b], twist(bodies, b, v)[0], w, a_O, alpha)
+def _euler_body(R, c, origin, quat, v_O, w, a_O, alpha, h):
+    """A body's symplectic Euler step, given its rotation R (3, 3), centroid c (body frame),
+    origin (world), joint quaternion and twist (v_O, w) and the twist's derivative (a_O,
+    alpha): v_G += h a_G and w += h alpha, then x_G += h v_G and R <- R exp(h w), centroid in
+    world, rotation in body. Returns the new (p_G, v_G, quaternion, w)."""
+    p_G, v_G = centroid_of(origin, R, c, v_O, w)
+    a_G = centroid_acceleration(R, c, v_O, w, a_O, alpha)
     v_G = axpy3(h, a_G, v_G)
     w = axpy3(h, alpha, w)
     # a unit quaternion, or the round-off in R compounds from step to step
-    quat = quat_times_exp4(joint_quat(bodies, b, q), h * w[0], h * w[1], h * w[2])
-    set_centroid_state(bodies, b, q, v, axpy3(h, v_G, p_G), v_G, quat, w)
+    return axpy3(h, v_G, p_G), v_G, quat_times_exp4(quat, h * w[0], h * w[1], h * w[2]), w
 
 
 @njit_inline
 def _euler_bodies(m, d, q, v, h):
     """Every free body's symplectic Euler step of h (s) from (q, v), in place, with the
     accelerations d.a and rotations d.R_W of the last evaluation (made at (q, v))."""
-    for b in range(m.bodies.joint.shape[0]):
-        a_O, alpha = twist_rate(m.bodies, b, d.a)
-        _euler_body(m.bodies, b, d.R_W[m.bodies.joint[b]], q, v, a_O, alpha, h)
+    _euler_kind(m, d, m.bodies.free_rows, q, v, h, free_twist, free_origin3, free_quat, set_free_state)
+    _euler_kind(m, d, m.bodies.planar_rows, q, v, h, planar_twist, planar_origin3, planar_quat, set_planar_state)
+
+
+@njit_inline
+def _euler_kind(m, d, rows, q, v, h, twist_of, origin_of, quat_of, set_state):
+    """`_euler_bodies` for the bodies of one joint kind (rows), read and written through that
+    kind's accessors."""
+    for b in rows:
+        v_O, w = twist_of(m.bodies, b, v)
+        a_O, alpha = twist_of(m.bodies, b, d.a)
+        p_G, v_G, quat, w = _euler_body(d.R_W[m.bodies.joint[b]], m.bodies.lever[b], origin_of(m.bodies, b, q),
+                                        quat_of(m.bodies, b, q), v_O, w, a_O, alpha, h)
+        set_state(m.bodies, b, q, v, p_G, v_G, quat, w)
 
 
 @njit
@@ -128,13 +147,26 @@ def onset_step(m, d):
 def _centroid_accelerations(m, d, out):
     """Each free body's centroid acceleration (world) and angular acceleration (body) at d's
     last evaluation, into out (n_bodies, 6)."""
-    for b in range(m.bodies.joint.shape[0]):
-        v_O, w = twist(m.bodies, b, d.v)
-        a_O, alpha = twist_rate(m.bodies, b, d.a)
-        a_G = centroid_acceleration(d.R_W[m.bodies.joint[b]], m.bodies.lever[b], v_O, w, a_O, alpha)
-        for x in range(3):
-            out[b, x] = a_G[x]
-            out[b, 3 + x] = alpha[x]
+    _centroid_accelerations_kind(m, d, m.bodies.free_rows, out, free_twist)
+    _centroid_accelerations_kind(m, d, m.bodies.planar_rows, out, planar_twist)
+
+
+@njit_inline
+def _centroid_accelerations_kind(m, d, rows, out, twist_of):
+    """`_centroid_accelerations` for the bodies of one joint kind (rows)."""
+    for b in rows:
+        v_O, w = twist_of(m.bodies, b, d.v)
+        a_O, alpha = twist_of(m.bodies, b, d.a)
+        _put_acceleration(out, b, centroid_acceleration(d.R_W[m.bodies.joint[b]], m.bodies.lever[b], v_O, w, a_O,
+                                                        alpha), alpha)
+
+
+@njit_inline
+def _put_acceleration(out, b, a_G, alpha):
+    """Row b of out (n_bodies, 6): a_G, then alpha."""
+    for x in range(3):
+        out[b, x] = a_G[x]
+        out[b, 3 + x] = alpha[x]
 
 
 @njit
