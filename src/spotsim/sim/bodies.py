@@ -84,34 +84,53 @@ def free_bodies(model: pin.Model) -> FreeBodies:
 
 
 # ------------------------------------------------------------------------------- joints
-# Each quantity has a free-flyer and a planar form, and a dispatcher on the body's kind for
-# the code that is not per step. The per-step loops (`kinematics`, the integrators, the
-# dynamics) run over the rows of each kind in turn (`free_rows`, `planar_rows`), handing one
-# loop body the kind's forms: a test on the kind inside the loop cost 7-11 % of a run's time
-# (measured on Case I and the dual arm).
+# Each quantity has a free-flyer and a planar form, and a dispatcher on the body's kind. A
+# test on the kind next to reads of the bodies' arrays keeps numba from pruning their
+# reference counts, which cost 20-110 ns a call (measured). So each form is split into a
+# struct-free part on the joint's slice of q or v (the `_at` forms), and the dispatchers hand
+# the choice between them to a compiled call that sees plain arrays only (the `_kind_at`
+# functions). The per-step loops (`kinematics`, the integrators, the dynamics) run over the
+# rows of each kind in turn (`free_rows`, `planar_rows`), handing one loop body the kind's
+# forms.
+
+
+@njit_inline
+def free_twist_at(v, iv):
+    """A free-flyer's velocity in its joint frame, (v_O, omega), two 3-tuples, from v[iv:]."""
+    return (v[iv], v[iv + 1], v[iv + 2]), (v[iv + 3], v[iv + 4], v[iv + 5])
+
+
+@njit_inline
+def planar_twist_at(v, iv):
+    """A planar joint's velocity in its joint frame, (v_O, omega), two 3-tuples, from v[iv:]:
+    its out-of-plane components are zero."""
+    return (v[iv], v[iv + 1], 0.0), (0.0, 0.0, v[iv + 2])
 
 
 @njit_inline
 def free_twist(bodies, b, v):
     """A free-flyer's velocity in its joint frame, (v_O, omega), two 3-tuples."""
-    iv = bodies.idx_v[b]
-    return (v[iv], v[iv + 1], v[iv + 2]), (v[iv + 3], v[iv + 4], v[iv + 5])
+    return free_twist_at(v, bodies.idx_v[b])
 
 
 @njit_inline
 def planar_twist(bodies, b, v):
-    """A planar joint's velocity in its joint frame, (v_O, omega), two 3-tuples: its
-    out-of-plane components are zero."""
-    iv = bodies.idx_v[b]
-    return (v[iv], v[iv + 1], 0.0), (0.0, 0.0, v[iv + 2])
+    """A planar joint's velocity in its joint frame, (v_O, omega), two 3-tuples."""
+    return planar_twist_at(v, bodies.idx_v[b])
 
 
 @njit_inline
 def twist(bodies, b, v):
     """Free body b's velocity in its joint frame, (v_O, omega), two 3-tuples."""
-    if bodies.planar[b]:
-        return planar_twist(bodies, b, v)
-    return free_twist(bodies, b, v)
+    return twist_kind_at(v, bodies.idx_v[b], bodies.planar[b])
+
+
+@njit
+def twist_kind_at(v, iv, planar):
+    """`planar_twist_at` or `free_twist_at`."""
+    if planar:
+        return planar_twist_at(v, iv)
+    return free_twist_at(v, iv)
 
 
 @njit_inline
@@ -136,69 +155,111 @@ def set_planar_rate(bodies, b, a, a_O, alpha):
 
 
 @njit_inline
-def free_quat(bodies, b, q):
-    """A free-flyer's joint rotation as its unit quaternion (x, y, z, w), a 4-tuple."""
-    iq = bodies.idx_q[b]
+def free_quat_at(q, iq):
+    """A free-flyer's joint rotation as its unit quaternion (x, y, z, w), from q[iq:]."""
     return q[iq + 3], q[iq + 4], q[iq + 5], q[iq + 6]
 
 
 @njit_inline
-def planar_quat(bodies, b, q):
-    """A planar joint's turn about its z as a unit quaternion (x, y, z, w), a 4-tuple."""
-    iq = bodies.idx_q[b]
+def planar_quat_at(q, iq):
+    """A planar joint's turn about its z as a unit quaternion (x, y, z, w), from q[iq:]."""
     half = 0.5 * math.atan2(q[iq + 3], q[iq + 2])
     return 0.0, 0.0, math.sin(half), math.cos(half)
 
 
 @njit_inline
+def free_quat(bodies, b, q):
+    """A free-flyer's joint rotation as its unit quaternion (x, y, z, w), a 4-tuple."""
+    return free_quat_at(q, bodies.idx_q[b])
+
+
+@njit_inline
+def planar_quat(bodies, b, q):
+    """A planar joint's turn about its z as a unit quaternion (x, y, z, w), a 4-tuple."""
+    return planar_quat_at(q, bodies.idx_q[b])
+
+
+@njit_inline
 def joint_quat(bodies, b, q):
     """The rotation of free body b's joint as a unit quaternion (x, y, z, w), a 4-tuple."""
-    if bodies.planar[b]:
-        return planar_quat(bodies, b, q)
-    return free_quat(bodies, b, q)
+    return quat_kind_at(q, bodies.idx_q[b], bodies.planar[b])
+
+
+@njit
+def quat_kind_at(q, iq, planar):
+    """`planar_quat_at` or `free_quat_at`."""
+    if planar:
+        return planar_quat_at(q, iq)
+    return free_quat_at(q, iq)
 
 
 # ------------------------------------------------------------------------------- poses
 
 
 @njit_inline
+def free_turn9_at(q, iq):
+    """A free-flyer's joint rotation, row by row, from q[iq:]."""
+    return quat_rotation9(q[iq + 3], q[iq + 4], q[iq + 5], q[iq + 6])
+
+
+@njit_inline
+def planar_turn9_at(q, iq):
+    """A planar joint's rotation about its z, row by row, from q[iq:] = (x, y, cos, sin)."""
+    c, s = q[iq + 2], q[iq + 3]
+    return c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0
+
+
+@njit_inline
+def free_shift3_at(q, iq):
+    """A free-flyer's joint translation, from q[iq:]."""
+    return q[iq], q[iq + 1], q[iq + 2]
+
+
+@njit_inline
+def planar_shift3_at(q, iq):
+    """A planar joint's translation, in its plane, from q[iq:]."""
+    return q[iq], q[iq + 1], 0.0
+
+
+@njit_inline
 def free_rotation9(bodies, b, q):
     """A free-flyer's rotation in the world, row by row: R_P times its quaternion's."""
-    iq = bodies.idx_q[b]
-    return mm9(bodies.R_P[b], quat_rotation9(q[iq + 3], q[iq + 4], q[iq + 5], q[iq + 6]))
+    return mm9(bodies.R_P[b], free_turn9_at(q, bodies.idx_q[b]))
 
 
 @njit_inline
 def planar_rotation9(bodies, b, q):
     """A planar joint's rotation in the world, row by row: R_P times its turn about z."""
-    iq = bodies.idx_q[b]
-    c, s = q[iq + 2], q[iq + 3]
-    return mm9(bodies.R_P[b], (c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0))
+    return mm9(bodies.R_P[b], planar_turn9_at(q, bodies.idx_q[b]))
 
 
 @njit_inline
 def free_origin3(bodies, b, q):
     """A free-flyer's origin in the world, a 3-tuple."""
-    iq = bodies.idx_q[b]
-    return add3(mv3(bodies.R_P[b], (q[iq], q[iq + 1], q[iq + 2])), bodies.p_P[b])
+    return add3(mv3(bodies.R_P[b], free_shift3_at(q, bodies.idx_q[b])), bodies.p_P[b])
 
 
 @njit_inline
 def planar_origin3(bodies, b, q):
     """A planar joint's origin in the world, a 3-tuple."""
-    iq = bodies.idx_q[b]
-    return add3(mv3(bodies.R_P[b], (q[iq], q[iq + 1], 0.0)), bodies.p_P[b])
+    return add3(mv3(bodies.R_P[b], planar_shift3_at(q, bodies.idx_q[b])), bodies.p_P[b])
 
 
-@njit
+@njit_inline
 def body_rotation9(bodies, b, q):
     """Rotation of free body b in the world as a 9-tuple, row by row."""
-    if bodies.planar[b]:
-        return planar_rotation9(bodies, b, q)
-    return free_rotation9(bodies, b, q)
+    return mm9(bodies.R_P[b], turn9_kind_at(q, bodies.idx_q[b], bodies.planar[b]))
 
 
 @njit
+def turn9_kind_at(q, iq, planar):
+    """`planar_turn9_at` or `free_turn9_at`."""
+    if planar:
+        return planar_turn9_at(q, iq)
+    return free_turn9_at(q, iq)
+
+
+@njit_inline
 def body_rotation_into(bodies, b, q, out):
     """`body_rotation9`, written into out (3, 3)."""
     put9(out, body_rotation9(bodies, b, q))
@@ -212,12 +273,18 @@ def body_rotation(bodies, b, q):
     return R
 
 
-@njit
+@njit_inline
 def body_origin3(bodies, b, q):
     """Origin of free body b in the world, from q, as a 3-tuple."""
-    if bodies.planar[b]:
-        return planar_origin3(bodies, b, q)
-    return free_origin3(bodies, b, q)
+    return add3(mv3(bodies.R_P[b], shift3_kind_at(q, bodies.idx_q[b], bodies.planar[b])), bodies.p_P[b])
+
+
+@njit
+def shift3_kind_at(q, iq, planar):
+    """`planar_shift3_at` or `free_shift3_at`."""
+    if planar:
+        return planar_shift3_at(q, iq)
+    return free_shift3_at(q, iq)
 
 
 @njit_inline
@@ -290,11 +357,9 @@ def _joint_state(bodies, b, p_G, v_G, Rq, w):
 
 
 @njit_inline
-def set_free_state(bodies, b, q, v, p_G, v_G, quat, w):
-    """Write a free-flyer's configuration and velocity from its world centroid state and its
-    joint's quaternion (x, y, z, w), in place."""
-    iq, iv = bodies.idx_q[b], bodies.idx_v[b]
-    x, v_O = _joint_state(bodies, b, p_G, v_G, quat_rotation9(quat[0], quat[1], quat[2], quat[3]), w)
+def put_free_state_at(q, v, iq, iv, x, quat, v_O, w):
+    """Write a free-flyer's joint translation x, quaternion quat (x, y, z, w), origin velocity
+    v_O and angular velocity w into q[iq:] and v[iv:]."""
     put3(q, iq, x)
     q[iq + 3], q[iq + 4], q[iq + 5], q[iq + 6] = quat[0], quat[1], quat[2], quat[3]
     put3(v, iv, v_O)
@@ -302,26 +367,48 @@ def set_free_state(bodies, b, q, v, p_G, v_G, quat, w):
 
 
 @njit_inline
-def set_planar_state(bodies, b, q, v, p_G, v_G, quat, w):
-    """Write a planar joint's configuration and velocity from its world centroid state and its
-    turn about z as a quaternion: the in-plane components (the integrators give it a centroid
-    in its plane and a turn about its normal)."""
-    iq, iv = bodies.idx_q[b], bodies.idx_v[b]
-    Rq = quat_rotation9(quat[0], quat[1], quat[2], quat[3])
-    x, v_O = _joint_state(bodies, b, p_G, v_G, Rq, w)
+def put_planar_state_at(q, v, iq, iv, x, Rq, v_O, w):
+    """`put_free_state_at` for a planar joint: the in-plane components, its turn read off its
+    rotation Rq (9-tuple; the integrators give it a centroid in its plane and a turn
+    about its normal)."""
     turn = math.sqrt(Rq[0] * Rq[0] + Rq[3] * Rq[3])
     q[iq], q[iq + 1], q[iq + 2], q[iq + 3] = x[0], x[1], Rq[0] / turn, Rq[3] / turn
     v[iv], v[iv + 1], v[iv + 2] = v_O[0], v_O[1], w[2]
 
 
-@njit
+@njit_inline
+def set_free_state(bodies, b, q, v, p_G, v_G, quat, w):
+    """Write a free-flyer's configuration and velocity from its world centroid state and its
+    joint's quaternion (x, y, z, w), in place."""
+    Rq = quat_rotation9(quat[0], quat[1], quat[2], quat[3])
+    x, v_O = _joint_state(bodies, b, p_G, v_G, Rq, w)
+    put_free_state_at(q, v, bodies.idx_q[b], bodies.idx_v[b], x, quat, v_O, w)
+
+
+@njit_inline
+def set_planar_state(bodies, b, q, v, p_G, v_G, quat, w):
+    """`set_free_state` for a planar joint: its in-plane components."""
+    Rq = quat_rotation9(quat[0], quat[1], quat[2], quat[3])
+    x, v_O = _joint_state(bodies, b, p_G, v_G, Rq, w)
+    put_planar_state_at(q, v, bodies.idx_q[b], bodies.idx_v[b], x, Rq, v_O, w)
+
+
+@njit_inline
 def set_centroid_state(bodies, b, q, v, p_G, v_G, quat, w):
     """Write free body b's configuration and velocity from its world centroid state and its
     joint's quaternion (x, y, z, w), in place."""
-    if bodies.planar[b]:
-        set_planar_state(bodies, b, q, v, p_G, v_G, quat, w)
+    Rq = quat_rotation9(quat[0], quat[1], quat[2], quat[3])
+    x, v_O = _joint_state(bodies, b, p_G, v_G, Rq, w)
+    put_state_kind_at(q, v, bodies.idx_q[b], bodies.idx_v[b], x, quat, Rq, v_O, w, bodies.planar[b])
+
+
+@njit
+def put_state_kind_at(q, v, iq, iv, x, quat, Rq, v_O, w, planar):
+    """`put_planar_state_at` or `put_free_state_at`."""
+    if planar:
+        put_planar_state_at(q, v, iq, iv, x, Rq, v_O, w)
     else:
-        set_free_state(bodies, b, q, v, p_G, v_G, quat, w)
+        put_free_state_at(q, v, iq, iv, x, quat, v_O, w)
 
 
 # ------------------------------------------------------------------------------- momenta
@@ -392,12 +479,6 @@ def kinetic_energy(bodies, q, v):
 # ------------------------------------------------------------------------------- motion bound
 
 
-@njit_inline
-def _speed_bound(v_O, w, reach):
-    """|v_O| + |w| reach: how fast any point within `reach` of a body's origin moves."""
-    return math.sqrt(v_O[0] ** 2 + v_O[1] ** 2 + v_O[2] ** 2) + math.sqrt(w[0] ** 2 + w[1] ** 2 + w[2] ** 2) * reach
-
-
 @njit
 def travel_rate(m, d):
     """A bound on how fast any two contact spheres approach each other, m/s: the sum over the
@@ -407,11 +488,7 @@ def travel_rate(m, d):
         rate = max(rate, abs(d.opening_rate[i]))
     for i in range(m.limits.reach_rows.shape[0]):
         # v = (v_O, omega) in the body's frame; norms are frame-free
-        b = m.limits.reach_rows[i]
-        if m.bodies.planar[b]:
-            v_O, w = planar_twist(m.bodies, b, d.v)
-            rate += _speed_bound(v_O, w, m.limits.reach[i])
-        else:
-            v_O, w = free_twist(m.bodies, b, d.v)
-            rate += _speed_bound(v_O, w, m.limits.reach[i])
+        v_O, w = twist(m.bodies, m.limits.reach_rows[i], d.v)
+        rate += math.sqrt(v_O[0] ** 2 + v_O[1] ** 2 + v_O[2] ** 2) + \
+            math.sqrt(w[0] ** 2 + w[1] ** 2 + w[2] ** 2) * m.limits.reach[i]
     return rate

@@ -23,11 +23,10 @@ def raise_peaks(m, d):
     d.peak_force_norm[g] = max(d.peak_force_norm[g], math.sqrt(f[0] ** 2 + f[1] ** 2 + f[2] ** 2))
     d.peak_torque_norm[g] = max(d.peak_torque_norm[g], math.sqrt(tau[0] ** 2 + tau[1] ** 2 + tau[2] ** 2))
     d.peak_pairs[g] = max(d.peak_pairs[g], d.contacts.key.shape[0])
-    for b in range(m.bodies.joint.shape[0]):
-        if m.bodies.planar[b]:
-            force, moment = table_load(m.bodies, b, d.loads.f_local)
-            d.peak_table_force[g] = max(d.peak_table_force[g], force)
-            d.peak_table_moment[g] = max(d.peak_table_moment[g], moment)
+    for b in m.bodies.planar_rows:
+        force, moment = table_load(m.bodies, b, d.loads.f_local)
+        d.peak_table_force[g] = max(d.peak_table_force[g], force)
+        d.peak_table_moment[g] = max(d.peak_table_moment[g], moment)
 
 
 @njit
