@@ -1139,7 +1139,8 @@ def bristle_damping(r=None) -> str:
     if not path.exists():
         return "Not run yet: `python benchmarks/bristle_damping.py > docs/results/bristle_damping.md`."
     head, *lines = path.read_text().strip().splitlines()
-    return f"{head}. Copied by `{GENERATE} pages` from `docs/results/bristle_damping.md`:\n\n" + "\n".join(lines)
+    return (f"{head}. Copied by `{GENERATE} pages` from `docs/results/bristle_damping.md`:\n\n"
+            + "\n".join(lines).strip())
 
 
 def design_sweep(r=None) -> str:
