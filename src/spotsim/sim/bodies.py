@@ -8,8 +8,7 @@ placements and velocities the contact needs follow from q and v directly. A free
 Pinocchio's XYZQUAT order, (x, y, z, qx, qy, qz, qw); a planar joint's is (x, y, cos theta,
 sin theta). Pinocchio keeps both velocities in the body frame: v = (v_O, omega) for a
 free-flyer, (v_O,x, v_O,y, omega_z) for a planar joint, whose other three components are zero.
-Everything below reads and writes a body's motion through `twist`, `twist_rate`, `joint_quat`
-and `set_centroid_state`, so that the integrators treat both kinds alike.
+Each quantity has a form for each kind, and a dispatcher on the body's kind (below).
 """
 
 from __future__ import annotations
@@ -57,7 +56,7 @@ class FreeBodies(NamedTuple):
 FREE_FLYER, PLANAR = "JointModelFreeFlyer", "JointModelPlanar"
 
 
-def free_flyers(model: pin.Model) -> list[int]:
+def free_joints(model: pin.Model) -> list[int]:
     """The joints of `model` that are free-flyers or planar joints."""
     return [j for j in range(1, model.njoints) if model.joints[j].shortname() in (FREE_FLYER, PLANAR)]
 
@@ -65,7 +64,7 @@ def free_flyers(model: pin.Model) -> list[int]:
 def free_bodies(model: pin.Model) -> FreeBodies:
     """The free-flyer and planar joints of `model`, which must be all its joints, each a child
     of the world (raises ModelError otherwise)."""
-    joints = free_flyers(model)
+    joints = free_joints(model)
     others = [model.names[j] for j in range(1, model.njoints) if j not in joints or model.parents[j] != 0]
     if others:
         raise ModelError(f"joints {others} are neither locked nor free-flyers or planar joints on the world: the "
@@ -88,10 +87,18 @@ def free_bodies(model: pin.Model) -> FreeBodies:
 # test on the kind next to reads of the bodies' arrays keeps numba from pruning their
 # reference counts, which cost 20-110 ns a call (measured). So each form is split into a
 # struct-free part on the joint's slice of q or v (the `_at` forms), and the dispatchers hand
-# the choice between them to a compiled call that sees plain arrays only (the `_kind_at`
-# functions). The per-step loops (`kinematics`, the integrators, the dynamics) run over the
-# rows of each kind in turn (`free_rows`, `planar_rows`), handing one loop body the kind's
-# forms.
+# the choice between them to a compiled call that sees plain arrays only (`by_kind`). The
+# per-step loops (`kinematics`, the integrators, the dynamics) run over the rows of each kind
+# in turn (`free_rows`, `planar_rows`), handing one loop body the kind's forms.
+
+
+@njit
+def by_kind(planar, planar_form, free_form, x, i):
+    """planar_form(x, i) if planar, else free_form(x, i): the one place a dispatcher tests a
+    body's kind, on plain arrays only (x: q or v; i: the joint's first index in it)."""
+    if planar:
+        return planar_form(x, i)
+    return free_form(x, i)
 
 
 @njit_inline
@@ -122,21 +129,7 @@ def planar_twist(bodies, b, v):
 @njit_inline
 def twist(bodies, b, v):
     """Free body b's velocity in its joint frame, (v_O, omega), two 3-tuples."""
-    return twist_kind_at(v, bodies.idx_v[b], bodies.planar[b])
-
-
-@njit
-def twist_kind_at(v, iv, planar):
-    """`planar_twist_at` or `free_twist_at`."""
-    if planar:
-        return planar_twist_at(v, iv)
-    return free_twist_at(v, iv)
-
-
-@njit_inline
-def twist_rate(bodies, b, a):
-    """`twist` of the accelerations a: (a_O, alpha), two 3-tuples."""
-    return twist(bodies, b, a)
+    return by_kind(bodies.planar[b], planar_twist_at, free_twist_at, v, bodies.idx_v[b])
 
 
 @njit_inline
@@ -182,15 +175,7 @@ def planar_quat(bodies, b, q):
 @njit_inline
 def joint_quat(bodies, b, q):
     """The rotation of free body b's joint as a unit quaternion (x, y, z, w), a 4-tuple."""
-    return quat_kind_at(q, bodies.idx_q[b], bodies.planar[b])
-
-
-@njit
-def quat_kind_at(q, iq, planar):
-    """`planar_quat_at` or `free_quat_at`."""
-    if planar:
-        return planar_quat_at(q, iq)
-    return free_quat_at(q, iq)
+    return by_kind(bodies.planar[b], planar_quat_at, free_quat_at, q, bodies.idx_q[b])
 
 
 # ------------------------------------------------------------------------------- poses
@@ -248,15 +233,7 @@ def planar_origin3(bodies, b, q):
 @njit_inline
 def body_rotation9(bodies, b, q):
     """Rotation of free body b in the world as a 9-tuple, row by row."""
-    return mm9(bodies.R_P[b], turn9_kind_at(q, bodies.idx_q[b], bodies.planar[b]))
-
-
-@njit
-def turn9_kind_at(q, iq, planar):
-    """`planar_turn9_at` or `free_turn9_at`."""
-    if planar:
-        return planar_turn9_at(q, iq)
-    return free_turn9_at(q, iq)
+    return mm9(bodies.R_P[b], by_kind(bodies.planar[b], planar_turn9_at, free_turn9_at, q, bodies.idx_q[b]))
 
 
 @njit_inline
@@ -276,15 +253,8 @@ def body_rotation(bodies, b, q):
 @njit_inline
 def body_origin3(bodies, b, q):
     """Origin of free body b in the world, from q, as a 3-tuple."""
-    return add3(mv3(bodies.R_P[b], shift3_kind_at(q, bodies.idx_q[b], bodies.planar[b])), bodies.p_P[b])
-
-
-@njit
-def shift3_kind_at(q, iq, planar):
-    """`planar_shift3_at` or `free_shift3_at`."""
-    if planar:
-        return planar_shift3_at(q, iq)
-    return free_shift3_at(q, iq)
+    return add3(mv3(bodies.R_P[b], by_kind(bodies.planar[b], planar_shift3_at, free_shift3_at, q, bodies.idx_q[b])),
+                bodies.p_P[b])
 
 
 @njit_inline

@@ -47,7 +47,6 @@ from .bodies import (
     set_planar_state,
     travel_rate,
     twist,
-    twist_rate,
 )
 from .data import RK_STATE
 from .dynamics import accelerations
@@ -301,7 +300,7 @@ def derivative(bodies, y, q, v, a):
         o = RK_STATE * b
         R = body_rotation(bodies, b, q)
         v_O, w = twist(bodies, b, v)
-        a_O, alpha = twist_rate(bodies, b, a)
+        a_O, alpha = twist(bodies, b, a)
         x, qy, z, qw = y[o + 3], y[o + 4], y[o + 5], y[o + 6]
         dy[o:o + 3] = y[o + 7:o + 10]
         # q' = q (x) (omega, 0) / 2, omega in the body frame

@@ -264,11 +264,10 @@ def _summary(s, model, v, rec, series, status, message, wall, welds) -> dict:
         # the SPOT experiment's measures: each body's displacement in the table's plane and
         # its turn about the normal, their amplitudes within each grasp (`measures`)
         moved = measures.displacements(series, s.testbed.table_normal)
-        t_end = float(series["t"][-1])
-        for entry in grasps:
-            if entry["started_s"] is not None:
-                end = entry["completed_s"] if entry["completed_s"] is not None else t_end
-                entry["displacements"] = measures.amplitudes(series["t"], moved, entry["started_s"], end)
+        started = [entry for entry in grasps if entry["started_s"] is not None]
+        windows = measures.grasp_windows({"grasps": grasps}, float(series["t"][-1]))
+        for entry, (start, end) in zip(started, windows, strict=True):
+            entry["displacements"] = measures.amplitudes(series["t"], moved, start, end)
     free = bool(model.robot_joint)
     sim = s.simulation
     testbed = {}
