@@ -1133,14 +1133,24 @@ def sweep_speed(r=None) -> str:
                     f". Copied by `{GENERATE} pages` from `docs/results/sweep_speed.md`:")
 
 
-def bristle_damping(r=None) -> str:
-    """The bristle-damping benchmark's table (`benchmarks/bristle_damping.py`), as printed."""
-    path = RESULTS / "bristle_damping.md"
+def benchmark_table(stem: str) -> str:
+    """A benchmark's table as printed by `benchmarks/<stem>.py` into docs/results/<stem>.md."""
+    path = RESULTS / f"{stem}.md"
     if not path.exists():
-        return "Not run yet: `python benchmarks/bristle_damping.py > docs/results/bristle_damping.md`."
+        return f"Not run yet: `python benchmarks/{stem}.py > docs/results/{stem}.md`."
     head, *lines = path.read_text().strip().splitlines()
-    return (f"{head}. Copied by `{GENERATE} pages` from `docs/results/bristle_damping.md`:\n\n"
+    return (f"{head}. Copied by `{GENERATE} pages` from `docs/results/{stem}.md`:\n\n"
             + "\n".join(lines).strip())
+
+
+def bristle_damping(r=None) -> str:
+    """The bristle-damping benchmark's table (`benchmarks/bristle_damping.py`)."""
+    return benchmark_table("bristle_damping")
+
+
+def bristle_switches(r=None) -> str:
+    """The bristle-switch benchmark's table (`benchmarks/bristle_switches.py`)."""
+    return benchmark_table("bristle_switches")
 
 
 def design_sweep(r=None) -> str:
@@ -1332,6 +1342,7 @@ RENDER = {
     "sweep-speed": sweep_speed,
     "design-sweep": design_sweep,
     "bristle-damping": bristle_damping,
+    "bristle-switches": bristle_switches,
 }
 PAGES = [ROOT / "README.md", DOCS / "usage.md", DOCS / "validation.md", DOCS / "performance.md"]
 

@@ -10,7 +10,8 @@ from spotsim.contact.detection import penetration
 from spotsim.contact.friction import BristleParams, bristle
 from spotsim.contact.normal import hertz_stiffness, indentation, normal_force
 from spotsim.sim.bodies import bodies_momentum, centroid_acceleration, centroid_state, free_bodies, kinematics
-from spotsim.sim.integrators import tableau
+from spotsim.contact.forces import Memory, no_contacts
+from spotsim.sim.integrators import SWITCH_WINDOW, switch_fraction, tableau
 from spotsim.sim.run import Stepper
 from spotsim.sim.weld import world_momentum
 
@@ -206,6 +207,52 @@ def test_adaptive_euler_rejected_try_leaves_no_trace(recorded_states, model_I):
         checked += 1
     assert checked >= 3
 
+
+
+def test_switch_fraction_interpolates_each_bristles_slack(model_I):
+    """A try's earliest bristle switch lies where its slack, linear between the memory and the
+    try's end, crosses zero: a holding bristle (slack 3 um) that ends saturated (-1 um) at 3/4
+    of the step, a saturated one (-1 um) that lets go (+1 um) at 1/2; one that holds
+    throughout, or a pair in one list alone, has none. A switch too slow to matter (its
+    misplaced damping impulse under the tolerance's share) is not located."""
+    m, um = model_I.sim, 1e-6
+    memory = Memory(np.array([1, 2, 3, 5]), np.zeros((4, 3)), np.zeros(4), np.array([3.0, -1.0, 2.0, 1.0]) * um)
+
+    def end(slack, speed):
+        return no_contacts()._replace(key=np.array([1, 2, 3, 4]), slack=np.array(slack) * um, speed=np.array(speed))
+
+    fast, still = 0.02, 1e-12  # m/s: a sliding pair's speed, and one whose switch cannot matter
+    assert switch_fraction(m, memory, end([-1.0, 1.0, 1.0, -5.0], [fast] * 4), 1e-5) == 0.5
+    assert switch_fraction(m, memory, end([-1.0, 1.0, 1.0, -5.0], [fast, still, fast, fast]), 1e-5) == 0.75
+    assert switch_fraction(m, memory, end([-1.0, 1.0, 1.0, -5.0], [still] * 4), 1e-5) == 1.0
+    assert switch_fraction(m, memory, end([1.0, -1.0, 1.0, -5.0], [fast] * 4), 1e-5) == 1.0
+
+
+def test_adaptive_euler_located_switch_leaves_no_trace_and_ends_the_step(recorded_states, model_I):
+    """With its bristle switches located, a step whose first try is cut at a switch ends
+    bit-identical (state, fingers, pair memory) to the same step asked for at the length it
+    was accepted at, and no switch that matters lies earlier in it than SWITCH_WINDOW from its
+    end."""
+    s = spotsim.replace(model_I.scenario, simulation={"integrator": {"method": "adaptive_euler",
+                                                                     "bristle_switches": "located"}})
+    model = spotsim.build_model(s)
+    checked = 0
+    for state in recorded_states:
+        first = Stepper(model, state.copy())
+        start_memory = state.view().memory
+        h = first.step(1e-3)
+        if first.data.cut == state.cut:
+            continue  # no switch cut this step
+        assert switch_fraction(model.sim, start_memory, first.data.view().contacts, h) >= 1.0 - SWITCH_WINDOW
+        again = Stepper(model, state.copy())
+        assert again.step(h) == h
+        a, b = first.data.view(), again.data.view()
+        for name in ("q", "v", "opening"):
+            assert np.array_equal(getattr(a, name), getattr(b, name)), name
+        for name in a.memory._fields:
+            assert np.array_equal(getattr(a.memory, name), getattr(b.memory, name)), name
+        checked += 1
+    assert checked >= 3
 
 #: The agreement asked of the closed-form Hertz impact; the crossings are resolved to 1e-6.
 ORACLE_RTOL = 1e-3

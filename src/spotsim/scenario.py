@@ -103,6 +103,10 @@ class Integrator:
     velocity_tol_m_s: float = key(2.5e-6, _positive, "adaptive_euler: a step's error in any contact sphere's velocity")
     onset_depth_m: float = key(1e-6, _positive, "adaptive_euler: while pairs may start, the most a step moves two "
                                "spheres closer (a new pair's first penetration)")
+    bristle_switches: str = key("within_step", _choice("within_step", "located"),
+                                "adaptive_euler: where a bristle that saturates or lets go in a step switches its "
+                                "damping c_b v_t: at the step's end (within_step), or at its own time, the step cut "
+                                "to end just past it (located)")
     h_min_s: float = key(1e-9, _positive, "adaptive methods: smallest step; below it the run is diverged")
     h_max_s: float = key(1e-3, _positive, "adaptive methods: largest step")
 

@@ -506,6 +506,7 @@ def model_fields(p: _Parts) -> ModelFields:
     A, b, c_nodes, e = tableau(i.method)
     integrator = IntegratorParams(METHODS.index(i.method), i.method in ADAPTIVE, A, b, c_nodes, e, i.rtol, i.atol,
                                   i.h_min_s, i.h_max_s, i.velocity_tol_m_s, i.onset_depth_m,
+                                  i.bristle_switches == "located",
                                   _error_levers(bodies, master, layers.slave, p.fingers))
     table = np.array(s.testbed.table_normal, dtype=float) if on_table(s) else np.zeros(3)
     if table.any():

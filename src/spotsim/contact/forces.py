@@ -48,6 +48,7 @@ class Contacts(NamedTuple):
     state: np.ndarray  # (k,) friction.SLIPPING or friction.STICKING
     s: np.ndarray  # (k, 3) bristle deflection after the evaluation, m
     v_minus: np.ndarray  # (k,) onset indentation rate delta_dot_minus, m/s
+    slack: np.ndarray  # (k,) the bristle's slack (`friction.bristle`): it holds while positive, m
     # how the finger's load along its axis grows as the finger closes further (N/m) and
     # faster (N s/m): the normal force's slopes along g and a holding bristle's k_b and c_b,
     # each projected twice on the axis (the finger drive's linearisation)
@@ -61,23 +62,24 @@ class Memory(NamedTuple):
     key: np.ndarray  # (k,)
     s: np.ndarray  # (k, 3) bristle deflection, m
     v_minus: np.ndarray  # (k,) onset indentation rate delta_dot_minus, m/s
+    slack: np.ndarray  # (k,) the bristle's slack, m
 
 
 def no_contacts() -> Contacts:
     ints, vec = lambda: np.zeros(0, dtype=np.int64), lambda: np.zeros((0, 3))
     return Contacts(ints(), ints(), ints(), np.zeros(0), vec(), vec(), vec(), vec(), np.zeros(0), ints(), vec(),
-                    np.zeros(0), np.zeros(0), np.zeros(0))
+                    np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0))
 
 
 def no_memory() -> Memory:
-    return Memory(np.zeros(0, dtype=np.int64), np.zeros((0, 3)), np.zeros(0))
+    return Memory(np.zeros(0, dtype=np.int64), np.zeros((0, 3)), np.zeros(0), np.zeros(0))
 
 
 @njit_inline
 def commit_memory(d):
     """The contacts of the last evaluation become the pairs' memory."""
     c = d.contacts
-    d.memory = Memory(c.key, c.s, c.v_minus)
+    d.memory = Memory(c.key, c.s, c.v_minus, c.slack)
 
 
 @njit
@@ -101,9 +103,10 @@ def pair_forces(m, d, h):
     """
     k = d.candidates.master.shape[0]
     # the outputs as rows of three blocks: an allocation costs ~25 ns, a step makes dozens
-    ints, scalars, vectors = np.empty((4, k), dtype=np.int64), np.empty((5, k)), np.empty((5, k, 3))
+    ints, scalars, vectors = np.empty((4, k), dtype=np.int64), np.empty((6, k)), np.empty((5, k, 3))
     out_m, out_s, out_key, state_out = ints[0], ints[1], ints[2], ints[3]
     phi_out, speed_out, v_minus_out, stiff_out, damp_out = scalars[0], scalars[1], scalars[2], scalars[3], scalars[4]
+    slack_out = scalars[5]
     point_out, c1_out, c2_out, force_out, s_out = vectors[0], vectors[1], vectors[2], vectors[3], vectors[4]
     r1, r2 = m.law.r1, m.law.r2
     n_mem = d.memory.key.shape[0]
@@ -143,9 +146,9 @@ def pair_forces(m, d, h):
             v_minus = onset_rate(delta_dot, m.law.floor)
             s_prev = (0.0, 0.0, 0.0)
         F_n, dF_ddelta, dF_drate = normal_law(indentation(phi), delta_dot, v_minus, m.law.K, m.law.damping)
-        s, F_f, state, holds = bristle(s_prev, v_rel, n_c, F_n, h, m.law.bristle)
+        s, F_f, state, slack = bristle(s_prev, v_rel, n_c, F_n, h, m.law.bristle)
         out_m[n], out_s[n], out_key[n] = mi, sl, key
-        phi_out[n], v_minus_out[n], state_out[n] = phi, v_minus, state
+        phi_out[n], v_minus_out[n], state_out[n], slack_out[n] = phi, v_minus, state, slack
         for a in range(3):
             point_out[n, a], c1_out[n, a], c2_out[n, a], s_out[n, a] = point[a], c1[a], c2[a], s[a]
             force_out[n, a] = F_n * g[a] + F_f[a]  # Eq. (18): f_i = F_n,i + F_f,i
@@ -153,10 +156,10 @@ def pair_forces(m, d, h):
         # the finger closing by dx along its axis indents the pair by (g . axis)^2 dx / 2 along
         # g, and bends a holding bristle by the axis' share in the tangent plane of n_c
         normal = 0.5 * (g[0] * slide[0] + g[1] * slide[1] + g[2] * slide[2]) ** 2
-        tangent = 1.0 - (n_c[0] * slide[0] + n_c[1] * slide[1] + n_c[2] * slide[2]) ** 2 if holds else 0.0
+        tangent = 1.0 - (n_c[0] * slide[0] + n_c[1] * slide[1] + n_c[2] * slide[2]) ** 2 if slack > 0.0 else 0.0
         stiff_out[n] = normal * dF_ddelta + tangent * m.law.bristle.k_b
         damp_out[n] = normal * dF_drate + tangent * m.law.bristle.c_b
         n += 1
     d.contacts = Contacts(out_m[:n], out_s[:n], out_key[:n], phi_out[:n], point_out[:n], c1_out[:n], c2_out[:n],
-                          force_out[:n], speed_out[:n], state_out[:n], s_out[:n], v_minus_out[:n], stiff_out[:n],
-                          damp_out[:n])
+                          force_out[:n], speed_out[:n], state_out[:n], s_out[:n], v_minus_out[:n], slack_out[:n],
+                          stiff_out[:n], damp_out[:n])

@@ -39,8 +39,9 @@ def bristle(s_prev, v, n_c, F_n, dt, p):
     contact point relative to B's, m/s. n_c: common normal. (3-vectors.) F_n: normal force
     magnitude, N. dt: step, s. p: BristleParams.
     Returns the deflection s, the friction force on A (N), both 3-tuples, the pair state, and
-    whether the bristle holds (below its s_max: the force then grows with the tangential
-    motion by k_b per metre and c_b per m/s).
+    the bristle's slack, m: s_max less the length it would have without its limit (Eq. 15's
+    first branch). The bristle holds while its slack is positive (the force then grows with
+    the tangential motion by k_b per metre and c_b per m/s) and saturates when it reaches zero.
     """
     # the carried deflection, kept in the current tangent plane with its length kept
     s = _tangential(s_prev, n_c)
@@ -52,7 +53,8 @@ def bristle(s_prev, v, n_c, F_n, dt, p):
     slipping = speed > p.v_d
     s_max = (p.mu_k if slipping else p.mu_s) * F_n / p.k_b  # Eq. (16)
     s0, s1, s2 = s0 + v_t[0] * dt, s1 + v_t[1] * dt, s2 + v_t[2] * dt  # Eq. (15), first branch
-    saturated = norm3((s0, s1, s2)) >= s_max
+    slack = s_max - norm3((s0, s1, s2))
+    saturated = slack <= 0.0
     if saturated:
         # Eq. (15), second branch: the bristle lies at s_max along the sliding direction
         # (along its own deflection when there is no sliding)
@@ -68,4 +70,4 @@ def bristle(s_prev, v, n_c, F_n, dt, p):
     # c_b * 2 s_max / dt, which grows without bound as dt shrinks.
     s_dot = (0.0, 0.0, 0.0) if saturated else v_t
     F_f = (-p.k_b * s0 - p.c_b * s_dot[0], -p.k_b * s1 - p.c_b * s_dot[1], -p.k_b * s2 - p.c_b * s_dot[2])  # Eq. (14)
-    return (s0, s1, s2), F_f, SLIPPING if slipping else STICKING, not saturated
+    return (s0, s1, s2), F_f, SLIPPING if slipping else STICKING, slack

@@ -107,6 +107,7 @@ class DataFields(NamedTuple):
     evaluations: int  # force evaluations
     accepted: int  # steps accepted (all but an adaptive integrator's rejected tries)
     rejected: int  # adaptive steps rejected
+    cut: int  # adaptive_euler's tries cut to end just past a bristle's switch
     energy_start: float  # mechanical energy at the start, J
     energy_now: float  # ... at the last record, J
     energy_passive: float  # ... when the current passive phase began, J (nan: not in one)
@@ -187,7 +188,7 @@ def make_data(model, rows: int = ROWS_PER_CALL) -> Data:
         peak_torque_norm=np.zeros(n_g), peak_pairs=ints(n_g), peak_table_force=np.zeros(n_g),
         peak_table_moment=np.zeros(n_g),
         impulse_W=np.zeros(3), impulse_moment_O_W=np.zeros(3), drive_power=0.0, drive_work=0.0,
-        steps=0, pair_steps=0, flights=0, evaluations=0, accepted=0, rejected=0,
+        steps=0, pair_steps=0, flights=0, evaluations=0, accepted=0, rejected=0, cut=0,
         energy_start=0.0, energy_now=0.0, energy_passive=math.nan, momentum_start=np.zeros(3),
         angular_momentum_start=np.zeros(3), momentum_max=0.0, angular_momentum_max=0.0, momentum_drift=0.0,
         angular_momentum_drift=0.0,

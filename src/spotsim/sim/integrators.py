@@ -8,7 +8,8 @@ the model's method; a new integrator is one more such function and its code.
 
 - `symplectic_euler`: the paper's explicit fixed step.
 - `adaptive_euler`: symplectic Euler with its error controlled by an embedded estimate
-  (Euler against Heun's trapezoid, from the end's forces, which start the next step).
+  (Euler against Heun's trapezoid, from the end's forces, which start the next step), and,
+  optionally, its steps cut where a bristle's damping switches on or off.
 - `rk4`, `dopri5`: explicit Runge-Kutta, fixed and error-controlled.
 
 Free bodies hang on free-flyer or planar joints, whose velocity Pinocchio keeps in the body
@@ -62,6 +63,13 @@ ADAPTIVE = ("dopri5", "adaptive_euler")
 #: ratio r scales it by SAFETY r^(-1/p) in between, p the order of its local error estimate
 #: (Hairer, Norsett and Wanner, II.4): 5 for dopri5, 2 for adaptive_euler.
 GROW_MAX, SHRINK_MIN, SAFETY = 5.0, 0.2, 0.9
+#: adaptive_euler with its bristle switches located (`switch_fraction`): a try in which a
+#: bristle saturates or lets go earlier than SWITCH_WINDOW of the step from its end is tried
+#: again to end just past the switch, if the switch's damping impulse c_b |v| h (1 - theta)
+#: would move the lightest free body by more than SWITCH_SHARE of the velocity tolerance
+#: (a switch misplaced within a step always errs the same way, so its share is kept small);
+#: a switch within SWITCH_FLOOR (s) of the step's start is taken as at its start.
+SWITCH_WINDOW, SWITCH_SHARE, SWITCH_FLOOR = 0.1, 0.1, 1e-8
 
 
 @njit_inline
@@ -185,6 +193,30 @@ def euler_error(m, acc0, acc1, h):
 
 
 @njit
+def switch_fraction(m, before, after, h):
+    """The earliest fraction of a try of h (s) at which a bristle switches its damping c_b v_t
+    (saturates, or lets go), by linear interpolation of its slack (`friction.bristle`) from
+    before (the committed memory, at the try's start) to after (its end's contacts); 1.0 if
+    none does, or none whose misplaced damping impulse matters (SWITCH_SHARE). A pair in one
+    of the two alone (sorted by key) has no switch to locate."""
+    if m.law.bristle.c_b == 0.0:  # no damping to switch
+        return 1.0
+    theta = 1.0
+    # the least relative speed (m/s) at which a switch misplaced by the rest of the step moves
+    # the lightest body by SWITCH_SHARE of the tolerance
+    speed = SWITCH_SHARE * m.integrator.velocity_tol * np.min(m.bodies.mass) / (m.law.bristle.c_b * h)
+    j, n = 0, after.key.shape[0]
+    for i in range(before.key.shape[0]):
+        while j < n and after.key[j] < before.key[i]:
+            j += 1
+        if j < n and after.key[j] == before.key[i] and (before.slack[i] > 0.0) != (after.slack[j] > 0.0):
+            at = before.slack[i] / (before.slack[i] - after.slack[j])
+            if after.speed[j] * (1.0 - at) > speed:
+                theta = min(theta, at)
+    return theta
+
+
+@njit
 def adaptive_euler(m, d, h):
     """One accepted symplectic Euler step with its error controlled, of at most min(h, the
     onset guard): returns the step taken, or 0.0 if it fell below h_min.
@@ -198,6 +230,12 @@ def adaptive_euler(m, d, h):
     start for each try, the committed bristles bent over it (as symplectic Euler's start
     bends them over its step), so that a rejected try leaves no trace. Its pairs are those
     the last evaluation found at the same poses (`contact_forces`).
+
+    With its bristle switches located (the model's `locate_switches`), a try in which a
+    bristle saturates or lets go well before its end (`switch_fraction`) is tried again to end
+    just past the switch: its damping c_b v_t then acts for the part of the step it should,
+    where the start's forces would apply it (or not) for the whole step. Such a cut is not a
+    rejection: the step after it may grow from the uncut try.
     """
     p = m.integrator
     h = min(h, onset_step(m, d))
@@ -213,6 +251,7 @@ def adaptive_euler(m, d, h):
     start = (d.candidates, d.contacts, d.loads, d.summary)  # put back after a rejection (a fresh start: its pairs)
     external = np.empty(6)
     rejected = False
+    h_free = 0.0  # the step the error control alone took, before a switch cut it
     while True:
         if fresh:
             if here:  # only the finger rates changed: the pairs found at this state stand
@@ -235,19 +274,29 @@ def adaptive_euler(m, d, h):
         d.evaluations += 1
         _centroid_accelerations(m, d, acc[1])
         ratio = euler_error(m, acc[0], acc[1], h)
-        if ratio <= 1.0:
+        theta = switch_fraction(m, d.memory, d.contacts, h) if p.locate_switches else 1.0
+        early = theta < 1.0 - SWITCH_WINDOW and theta * h > SWITCH_FLOOR
+        if ratio <= 1.0 and not early:
             grow = GROW_MAX if ratio == 0.0 else min(GROW_MAX, max(SHRINK_MIN, SAFETY / math.sqrt(ratio)))
-            # no growth right after a rejection (Hairer, Norsett and Wanner, II.4)
-            d.h_next = min(p.h_max, h * (min(grow, 1.0) if rejected else grow))
+            # no growth right after a rejection (Hairer, Norsett and Wanner, II.4); a step
+            # cut at a switch does not hold back the next
+            d.h_next = min(p.h_max, max(h * (min(grow, 1.0) if rejected else grow), h_free))
             break
-        rejected = True
-        d.rejected += 1
         d.q[:], d.v[:], d.opening[:] = q0, v0, opening0
         if not fresh:  # a fresh start is evaluated again for the next try
             d.a[:] = a0
             kinematics(m, d)
             d.candidates, d.contacts, d.loads, d.summary = start
-        h *= max(SHRINK_MIN, SAFETY / math.sqrt(ratio))
+        tried = h
+        if ratio > 1.0:
+            rejected = True
+            d.rejected += 1
+            h *= max(SHRINK_MIN, SAFETY / math.sqrt(ratio))
+        if early:  # the next try ends just past the switch
+            if ratio <= 1.0:
+                h_free = tried
+            d.cut += 1
+            h = min(h, theta * (1.0 + 0.5 * SWITCH_WINDOW) * tried)
         if h < p.h_min:
             return 0.0
     commit_memory(d)

@@ -106,6 +106,7 @@ class IntegratorParams(NamedTuple):
     h_max: float  # s
     velocity_tol: float  # adaptive_euler: a step's error in any contact sphere's velocity, m/s
     onset_depth: float  # adaptive_euler: how far a step may move two spheres closer while pairs may start, m
+    locate_switches: bool  # adaptive_euler: a step ends where a bristle saturates or lets go
     lever: np.ndarray  # (n_bodies,) each free body's farthest contact sphere from its centroid, m
 
 

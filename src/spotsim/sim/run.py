@@ -298,7 +298,7 @@ def _summary(s, model, v, rec, series, status, message, wall, welds) -> dict:
         # steps of a whole record interval, taken where no contact could start within it
         "free_flight_steps": v.flights,
         "integrator": {"method": sim.integrator.method, "accepted_steps": v.accepted, "rejected_steps": v.rejected,
-                       "force_evaluations": v.evaluations},
+                       "switch_cuts": v.cut, "force_evaluations": v.evaluations},
         "broad_phase": s.contact.broad_phase,
         "drive": s.end_effector.drive,
         "phases": phases[0] if len(phases) == 1 else phases,

@@ -84,7 +84,7 @@ def weld(model, data, source: str = "<scenario>"):
         "peak_force", "peak_torque", "peak_force_norm", "peak_torque_norm", "peak_pairs", "peak_table_force",
         "peak_table_moment", "impulse_W",
         "impulse_moment_O_W", "drive_work", "steps", "pair_steps", "flights", "evaluations", "accepted", "rejected",
-        "energy_start", "energy_now", "momentum_start", "angular_momentum_start", "momentum_max",
+        "cut", "energy_start", "energy_now", "momentum_start", "angular_momentum_start", "momentum_max",
         "angular_momentum_max", "momentum_drift", "angular_momentum_drift", "row_index", "last_open")}
     # a new passive phase starts with the new model
     new_data.assign(q=q, v=v, opening=opening, t_start=t_start, active=old.active + 1, **carried)

@@ -1,0 +1,103 @@
+"""What locating the bristle switches buys adaptive_euler: its ensembles against the converged
+reference, with and without `simulation.integrator.bristle_switches: located`.
+
+    python benchmarks/bristle_switches.py [--members 32]
+
+Cases I-III and the dual-arm run, each as an ensemble of MEMBERS starts (spotsim's default
+perturbation, seed 0) at: the default (switches within the step), the switches located, and
+the switches located at a quarter of the velocity tolerance. Each is compared, by the ensemble
+accuracy study's own comparison (`studies.accuracy_ensemble.compare`), with the study's
+converged reference from the same starts: symplectic Euler at 0.78125 us, read from
+docs/results/accuracy_ensemble/<case>/members/. Printed per case, setting and grasp: the
+median peak force and residual offset against the reference's (with their sampling errors),
+the residual's KS p-value, and per member the wall time, force evaluations and switch cuts.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+import spotsim
+from spotsim.studies.accuracy_ensemble import compare
+from spotsim.studies.ensemble import grasp_prefix, member_row
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bristle_damping import machine  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+CASES = (("Case I", "single_arm_case_I"), ("Case II", "single_arm_case_II"), ("Case III", "single_arm_case_III"),
+         ("dual arm", "dual_arm_sequential"))
+REFERENCE = "symplectic_euler_h_0.00078125_ms.csv"
+
+
+def settings(tol: float):
+    """(label, integrator changes) of the settings compared."""
+    return (("within the step (default)", {}),
+            ("located", {"bristle_switches": "located"}),
+            (f"located, tol {tol / 4:g} m/s", {"bristle_switches": "located", "velocity_tol_m_s": tol / 4}))
+
+
+def reference_rows(name: str) -> list[dict]:
+    """The reference ensemble's members table, its numbers as numbers and blanks as None."""
+    def value(x: str):
+        if x == "":
+            return None
+        try:
+            return float(x) if x.lower() not in ("nan",) else float("nan")
+        except ValueError:
+            return x
+
+    path = ROOT / "docs" / "results" / "accuracy_ensemble" / name / "members" / REFERENCE
+    with open(path, newline="") as f:
+        rows = [{k: value(v) for k, v in r.items()} for r in csv.DictReader(f)]
+    for r in rows:
+        r["member"] = int(r["member"])
+    return rows
+
+
+def pct(x: float, err: float | None = None) -> str:
+    return f"{100 * x:+.1f} %" + (f" ± {100 * err:.1f} %" if err is not None else "")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--members", type=int, default=32)
+    args = ap.parse_args()
+    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True).stdout
+    print(f"Measured by `python benchmarks/bristle_switches.py` at spotsim {commit.strip()} on {machine()}: "
+          f"{args.members} starts per setting, against the converged reference's same starts (symplectic Euler, "
+          f"0.78125 µs)\n")
+    print("| case | bristle switches | grasp | peak force vs reference | residual median vs reference "
+          "| residual KS p | wall per member (s) | force evaluations per member | switch cuts per member |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+    for title, name in CASES:
+        base = spotsim.load_scenario(ROOT / "config" / f"{name}.yaml")
+        ref = reference_rows(name)
+        tol = base.simulation.integrator.velocity_tol_m_s
+        for label, changes in settings(tol):
+            s = spotsim.replace(base, simulation={"integrator": changes}) if changes else base
+            e = spotsim.ensemble(s, args.members, workers=2)
+            n_grasps = len(e.members[0].grasps())
+            dual = n_grasps > 1
+            rows = [member_row(m, n_grasps, dual) for m in e.members]
+            c = compare(rows, ref, n_grasps, dual)
+            ran = [m.summary for m in e.members if m.summary]
+            wall = np.median([x["wall_time_s"] for x in ran])
+            evaluations = np.mean([x["integrator"]["force_evaluations"] for x in ran])
+            cuts = np.mean([x["integrator"]["switch_cuts"] for x in ran])
+            for g in range(n_grasps):
+                p = grasp_prefix(g, n_grasps)
+                force = pct(c[p + "peak_force_median_rel"], c[p + "peak_force_median_rel_error"])
+                residual = pct(c[p + "residual_median_rel"], c[p + "residual_median_rel_error"])
+                print(f"| {title} | {label} | {g + 1} | {force} | {residual} "
+                      f"| {c[p + 'residual_ks_p']:.2g} | {wall:.3f} | {evaluations:.3g} | {cuts:.3g} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
