@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
 import subprocess
 import time
 from pathlib import Path
@@ -24,20 +23,11 @@ from pathlib import Path
 import numpy as np
 
 import spotsim
+from speed import cpu_name
 
 ROOT = Path(__file__).resolve().parents[1]
 CASE_II = ROOT / "config" / "single_arm_case_II.yaml"
 DAMPINGS = (80.0, 8.0, 0.08)
-
-
-def machine() -> str:
-    """The CPU's name and core count."""
-    name = platform.processor() or platform.machine()
-    try:
-        name = next(x.split(":", 1)[1].strip() for x in open("/proc/cpuinfo") if x.startswith("model name"))
-    except (OSError, StopIteration):
-        pass
-    return f"{name}, {os.cpu_count()} cores"
 
 
 def medians(e) -> tuple[float, float, int]:
@@ -54,7 +44,8 @@ def main() -> None:
     substeps = [int(x) for x in args.substeps.split(",")]
     base = spotsim.load_scenario(CASE_II)
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True).stdout
-    print(f"Measured by `python benchmarks/bristle_damping.py` at spotsim {commit.strip()} on {machine()}: Case II, "
+    machine = f"{cpu_name()}, {os.cpu_count()} cores"
+    print(f"Measured by `python benchmarks/bristle_damping.py` at spotsim {commit.strip()} on {machine}: Case II, "
           f"symplectic Euler, {args.members} starts per setting (medians; change from the finest step)\n")
     print("| c_b (N s/m) | step (µs) | peak force (N) | vs finest | residual e (mm) | vs finest | completed "
           "| wall (s) |")

@@ -17,8 +17,8 @@ from __future__ import annotations
 
 import argparse
 import csv
+import os
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -26,9 +26,7 @@ import numpy as np
 import spotsim
 from spotsim.studies.accuracy_ensemble import compare
 from spotsim.studies.ensemble import grasp_prefix, member_row
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bristle_damping import machine  # noqa: E402
+from speed import cpu_name
 
 ROOT = Path(__file__).resolve().parents[1]
 CASES = (("Case I", "single_arm_case_I"), ("Case II", "single_arm_case_II"), ("Case III", "single_arm_case_III"),
@@ -46,10 +44,8 @@ def settings(tol: float):
 def reference_rows(name: str) -> list[dict]:
     """The reference ensemble's members table, its numbers as numbers and blanks as None."""
     def value(x: str):
-        if x == "":
-            return None
         try:
-            return float(x) if x.lower() not in ("nan",) else float("nan")
+            return float(x) if x else None
         except ValueError:
             return x
 
@@ -70,7 +66,8 @@ def main() -> None:
     ap.add_argument("--members", type=int, default=32)
     args = ap.parse_args()
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True).stdout
-    print(f"Measured by `python benchmarks/bristle_switches.py` at spotsim {commit.strip()} on {machine()}: "
+    machine = f"{cpu_name()}, {os.cpu_count()} cores"
+    print(f"Measured by `python benchmarks/bristle_switches.py` at spotsim {commit.strip()} on {machine}: "
           f"{args.members} starts per setting, against the converged reference's same starts (symplectic Euler, "
           f"0.78125 µs)\n")
     print("| case | bristle switches | grasp | peak force vs reference | residual median vs reference "

@@ -185,6 +185,15 @@ def test_adaptive_euler_rejects_steps_and_converges_as_its_tolerance_falls(case_
     assert errors[0] / errors[1] >= ADAPTIVE_ERROR_RATIO_PER_100X_TOL, errors
 
 
+def assert_same_end(first, again):
+    """Two Steppers' steps ended bit-identical: state, fingers and every pair memory field."""
+    a, b = first.data.view(), again.data.view()
+    for name in ("q", "v", "opening"):
+        assert np.array_equal(getattr(a, name), getattr(b, name)), name
+    for name in a.memory._fields:
+        assert np.array_equal(getattr(a.memory, name), getattr(b.memory, name)), name
+
+
 def test_adaptive_euler_rejected_try_leaves_no_trace(recorded_states, model_I):
     """A step whose first try is rejected ends bit-identical (state, fingers, pair memory) to
     the same step asked for at the length it was accepted at: a rejection restores everything."""
@@ -199,11 +208,7 @@ def test_adaptive_euler_rejected_try_leaves_no_trace(recorded_states, model_I):
             continue  # accepted at once: nothing to check here
         again = Stepper(model, state.copy())
         assert again.step(h) == h and again.data.rejected == state.rejected
-        a, b = first.data.view(), again.data.view()
-        for name in ("q", "v", "opening"):
-            assert np.array_equal(getattr(a, name), getattr(b, name)), name
-        for name in a.memory._fields:
-            assert np.array_equal(getattr(a.memory, name), getattr(b.memory, name)), name
+        assert_same_end(first, again)
         checked += 1
     assert checked >= 3
 
@@ -246,13 +251,10 @@ def test_adaptive_euler_located_switch_leaves_no_trace_and_ends_the_step(recorde
         assert switch_fraction(model.sim, start_memory, first.data.view().contacts, h) >= 1.0 - SWITCH_WINDOW
         again = Stepper(model, state.copy())
         assert again.step(h) == h
-        a, b = first.data.view(), again.data.view()
-        for name in ("q", "v", "opening"):
-            assert np.array_equal(getattr(a, name), getattr(b, name)), name
-        for name in a.memory._fields:
-            assert np.array_equal(getattr(a.memory, name), getattr(b.memory, name)), name
+        assert_same_end(first, again)
         checked += 1
     assert checked >= 3
+
 
 #: The agreement asked of the closed-form Hertz impact; the crossings are resolved to 1e-6.
 ORACLE_RTOL = 1e-3
