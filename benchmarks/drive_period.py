@@ -1,0 +1,92 @@
+"""How the finger drive's controller period sets the default's error: its ensembles against
+converged ensembles with the same starts, at the default period and at shorter ones.
+
+    python benchmarks/drive_period.py [--members 32] [--periods 1e-4,1e-5]
+
+Cases I-III and the dual-arm run, each as an ensemble of MEMBERS starts (spotsim's default
+perturbation, seed 0), at each `end_effector.control_period_s` in PERIODS: the default
+integrator against symplectic Euler at 0.78125 us from the same starts (at the scenario's own
+period, the accuracy study's reference, read from docs/results/accuracy_ensemble/<case>/members/;
+at any other, run here). Compared by the ensemble accuracy study's own comparison
+(`studies.accuracy_ensemble.compare`), and member by member: printed per case, period and grasp,
+the reference's median peak force, the default's median against it (with its sampling error),
+the median of the members' own differences, the residual's median and KS p-value, and the wall
+time per member of both.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+from pathlib import Path
+
+import numpy as np
+
+import spotsim
+from spotsim.studies.accuracy_ensemble import compare
+from spotsim.studies.ensemble import grasp_prefix, member_row
+from bristle_switches import CASES, pct, reference_rows
+from speed import cpu_name
+
+ROOT = Path(__file__).resolve().parents[1]
+#: The reference's step: the accuracy study's, symplectic Euler at 1/1280 of the 1 ms record step.
+FINE = {"method": "symplectic_euler"}
+FINE_SUBSTEPS = 1280
+
+
+def rows_of(scenario, members: int) -> tuple[list[dict], float, int]:
+    """An ensemble's member rows, its median wall time per member (s) and its grasp count."""
+    e = spotsim.ensemble(scenario, members, workers=2)
+    n_grasps = len(e.members[0].grasps())
+    rows = [member_row(m, n_grasps, n_grasps > 1) for m in e.members]
+    wall = float(np.median([m.summary["wall_time_s"] for m in e.members if m.summary]))
+    return rows, wall, n_grasps
+
+
+def paired(rows: list[dict], ref: list[dict], column: str) -> float:
+    """The median over the members of their own relative difference in `column`."""
+    by_member = {r["member"]: r.get(column) for r in ref}
+    d = [r[column] / by_member[r["member"]] - 1.0 for r in rows
+         if r.get(column) is not None and by_member.get(r["member"]) not in (None, 0.0)]
+    return float(np.median(d)) if d else float("nan")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--members", type=int, default=32)
+    ap.add_argument("--periods", default="1e-4,1e-5", help="control periods, s, comma-separated")
+    args = ap.parse_args()
+    periods = [float(x) for x in args.periods.split(",")]
+    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True).stdout
+    machine = f"{cpu_name()}, {os.cpu_count()} cores"
+    print(f"Measured by `python benchmarks/drive_period.py` at spotsim {commit.strip()} on {machine}: "
+          f"{args.members} starts per setting, each against symplectic Euler at 0.78125 µs from the same starts "
+          f"and with the same controller period\n")
+    print("| case | controller period (ms) | grasp | reference peak force, median (N) | default peak force vs reference "
+          "| member by member | residual median vs reference | residual KS p | wall per member, default / reference (s) |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+    for title, name in CASES:
+        base = spotsim.load_scenario(ROOT / "config" / f"{name}.yaml")
+        for period in periods:
+            s = spotsim.replace(base, end_effector={"control_period_s": period})
+            if period == base.end_effector.control_period_s:
+                ref = reference_rows(name)[:args.members]
+                ref_wall = float(np.median([r["wall_time_s"] for r in ref]))
+            else:
+                ref, ref_wall, _ = rows_of(spotsim.replace(s, simulation={"substeps": FINE_SUBSTEPS,
+                                                                          "integrator": FINE}), args.members)
+            rows, wall, n_grasps = rows_of(s, args.members)
+            c = compare(rows, ref, n_grasps, n_grasps > 1)
+            for g in range(n_grasps):
+                p = grasp_prefix(g, n_grasps)
+                force = np.median([r[p + "peak_force_norm_N"] for r in ref if r.get(p + "peak_force_norm_N")])
+                print(f"| {title} | {period * 1e3:g} | {g + 1} | {force:.1f} "
+                      f"| {pct(c[p + 'peak_force_median_rel'], c[p + 'peak_force_median_rel_error'])} "
+                      f"| {pct(paired(rows, ref, p + 'peak_force_norm_N'))} "
+                      f"| {pct(c[p + 'residual_median_rel'], c[p + 'residual_median_rel_error'])} "
+                      f"| {c[p + 'residual_ks_p']:.2g} | {wall:.3f} / {ref_wall:.2f} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
