@@ -11,7 +11,7 @@ at any other, run here). Compared by the ensemble accuracy study's own compariso
 (`studies.accuracy_ensemble.compare`), and member by member: printed per case, period and grasp,
 the reference's median peak force, the default's median against it (with its sampling error),
 the median of the members' own differences, the residual's median and KS p-value, and the wall
-time per member of both.
+time per member of both (the stored reference's: as recorded when the study made it).
 """
 
 from __future__ import annotations

@@ -1153,6 +1153,11 @@ def bristle_switches(r=None) -> str:
     return benchmark_table("bristle_switches")
 
 
+def drive_period(r=None) -> str:
+    """The drive-period benchmark's table (`benchmarks/drive_period.py`)."""
+    return benchmark_table("drive_period")
+
+
 def design_sweep(r=None) -> str:
     """The design sweep example's printout (`examples/design_sweep.py`), verbatim."""
     return printout("design_sweep.txt", "python examples/design_sweep.py", ":")
@@ -1343,6 +1348,7 @@ RENDER = {
     "design-sweep": design_sweep,
     "bristle-damping": bristle_damping,
     "bristle-switches": bristle_switches,
+    "drive-period": drive_period,
 }
 PAGES = [ROOT / "README.md", DOCS / "usage.md", DOCS / "validation.md", DOCS / "performance.md"]
 
