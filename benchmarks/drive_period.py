@@ -9,9 +9,10 @@ integrator against symplectic Euler at 0.78125 us from the same starts (at the s
 period, the accuracy study's reference, read from docs/results/accuracy_ensemble/<case>/members/;
 at any other, run here). Compared by the ensemble accuracy study's own comparison
 (`studies.accuracy_ensemble.compare`), and member by member: printed per case, period and grasp,
-the reference's median peak force, the default's median against it (with its sampling error),
-the median of the members' own differences, the residual's median and KS p-value, and the wall
-time per member of both (the stored reference's: as recorded when the study made it).
+the reference's median peak force and residual offset, the default's median force against the
+reference's (with its sampling error), the median of the members' own differences, the
+residual's median and KS p-value, and the wall time per member of both (the stored
+reference's: as recorded when the study made it).
 """
 
 from __future__ import annotations
@@ -63,9 +64,11 @@ def main() -> None:
     print(f"Measured by `python benchmarks/drive_period.py` at spotsim {commit.strip()} on {machine}: "
           f"{args.members} starts per setting, each against symplectic Euler at 0.78125 µs from the same starts "
           f"and with the same controller period\n")
-    print("| case | controller period (ms) | grasp | reference peak force, median (N) | default peak force vs reference "
-          "| member by member | residual median vs reference | residual KS p | wall per member, default / reference (s) |")
-    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+    print("| case | controller period (ms) | grasp | reference peak force, median (N) "
+          "| reference residual offset, median (mm) | default peak force vs reference "
+          "| member by member | residual median vs reference | residual KS p "
+          "| wall per member, default / reference (s) |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
     for title, name in CASES:
         base = spotsim.load_scenario(ROOT / "config" / f"{name}.yaml")
         for period in periods:
@@ -81,7 +84,9 @@ def main() -> None:
             for g in range(n_grasps):
                 p = grasp_prefix(g, n_grasps)
                 force = np.median([r[p + "peak_force_norm_N"] for r in ref if r.get(p + "peak_force_norm_N")])
-                print(f"| {title} | {period * 1e3:g} | {g + 1} | {force:.1f} "
+                residual = np.nanmedian([r[p + "residual_norm_mm"] for r in ref
+                                         if r.get(p + "residual_norm_mm") is not None])
+                print(f"| {title} | {period * 1e3:g} | {g + 1} | {force:.1f} | {residual:.3g} "
                       f"| {pct(c[p + 'peak_force_median_rel'], c[p + 'peak_force_median_rel_error'])} "
                       f"| {pct(paired(rows, ref, p + 'peak_force_norm_N'))} "
                       f"| {pct(c[p + 'residual_median_rel'], c[p + 'residual_median_rel_error'])} "
