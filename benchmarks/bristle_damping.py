@@ -15,17 +15,13 @@ c_b |v_t| at every switch; a step resolves the switches only to its own length.
 from __future__ import annotations
 
 import argparse
-import os
-import subprocess
 import time
-from pathlib import Path
 
 import numpy as np
 
 import spotsim
-from speed import cpu_name
+from speed import ROOT, measured_at
 
-ROOT = Path(__file__).resolve().parents[1]
 CASE_II = ROOT / "config" / "single_arm_case_II.yaml"
 DAMPINGS = (80.0, 8.0, 0.08)
 
@@ -43,9 +39,7 @@ def main() -> None:
     args = ap.parse_args()
     substeps = [int(x) for x in args.substeps.split(",")]
     base = spotsim.load_scenario(CASE_II)
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True).stdout
-    machine = f"{cpu_name()}, {os.cpu_count()} cores"
-    print(f"Measured by `python benchmarks/bristle_damping.py` at spotsim {commit.strip()} on {machine}: Case II, "
+    print(f"Measured by `python benchmarks/bristle_damping.py` at {measured_at()}: Case II, "
           f"symplectic Euler, {args.members} starts per setting (medians; change from the finest step)\n")
     print("| c_b (N s/m) | step (µs) | peak force (N) | vs finest | residual e (mm) | vs finest | completed "
           "| wall (s) |")

@@ -17,18 +17,14 @@ from __future__ import annotations
 
 import argparse
 import csv
-import os
-import subprocess
-from pathlib import Path
 
 import numpy as np
 
 import spotsim
 from spotsim.studies.accuracy_ensemble import compare
 from spotsim.studies.ensemble import grasp_prefix, member_row
-from speed import cpu_name
+from speed import ROOT, measured_at
 
-ROOT = Path(__file__).resolve().parents[1]
 CASES = (("Case I", "single_arm_case_I"), ("Case II", "single_arm_case_II"), ("Case III", "single_arm_case_III"),
          ("dual arm", "dual_arm_sequential"))
 REFERENCE = "symplectic_euler_h_0.00078125_ms.csv"
@@ -65,9 +61,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--members", type=int, default=32)
     args = ap.parse_args()
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True).stdout
-    machine = f"{cpu_name()}, {os.cpu_count()} cores"
-    print(f"Measured by `python benchmarks/bristle_switches.py` at spotsim {commit.strip()} on {machine}: "
+    print(f"Measured by `python benchmarks/bristle_switches.py` at {measured_at()}: "
           f"{args.members} starts per setting, against the converged reference's same starts (symplectic Euler, "
           f"0.78125 µs)\n")
     print("| case | bristle switches | grasp | peak force vs reference | residual median vs reference "

@@ -18,9 +18,6 @@ reference's: as recorded when the study made it).
 from __future__ import annotations
 
 import argparse
-import os
-import subprocess
-from pathlib import Path
 
 import numpy as np
 
@@ -28,9 +25,8 @@ import spotsim
 from spotsim.studies.accuracy_ensemble import compare
 from spotsim.studies.ensemble import grasp_prefix, member_row
 from bristle_switches import CASES, pct, reference_rows
-from speed import cpu_name
+from speed import ROOT, measured_at
 
-ROOT = Path(__file__).resolve().parents[1]
 #: The reference's step: the accuracy study's, symplectic Euler at 1/1280 of the 1 ms record step.
 FINE = {"method": "symplectic_euler"}
 FINE_SUBSTEPS = 1280
@@ -59,9 +55,7 @@ def main() -> None:
     ap.add_argument("--periods", default="1e-4,1e-5", help="control periods, s, comma-separated")
     args = ap.parse_args()
     periods = [float(x) for x in args.periods.split(",")]
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True).stdout
-    machine = f"{cpu_name()}, {os.cpu_count()} cores"
-    print(f"Measured by `python benchmarks/drive_period.py` at spotsim {commit.strip()} on {machine}: "
+    print(f"Measured by `python benchmarks/drive_period.py` at {measured_at()}: "
           f"{args.members} starts per setting, each against symplectic Euler at 0.78125 µs from the same starts "
           f"and with the same controller period\n")
     print("| case | controller period (ms) | grasp | reference peak force, median (N) "

@@ -55,6 +55,17 @@ def cpu_name() -> str:
     return platform.processor() or "unknown"
 
 
+def head_commit() -> str:
+    """The checkout's commit, short."""
+    return subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True,
+                          text=True).stdout.strip()
+
+
+def measured_at() -> str:
+    """Where a benchmark ran: `spotsim COMMIT on CPU, N cores`."""
+    return f"spotsim {head_commit()} on {cpu_name()}, {os.cpu_count()} cores"
+
+
 @njit
 def repeat_forces(m, d, h, n):
     """The contact stage n times on one state (the pair memory is not committed: each call
@@ -156,9 +167,8 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=15, metavar="N", help="pairs of alternating runs")
     args = parser.parse_args()
 
-    head = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True, text=True)
     print(f"machine: {cpu_name()}, {len(os.sched_getaffinity(0))} cores; Python {platform.python_version()}, "
-          f"Pinocchio {pin.__version__}, numba {__import__('numba').__version__}; spotsim at {head.stdout.strip()}")
+          f"Pinocchio {pin.__version__}, numba {__import__('numba').__version__}; spotsim at {head_commit()}")
     rows = []
     for name in args.cases:
         scenario = spotsim.load_scenario(ROOT / "config" / CASES[name])
