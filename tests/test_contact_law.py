@@ -8,7 +8,7 @@ from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 
 from spotsim.build.model import contact_law
-from spotsim.contact.detection import contact_point, cutoff_distance, force_direction, penetration
+from spotsim.contact.detection import SIDE_CAP, contact_point, cutoff_distance, force_direction, penetration
 from spotsim.contact.friction import SLIPPING, STICKING, BristleParams, bristle
 from spotsim.contact.normal import damping_factor, hertz_stiffness, indentation, normal_force, onset_rate
 from spotsim.scenario import Contact, Friction
@@ -21,7 +21,7 @@ UP, DOWN = np.array([0.0, 0.0, 1.0]), np.array([0.0, 0.0, -1.0])
 
 def pair(c1, c2, n1=DOWN, n2=UP):
     """Master A at c1 facing n1 against slave B at c2 facing n2: (n_c, phi, in contact)."""
-    n_c, phi, hit = penetration(np.asarray(c1, float), n1, R1, np.asarray(c2, float), n2, R2)
+    n_c, phi, hit, _ = penetration(np.asarray(c1, float), n1, R1, np.asarray(c2, float), n2, R2)
     return np.array(n_c), phi, hit
 
 
@@ -68,21 +68,98 @@ def test_gradient_direction_is_minus_the_gradient_of_the_penetration():
     2e-11 (round-off of phi ~ 1e-19 m over 1e-8 m, truncation ~ step^2 / r^2); 1e-9 allowed."""
     c1, c2 = np.array([0.3e-3, -0.2e-3, 1.2e-3]), np.zeros(3)
     n1, n2 = np.array([0.1, 0.0, -1.0]) / np.hypot(0.1, 1.0), UP
-    n_c, phi, hit = penetration(c1, n1, R1, c2, n2, R2)
-    assert hit
-    g = np.array(force_direction(c1, c2, n_c, phi, True))
+    n_c, phi, hit, side = penetration(c1, n1, R1, c2, n2, R2)
+    assert hit and not side
+    g = np.array(force_direction(c1, c2, n_c, phi, True, side))
     eps = 1e-8
     grad = [(penetration(c1 + eps * e, n1, R1, c2, n2, R2)[1] - penetration(c1 - eps * e, n1, R1, c2, n2, R2)[1])
             / (2 * eps) for e in np.eye(3)]
     assert np.allclose(g, -np.array(grad), rtol=0, atol=1e-9)
     assert np.dot(g, n_c) == pytest.approx(1.0, abs=1e-15) and np.linalg.norm(g - n_c) > 0.1
-    assert force_direction(c1, c2, n_c, phi, False) == n_c
+    assert force_direction(c1, c2, n_c, phi, False, side) == n_c
+
+
+def test_a_sphere_behind_entering_sideways_touches_only_when_the_spheres_overlap():
+    """A master sphere 0.1 mm behind the slave's centre along the common normal (chi < 0), slid
+    sideways towards it. Eq. (8) alone puts it in contact at phi = 0.1 mm the moment its lateral
+    offset drops below r1 + r2 = 1.5 mm, with the spheres still apart: a jump from no force to
+    a deep pair. Capped (SIDE_CAP), it touches when the spheres first overlap, at an offset of
+    sqrt(1.5^2 - 0.1^2) = 1.4967 mm, and then penetrates by twice their overlap."""
+    _, phi, hit = pair([1.499e-3, 0, -0.1e-3], [0, 0, 0])
+    assert not hit and phi < 0.0
+    _, phi, hit = pair([1.4966e-3, 0, -0.1e-3], [0, 0, 0])
+    assert hit and 0.0 < phi < 2 * 1e-7
+    n_c, phi, hit, side = penetration(np.array([1.4e-3, 0, -0.1e-3]), DOWN, R1, np.zeros(3), UP, R2)
+    assert hit and side and phi == pytest.approx(SIDE_CAP * (1.5e-3 - np.hypot(1.4e-3, 0.1e-3)), abs=TOL)
+
+
+def test_the_side_cap_leaves_face_on_pairs_to_eq_8():
+    """Pairs in contact whose centres lie at least (r1 + r2) / 2 apart along the common normal,
+    on faces tilted up to ~30 degrees, have Eq. (8)'s penetration (to round-off, 1e-18 m)."""
+    rng = np.random.default_rng(2)
+    checked = 0
+    for _ in range(5000):
+        n2 = UP + rng.normal(0, 0.3, 3)
+        n2 /= np.linalg.norm(n2)
+        n1 = -n2 + rng.normal(0, 0.3, 3)
+        n1 /= np.linalg.norm(n1)
+        c1 = rng.uniform(-1.5e-3, 1.5e-3, 3)
+        n_c, phi, hit, side = penetration(c1, n1, R1, np.zeros(3), n2, R2)
+        chi = float(np.dot(n_c, c1))
+        if not hit or chi < (R1 + R2) / SIDE_CAP:
+            continue
+        checked += 1
+        assert not side and phi == pytest.approx(-chi + np.sqrt(chi * chi - (c1 @ c1 - (R1 + R2) ** 2)), abs=1e-18)
+    assert checked > 200
+
+
+def test_the_penetration_is_continuous_with_slope_at_most_the_side_cap():
+    """Moving the master by dc changes its penetration (0 out of contact) by at most
+    SIDE_CAP |dc|, for random pairs on faces tilted up to ~60 degrees, over the whole sphere of
+    reach: no jump where a pair comes into contact sideways or from behind, and no unbounded
+    slope side-on (Eq. (8) alone has both: its phi grows as sqrt(2 (r1 + r2) s) with a side-on
+    pair's overlap s)."""
+    rng = np.random.default_rng(1)
+    step, touched, steepest = 1e-7, 0, 0.0
+
+    def phi_of(c1, n1, n2):
+        _, phi, hit, _ = penetration(c1, n1, R1, np.zeros(3), n2, R2)
+        return phi if hit else 0.0
+
+    for _ in range(40_000):
+        n2 = UP + rng.normal(0, 0.5, 3)
+        n2 /= np.linalg.norm(n2)
+        n1 = -n2 + rng.normal(0, 0.5, 3)
+        n1 /= np.linalg.norm(n1)
+        c1 = rng.uniform(-1.8e-3, 1.8e-3, 3)
+        dc = rng.normal(size=3)
+        dc *= step / np.linalg.norm(dc)
+        a, b = phi_of(c1, n1, n2), phi_of(c1 + dc, n1, n2)
+        if a or b:
+            touched += 1
+            steepest = max(steepest, abs(b - a) / step)
+    assert touched > 5000
+    assert steepest <= SIDE_CAP * (1 + 1e-6)
+
+
+def test_side_capped_gradient_direction_is_minus_the_gradient_of_the_penetration():
+    """A side-on pair (its centres 0.2 mm apart along n_c, 1.45 mm across) is capped; the
+    variant's direction is then SIDE_CAP along the line of the centres, -dphi/dc1."""
+    c1, c2 = np.array([1.45e-3, 0.0, 0.2e-3]), np.zeros(3)
+    n_c, phi, hit, side = penetration(c1, DOWN, R1, c2, UP, R2)
+    assert hit and side
+    g = np.array(force_direction(c1, c2, n_c, phi, True, side))
+    eps = 1e-9
+    grad = [(penetration(c1 + eps * e, DOWN, R1, c2, UP, R2)[1] - penetration(c1 - eps * e, DOWN, R1, c2, UP, R2)[1])
+            / (2 * eps) for e in np.eye(3)]
+    assert np.allclose(g, -np.array(grad), rtol=0, atol=1e-6)
+    assert np.allclose(g, SIDE_CAP * c1 / np.linalg.norm(c1), rtol=0, atol=1e-15)
 
 
 def test_contact_point_is_mid_overlap_for_coaxial_spheres():
     """For coaxial spheres the shared contact point lies halfway through the overlap."""
     c1, c2 = np.array([0, 0, 1.2e-3]), np.array([0, 0, 0.0])
-    n_c, phi, _ = penetration(c1, DOWN, R1, c2, UP, R2)
+    n_c, phi, _, _ = penetration(c1, DOWN, R1, c2, UP, R2)
     p = contact_point(c1, c2, R1, R2, n_c, phi)
     # overlap spans z in [c1 - r1, c2 + r2] = [0.5, 0.8] mm
     assert p[2] == pytest.approx(0.65e-3, abs=TOL)
@@ -141,8 +218,8 @@ def restitution(v0, law, mass=0.1):
     def contact(z, v_z, v_minus):
         """phi, the force direction's z and the force magnitude at height z, speed v_z."""
         c1 = np.array([0.0, 0.0, z])
-        n_c, phi, hit = penetration(c1, DOWN, r1, origin, UP, r2)
-        g = force_direction(c1, origin, n_c, phi, law.gradient)
+        n_c, phi, hit, side = penetration(c1, DOWN, r1, origin, UP, r2)
+        g = force_direction(c1, origin, n_c, phi, law.gradient, side)
         delta_dot = indentation(-(v_z * g[2]))
         F = normal_force(indentation(phi), delta_dot, v_minus, law.K, law.damping) if hit else 0.0
         return phi, g[2], F, delta_dot

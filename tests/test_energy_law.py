@@ -81,12 +81,12 @@ def slab_forces(q, v, h, slab_c, slab_n, plate_c, plate_n, law, s_mem, v_minus_m
                 touching[i, j] = False
                 continue
             c1, n1 = plate_c[row, j], plate_n[row, j]
-            n_c, phi, hit = penetration(c1, n1, R1, c2, n2, R2)
+            n_c, phi, hit, side = penetration(c1, n1, R1, c2, n2, R2)
             if not hit:
                 touching[i, j] = False
                 continue
             p = contact_point(c1, c2, R1, R2, n_c, phi)
-            g = force_direction(c1, c2, n_c, phi, law.gradient)
+            g = force_direction(c1, c2, n_c, phi, law.gradient, side)
             rx, rz = p[0] - q[0], p[2] - q[1]
             v_rel = (-(v[0] + v[2] * rz), 0.0, -(v[1] - v[2] * rx))  # the row is fixed: 0 - v_slab(p)
             delta_dot = indentation(-(v_rel[0] * g[0] + v_rel[1] * g[1] + v_rel[2] * g[2]))

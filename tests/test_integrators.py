@@ -274,7 +274,7 @@ def test_undamped_hertz_impact_matches_its_closed_form():
 
     def contact(z, v_z):
         """phi and the force on the falling sphere A (along +z) at height z, speed v_z."""
-        _, phi, hit = penetration(np.array([0.0, 0.0, z]), down, r1, origin, up, r2)
+        _, phi, hit, _ = penetration(np.array([0.0, 0.0, z]), down, r1, origin, up, r2)
         return phi, normal_force(indentation(phi), -0.5 * v_z, 1.0, K, 0.0) if hit else 0.0  # c_r = 1
 
     def rhs(t, y):

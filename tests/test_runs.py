@@ -298,3 +298,16 @@ def test_a_write_that_fails_midway_keeps_what_was_written_and_no_summary(tmp_pat
     kept = read_arrays(out / "timeseries.npz")
     recorded = spotsim.simulate(spotsim.load_scenario(CASE_I)).timeseries
     assert set(kept) == set(recorded) and all(np.array_equal(kept[k], recorded[k]) for k in kept)
+
+
+def test_a_finger_past_its_groove_ends_on_the_land_not_diverged(case_I):
+    """12 mm off along x_a (past the 11 mm the mouth admits), with the energy-consistent pair
+    law: the lower finger comes down on the land beside its groove, and its flank's edge meets
+    the groove flank's edge side-on as it slides. With Eq. (8) uncapped, that pair jumped into
+    contact 0.14 mm deep and the adaptive step fell below its least size; capped side-on, the
+    grasp ends with the finger on the land: not captured, the run complete."""
+    s = spotsim.replace(case_I, module={"initial_offset_mm": [12.0, 0.0, 0.0]}, end_effector={"start_gap_mm": 12.0},
+                        contact={"normal_direction": "gradient"})
+    r = spotsim.simulate(s)
+    assert r.status == "completed", r.summary["message"]
+    assert r.grasp["in_grooves"] is False and r.grasp["residual_offset_norm_mm"] > 10.0

@@ -11,13 +11,23 @@ from ..jit import njit
 #: Two spheres whose face normals differ by less than this (|n2 - n1|) face the same way and
 #: cannot touch across a common normal: Eq. (6) is undefined for them, so they never pair.
 NORMAL_EPS = 1e-9
+#: [reading] A pair whose centres lie less than (r1 + r2) / SIDE_CAP apart along the common
+#: normal (chi, Eq. 9) meets side-on, as at a layer's edge: its penetration is at most SIDE_CAP
+#: times the spheres' own overlap r1 + r2 - |c1 - c2|. Eq. (8)'s phi is at most (r1 + r2) / chi
+#: times that overlap, so the cap leaves every pair with chi >= (r1 + r2) / SIDE_CAP to Eq. (8)
+#: (a face-on pair has chi = r1 + r2 less about its penetration), and is continuous where it
+#: starts to bind. Without it phi is discontinuous side-on: it grows as sqrt(2 (r1 + r2) s) with
+#: the overlap s, and for chi < 0 (A's centre behind B's) it jumps from no contact to -chi as A
+#: comes within lateral reach of B.
+SIDE_CAP = 2.0
 
 
 @njit
 def penetration(c1, n1, r1, c2, n2, r2):
     """Eq. (6), (8)-(10) for one sphere pair: common normal (3-tuple), penetration phi (m, how
-    far A must move along n_c to just touch B) and whether they are in contact (the root of
-    Eq. (8) is real and phi > 0). c1, n1, c2, n2: 3-vectors (world); r1, r2: radii, m."""
+    far A must move along n_c to just touch B, capped side-on: SIDE_CAP), whether they are in
+    contact (the root of Eq. (8) is real and phi > 0) and whether the cap set phi. c1, n1, c2,
+    n2: 3-vectors (world); r1, r2: radii, m."""
     d0, d1, d2 = n2[0] - n1[0], n2[1] - n1[1], n2[2] - n1[2]
     norm = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
     facing = norm > NORMAL_EPS
@@ -28,24 +38,35 @@ def penetration(c1, n1, r1, c2, n2, r2):
     w = e0 * e0 + e1 * e1 + e2 * e2 - (r1 + r2) ** 2  # Eq. (10)
     disc = chi * chi - w
     phi = -chi + math.sqrt(max(disc, 0.0))  # Eq. (8)
-    return (d0, d1, d2), phi, facing and disc >= 0.0 and phi > 0.0
+    side = False
+    if chi < (r1 + r2) / SIDE_CAP:
+        cap = SIDE_CAP * (r1 + r2 - math.sqrt(e0 * e0 + e1 * e1 + e2 * e2))
+        if cap < phi:
+            phi, side = cap, True
+    return (d0, d1, d2), phi, facing and disc >= 0.0 and phi > 0.0, side
 
 
 @njit
-def force_direction(c1, c2, n_c, phi, gradient):
-    """The direction g of a pair's normal force on the master, scaled so that g . n_c = 1
-    (3-tuple): the force is F_n g, and the pair's indentation rate is -(v . g) / 2.
+def force_direction(c1, c2, n_c, phi, gradient, side):
+    """The direction g of a pair's normal force on the master (3-tuple): the force is F_n g,
+    and the pair's indentation rate is -(v . g) / 2.
 
     gradient False, the paper's law (Eq. 11): g = n_c.
-    gradient True, [variant] g = d / (d . n_c) with d = c1 - c2 + phi n_c (Eq. 7). Moving A
-    by dc changes phi by -g . dc (differentiate |c1 - c2 + phi n_c| = r1 + r2), so the elastic
-    force K delta^1.5 g is the gradient of the pair's Hertz potential, and the pair's normal
-    damping opposes the rate of phi and only dissipates. d . n_c = sqrt(chi^2 - w) >= chi > 0
-    for any pair whose phi stays below r1 + r2, which a run's divergence check ensures.
+    gradient True, [variant] g = -dphi/dc1, so that the elastic force K delta^1.5 g is the
+    gradient of the pair's Hertz potential, and the pair's normal damping opposes the rate of
+    phi and only dissipates. From Eq. (8), g = d / (d . n_c) with d = c1 - c2 + phi n_c
+    (Eq. 7; differentiate |c1 - c2 + phi n_c| = r1 + r2), and g . n_c = 1; d . n_c =
+    sqrt(chi^2 - w) >= chi > 0 for any pair whose phi stays below r1 + r2, which a run's
+    divergence check ensures. Capped side-on (`side`, phi = SIDE_CAP (r1 + r2 - |c1 - c2|)),
+    g = SIDE_CAP (c1 - c2) / |c1 - c2|, along the line of the centres.
     c1, c2: sphere centres; n_c: common normal (3-vectors, world); phi: penetration, m.
     """
     if not gradient:
         return (n_c[0], n_c[1], n_c[2])
+    if side:
+        e0, e1, e2 = c1[0] - c2[0], c1[1] - c2[1], c1[2] - c2[2]
+        k = SIDE_CAP / math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+        return (k * e0, k * e1, k * e2)
     d0, d1, d2 = c1[0] - c2[0] + phi * n_c[0], c1[1] - c2[1] + phi * n_c[1], c1[2] - c2[2] + phi * n_c[2]  # Eq. (7)
     dn = d0 * n_c[0] + d1 * n_c[1] + d2 * n_c[2]
     return (d0 / dn, d1 / dn, d2 / dn)

@@ -122,7 +122,7 @@ def pair_forces(m, d, h):
                                   m.master.centre_J[mi, 1] + shift * m.master.axis_J[mi, 1],
                                   m.master.centre_J[mi, 2] + shift * m.master.axis_J[mi, 2])), d.p_W[j1])
         c2 = add3(mv3(d.R_W[j2], m.slave.centre_J[sl]), d.p_W[j2])
-        n_c, phi, hit = penetration(c1, mv3(d.R_W[j1], m.master.normal_J[mi]), r1, c2,
+        n_c, phi, hit, side = penetration(c1, mv3(d.R_W[j1], m.master.normal_J[mi]), r1, c2,
                                     mv3(d.R_W[j2], m.slave.normal_J[sl]), r2)
         if not hit:
             continue
@@ -133,7 +133,7 @@ def pair_forces(m, d, h):
         v_B = _point_velocity(d.vo_W[j2], d.w_W[j2], d.p_W[j2], point)
         v_rel = ((slide[0] * rate + v_A[0]) - v_B[0], (slide[1] * rate + v_A[1]) - v_B[1],
                  (slide[2] * rate + v_A[2]) - v_B[2])
-        g = force_direction(c1, c2, n_c, phi, m.law.gradient)
+        g = force_direction(c1, c2, n_c, phi, m.law.gradient, side)
         # rate of delta = phi / 2, which is linear: the indentation of phi's rate -(v . g)
         delta_dot = indentation(-(v_rel[0] * g[0] + v_rel[1] * g[1] + v_rel[2] * g[2]))
         key = d.candidates.key[i]
