@@ -301,7 +301,8 @@ def results_command() -> None:
 
 def runs_command(keep_ensembles: bool = True) -> None:
     """The shipped configs' runs, the momentum checks and the single-run studies; the ensemble
-    studies' results and their entries in meta.json are kept as they are (keep_ensembles)."""
+    studies', the drive comparison's and the envelopes' results and their entries in meta.json
+    are kept as they are (keep_ensembles)."""
     import numba
     import pinocchio
 
@@ -314,9 +315,9 @@ def runs_command(keep_ensembles: bool = True) -> None:
     kept = []
     if keep_ensembles and (RESULTS / "meta.json").exists():
         outs = {str((RESULTS / kind / name).relative_to(ROOT)) for kind, name, _ in ENSEMBLE_STUDIES}
-        drives = str((RESULTS / "drives").relative_to(ROOT))
+        separate = tuple(str((RESULTS / kind).relative_to(ROOT)) + "/" for kind in ("drives", "envelope"))
         kept = [x for x in json.loads((RESULTS / "meta.json").read_text())["studies"]
-                if x.get("out") in outs or x.get("out", "").startswith(drives)]
+                if x.get("out") in outs or x.get("out", "").startswith(separate)]
     meta = {"spotsim_version": spotsim.__version__, "commit": commit,
             "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
             "machine": machine(), "python": platform.python_version(), "pinocchio": pinocchio.__version__,
