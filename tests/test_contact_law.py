@@ -93,16 +93,22 @@ def test_a_sphere_behind_entering_sideways_touches_only_when_the_spheres_overlap
     assert hit and side and phi == pytest.approx(SIDE_CAP * (1.5e-3 - np.hypot(1.4e-3, 0.1e-3)), abs=TOL)
 
 
+def tilted_faces(rng, spread):
+    """A random slave face normal about UP and a master face normal about its opposite, each
+    tilted by normal deviates of `spread` per component (unit 3-vectors)."""
+    n2 = UP + rng.normal(0, spread, 3)
+    n2 /= np.linalg.norm(n2)
+    n1 = -n2 + rng.normal(0, spread, 3)
+    return n1 / np.linalg.norm(n1), n2
+
+
 def test_the_side_cap_leaves_face_on_pairs_to_eq_8():
     """Pairs in contact whose centres lie at least (r1 + r2) / 2 apart along the common normal,
     on faces tilted up to ~30 degrees, have Eq. (8)'s penetration (to round-off, 1e-18 m)."""
     rng = np.random.default_rng(2)
     checked = 0
     for _ in range(5000):
-        n2 = UP + rng.normal(0, 0.3, 3)
-        n2 /= np.linalg.norm(n2)
-        n1 = -n2 + rng.normal(0, 0.3, 3)
-        n1 /= np.linalg.norm(n1)
+        n1, n2 = tilted_faces(rng, 0.3)
         c1 = rng.uniform(-1.5e-3, 1.5e-3, 3)
         n_c, phi, hit, side = penetration(c1, n1, R1, np.zeros(3), n2, R2)
         chi = float(np.dot(n_c, c1))
@@ -127,10 +133,7 @@ def test_the_penetration_is_continuous_with_slope_at_most_the_side_cap():
         return phi if hit else 0.0
 
     for _ in range(40_000):
-        n2 = UP + rng.normal(0, 0.5, 3)
-        n2 /= np.linalg.norm(n2)
-        n1 = -n2 + rng.normal(0, 0.5, 3)
-        n1 /= np.linalg.norm(n1)
+        n1, n2 = tilted_faces(rng, 0.5)
         c1 = rng.uniform(-1.8e-3, 1.8e-3, 3)
         dc = rng.normal(size=3)
         dc *= step / np.linalg.norm(dc)
