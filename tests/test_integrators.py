@@ -213,7 +213,6 @@ def test_adaptive_euler_rejected_try_leaves_no_trace(recorded_states, model_I):
     assert checked >= 3
 
 
-
 def test_switch_fraction_interpolates_each_bristles_slack(model_I):
     """A try's earliest bristle switch lies where its slack, linear between the memory and the
     try's end, crosses zero: a holding bristle (slack 3 um) that ends saturated (-1 um) at 3/4

@@ -35,12 +35,14 @@ def penetration(c1, n1, r1, c2, n2, r2):
         d0, d1, d2 = d0 / norm, d1 / norm, d2 / norm
     e0, e1, e2 = c1[0] - c2[0], c1[1] - c2[1], c1[2] - c2[2]
     chi = d0 * e0 + d1 * e1 + d2 * e2  # Eq. (9)
-    w = e0 * e0 + e1 * e1 + e2 * e2 - (r1 + r2) ** 2  # Eq. (10)
+    reach = r1 + r2
+    distance2 = e0 * e0 + e1 * e1 + e2 * e2
+    w = distance2 - reach ** 2  # Eq. (10)
     disc = chi * chi - w
     phi = -chi + math.sqrt(max(disc, 0.0))  # Eq. (8)
     side = False
-    if chi < (r1 + r2) / SIDE_CAP:
-        cap = SIDE_CAP * (r1 + r2 - math.sqrt(e0 * e0 + e1 * e1 + e2 * e2))
+    if chi < reach / SIDE_CAP:
+        cap = SIDE_CAP * (reach - math.sqrt(distance2))
         if cap < phi:
             phi, side = cap, True
     return (d0, d1, d2), phi, facing and disc >= 0.0 and phi > 0.0, side
