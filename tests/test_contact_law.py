@@ -118,7 +118,8 @@ def test_the_side_cap_leaves_face_on_pairs_to_eq_8():
         if not hit or chi < (R1 + R2) / SIDE_CAP:
             continue
         checked += 1
-        assert not side and phi == pytest.approx(-chi + np.sqrt(chi * chi - (c1 @ c1 - (R1 + R2) ** 2)), abs=PHI_ROUND_OFF_M)
+        eq_8 = -chi + np.sqrt(chi * chi - (c1 @ c1 - (R1 + R2) ** 2))
+        assert not side and phi == pytest.approx(eq_8, abs=PHI_ROUND_OFF_M)
     assert checked > 200
 
 
