@@ -162,6 +162,15 @@ def test_a_finished_sweep_started_again_runs_nothing(local):
     assert physics(again.table).equals(physics(local.table))
 
 
+def test_a_point_computed_by_other_code_is_not_reused(local, monkeypatch):
+    """A point's key covers spotsim's code: under other code (another fingerprint) none of the
+    finished points matches the spec's, so a resumed sweep runs them all again."""
+    done = sw.read_records(local.out / sw.POINTS_FILE)
+    assert {p.key for p in sw.resolve_points(CASE_I, sw.spec_of(VARY))} == set(done)
+    monkeypatch.setattr(sw, "code_fingerprint", lambda: "other code")
+    assert not {p.key for p in sw.resolve_points(CASE_I, sw.spec_of(VARY))} & set(done)
+
+
 def test_an_existing_scheduler_with_two_workers_gives_the_local_clusters_table(local, tmp_path):
     """A real `dask scheduler` and two `dask worker` processes on localhost."""
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}

@@ -14,8 +14,9 @@ The output directory holds:
 
 - `spec.yaml`: the resolved spec (the scenario file, the fixed overrides and every point);
 - `points.jsonl`: a line per finished point, appended and flushed when it ends. A point's key
-  is a hash of its resolved scenario: a sweep started again over the same directory runs only
-  the points without a line; a last line cut short by a kill is dropped when read, and a file
+  is a hash of its resolved scenario and of spotsim's code (`code_fingerprint`): a sweep
+  started again over the same directory runs only the points without a line, and every point
+  again once the code has changed; a last line cut short by a kill is dropped when read, and a file
   with any other line that is not a record is refused, left as it is;
 - `sweep.parquet` and `sweep.csv`: the table, a row per point in the spec's order, written to
   a temporary file and renamed over the last one when the sweep ends or stops.
@@ -33,6 +34,7 @@ existing scheduler's own setting rules there) and is then recorded as `worker di
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import itertools
 import json
@@ -201,7 +203,8 @@ class SweepSpec:
 @dataclass
 class Point:
     """One point of a sweep: its index in the spec, its values by key path, its key (a hash of
-    its resolved scenario) and the scenario, or the problems that made it invalid."""
+    its resolved scenario and the code, `scenario_key`) and the scenario, or the problems that
+    made it invalid."""
 
     index: int
     values: dict
@@ -210,9 +213,26 @@ class Point:
     problems: list = field(default_factory=list)
 
 
+@functools.cache
+def code_fingerprint() -> str:
+    """A hash of the code a point runs: spotsim's modules and the URDF/XACRO files it builds
+    its scenes from, by their paths and contents."""
+    from ..build.assets import URDF_DIR
+
+    package = Path(__file__).resolve().parents[1]
+    digest = hashlib.sha256()
+    for root, pattern in ((package, "*.py"), (URDF_DIR, "*.xacro"), (URDF_DIR, "*.urdf")):
+        for f in sorted(root.rglob(pattern)):
+            digest.update(f"{pattern}:{f.relative_to(root).as_posix()}\n".encode())
+            digest.update(f.read_bytes())
+    return digest.hexdigest()
+
+
 def scenario_key(scenario) -> str:
-    """A short hash of a resolved scenario: equal scenarios, equal keys."""
-    return hashlib.sha256(to_yaml(scenario).encode()).hexdigest()[:16]
+    """A short hash of a resolved scenario and of the code that runs it (`code_fingerprint`):
+    equal scenarios under equal code, equal keys; a point computed by other code is not
+    reused."""
+    return hashlib.sha256((code_fingerprint() + to_yaml(scenario)).encode()).hexdigest()[:16]
 
 
 def base_raw(config: Path, sets: list[str]) -> dict:
