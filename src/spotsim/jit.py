@@ -16,14 +16,19 @@ from pathlib import Path
 import numba
 
 
+def add_sources(digest, root: Path, paths) -> None:
+    """Add each of `paths` (files under `root`) to the hash `digest`: its path relative to
+    root, then its bytes."""
+    for path in paths:
+        digest.update(path.relative_to(root).as_posix().encode())
+        digest.update(path.read_bytes())
+
+
 def _cache_dir() -> str:
     package = Path(__file__).resolve().parent
     digest = hashlib.sha256()
-    for source in sorted(package.rglob("*.py")):
-        text = source.read_bytes()
-        if b"@njit" in text:  # kernels call only kernels, so these files are all they read
-            digest.update(source.relative_to(package).as_posix().encode())
-            digest.update(text)
+    # kernels call only kernels, so the files that define them are all they read
+    add_sources(digest, package, [f for f in sorted(package.rglob("*.py")) if b"@njit" in f.read_bytes()])
     base = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "spotsim" / "numba"
     return str(base / digest.hexdigest()[:16])
 

@@ -123,7 +123,7 @@ def pair_forces(m, d, h):
                                   m.master.centre_J[mi, 2] + shift * m.master.axis_J[mi, 2])), d.p_W[j1])
         c2 = add3(mv3(d.R_W[j2], m.slave.centre_J[sl]), d.p_W[j2])
         n_c, phi, hit, side = penetration(c1, mv3(d.R_W[j1], m.master.normal_J[mi]), r1, c2,
-                                    mv3(d.R_W[j2], m.slave.normal_J[sl]), r2)
+                                          mv3(d.R_W[j2], m.slave.normal_J[sl]), r2)
         if not hit:
             continue
         point = contact_point(c1, c2, r1, r2, n_c, phi)

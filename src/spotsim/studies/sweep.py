@@ -52,6 +52,7 @@ import yaml
 
 from ..errors import ScenarioError, SpotsimError
 from ..files import atomic_write
+from ..jit import add_sources
 from ..scenario import from_dict, modules_of, parse_yaml, read_yaml, set_value, to_dict, to_yaml
 from ..sim.run import WALL_LIMIT
 from .ensemble import Member, Start, grasp_prefix, member_row
@@ -221,10 +222,8 @@ def code_fingerprint() -> str:
 
     package = Path(__file__).resolve().parents[1]
     digest = hashlib.sha256()
-    for root, pattern in ((package, "*.py"), (URDF_DIR, "*.xacro"), (URDF_DIR, "*.urdf")):
-        for f in sorted(root.rglob(pattern)):
-            digest.update(f"{pattern}:{f.relative_to(root).as_posix()}\n".encode())
-            digest.update(f.read_bytes())
+    add_sources(digest, package, sorted(package.rglob("*.py")))
+    add_sources(digest, URDF_DIR, sorted([*URDF_DIR.rglob("*.xacro"), *URDF_DIR.rglob("*.urdf")]))
     return digest.hexdigest()
 
 
