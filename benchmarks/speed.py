@@ -71,7 +71,7 @@ def repeat_forces(m, d, h, n):
     """The contact stage n times on one state (the pair memory is not committed: each call
     sees the same state)."""
     for _ in range(n):
-        forces(m, d, h)
+        forces(m, d, h, False)
 
 
 def fastest(scenario, model, repeat: int) -> dict:

@@ -328,7 +328,7 @@ def settle_bristle(load, F_n=10.0, dt=1e-5, t_end=0.3, mass=0.01):
     """
     s, x_dot, state = (0.0, 0.0, 0.0), 0.0, None
     for _ in range(int(t_end / dt)):
-        s, F_f, state, _ = bristle(s, (x_dot, 0.0, 0.0), NORMAL, F_n, dt, BRISTLE)
+        s, F_f, state, _, _ = bristle(s, (x_dot, 0.0, 0.0), NORMAL, F_n, dt, BRISTLE, False)
         x_dot += dt * (load + F_f[0]) / mass
     return np.array(s), x_dot, state
 
@@ -350,8 +350,49 @@ def test_bristle_slides_at_kinetic_friction_above_static():
 def test_carried_deflection_turns_with_the_normal():
     """A deflection carried to a tilted contact stays in the new tangent plane, length kept."""
     tilted = np.array([np.sin(0.1), 0.0, np.cos(0.1)])
-    s, _, _, _ = bristle((1e-5, 0.0, 0.0), (0.0, 0.0, 0.0), tilted, 100.0, 1e-4, BRISTLE)
+    s, _, _, _, _ = bristle((1e-5, 0.0, 0.0), (0.0, 0.0, 0.0), tilted, 100.0, 1e-4, BRISTLE, False)
     assert abs(np.dot(s, tilted)) < 1e-18 and np.linalg.norm(s) == pytest.approx(1e-5, rel=1e-12)
+
+
+
+def jump_impulse(dF, dt, v=0.005, F_n=10.0, t_end=1e-4):
+    """The bristle's damping impulse (N s) over t_end after the normal force of a pair sliding
+    at v (m/s, saturated at mu_k F_n) jumps by dF, in steps of dt: the jump flagged in the
+    first step alone, as a controller tick flags it."""
+    s = (BRISTLE.mu_k * F_n / BRISTLE.k_b, 0.0, 0.0)  # saturated along the sliding
+    impulse = 0.0
+    for k in range(round(t_end / dt)):
+        s, F_f, _, _, _ = bristle(s, (v, 0.0, 0.0), NORMAL, F_n + dF, dt, BRISTLE, k == 0)
+        impulse += dt * (F_f[0] + BRISTLE.k_b * s[0])  # the damping's share of the force
+    return impulse
+
+
+def test_a_jump_of_the_normal_force_damps_by_its_closed_form_at_any_step():
+    """A jump dF of the normal force raises s_max by mu_k dF / k_b: the bristle holds while it
+    slides that far, damping -c_b v for tau = mu_k dF / (k_b v), an impulse of
+    -(c_b mu_k / k_b) dF whatever the speed. Steps longer than tau take it as the share of the
+    step held; steps far shorter resolve it (to within one step's c_b v dt)."""
+    dF, v = 0.01, 0.005
+    tau = BRISTLE.mu_k * dF / (BRISTLE.k_b * v)  # 17.3 us
+    closed = -BRISTLE.c_b * BRISTLE.mu_k * dF / BRISTLE.k_b
+    for dt in (1e-4, 5e-5, 2.5e-5):  # longer than tau: held for a share of the first step
+        assert dt > tau
+        assert jump_impulse(dF, dt, v) == pytest.approx(closed, rel=1e-9)
+    for dt in (1e-7, 1e-8):
+        assert abs(jump_impulse(dF, dt, v) - closed) <= BRISTLE.c_b * v * dt
+    assert jump_impulse(dF, 2e-5, v=2 * v) == pytest.approx(closed, rel=1e-9)
+
+
+def test_without_a_jump_a_saturated_bristle_does_not_damp():
+    """A normal force growing smoothly keeps a sliding bristle saturated as dt -> 0: no damping
+    (the reading of Eq. (14) for a saturated bristle), however the step is cut."""
+    v, rate = 0.005, 10.0  # N/s: mu_k rate / k_b = 8.7e-5 m/s, far below v
+    for dt in (1e-4, 1e-6):
+        s = (BRISTLE.mu_k * 10.0 / BRISTLE.k_b, 0.0, 0.0)
+        for k in range(round(1e-3 / dt)):
+            s, F_f, _, slack, held = bristle(s, (v, 0.0, 0.0), NORMAL, 10.0 + rate * (k + 1) * dt, dt, BRISTLE,
+                                             False)
+            assert slack <= 0.0 and held == 0.0 and F_f[0] == -BRISTLE.k_b * s[0]
 
 
 # Friction between mu_k F_n and mu_s F_n, where Eq. (16)'s switch of the cap decides.
@@ -376,7 +417,7 @@ def pulled_block(load, t_end, F_n=lambda t: PRESS, normal=lambda t: NORMAL, dt=B
     s, v = (0.0, 0.0, 0.0), np.zeros(3)
     for k in range(n_steps):
         n = normal(t[k])
-        s, F_f, state[k], _ = bristle(s, v, n, F_n(t[k]), dt, BRISTLE)
+        s, F_f, state[k], _, _ = bristle(s, v, n, F_n(t[k]), dt, BRISTLE, False)
         v = v + dt * (load(t[k]) + np.array(F_f)) / mass
         v -= np.dot(v, normal(t[k] + dt)) * normal(t[k] + dt)  # the plane holds the block in it
         S[k], V[k], F[k] = s, v, F_f

@@ -312,7 +312,7 @@ def pressed_block(load, seconds, dt=1e-4, mass=0.1, F_n=10.0):
     normal, s, x, v = np.array([0.0, 0.0, 1.0]), (0.0, 0.0, 0.0), 0.0, 0.0
     xs, vs = [], []
     for _ in range(round(seconds / dt)):
-        s, F_f, _, _ = bristle(s, (v, 0.0, 0.0), normal, F_n, dt, params)
+        s, F_f, _, _, _ = bristle(s, (v, 0.0, 0.0), normal, F_n, dt, params, False)
         v += dt * (load + F_f[0]) / mass
         x += dt * v
         xs.append(x)

@@ -28,7 +28,7 @@ def contacts_by(model, state, search):
     else:
         candidates = grid_search(model.sim, data, BroadPhase(model).near(data.q, data.opening))
     data.assign(candidates=candidates)
-    pair_forces(model.sim, data, 1e-4)
+    pair_forces(model.sim, data, 1e-4, False)
     return data
 
 

@@ -91,9 +91,11 @@ def _point_velocity(vo, w, o, point):
 
 
 @njit
-def pair_forces(m, d, h):
+def pair_forces(m, d, h, jump):
     """Stage: d.contacts, the normal (Eq. 11-13) and bristle friction (Eq. 14-17) force of each
-    candidate pair in contact, at d's kinematics, its bristles bent over h (s) from d.memory.
+    candidate pair in contact, at d's kinematics, its bristles bent over h (s) from d.memory;
+    `jump`: the finger rates changed since the memory's evaluation, and h is the step to come
+    (`friction.bristle`).
 
     One pass over the candidates, each pair's arithmetic in scalars. A pair in the memory
     keeps its onset indentation rate and bristle; a new one starts from its indentation rate
@@ -146,7 +148,7 @@ def pair_forces(m, d, h):
             v_minus = onset_rate(delta_dot, m.law.floor)
             s_prev = (0.0, 0.0, 0.0)
         F_n, dF_ddelta, dF_drate = normal_law(indentation(phi), delta_dot, v_minus, m.law.K, m.law.damping)
-        s, F_f, state, slack = bristle(s_prev, v_rel, n_c, F_n, h, m.law.bristle)
+        s, F_f, state, slack, held = bristle(s_prev, v_rel, n_c, F_n, h, m.law.bristle, jump)
         out_m[n], out_s[n], out_key[n] = mi, sl, key
         phi_out[n], v_minus_out[n], state_out[n], slack_out[n] = phi, v_minus, state, slack
         for a in range(3):
@@ -154,11 +156,12 @@ def pair_forces(m, d, h):
             force_out[n, a] = F_n * g[a] + F_f[a]  # Eq. (18): f_i = F_n,i + F_f,i
         speed_out[n] = math.sqrt(v_rel[0] ** 2 + v_rel[1] ** 2 + v_rel[2] ** 2)
         # the finger closing by dx along its axis indents the pair by (g . axis)^2 dx / 2 along
-        # g, and bends a holding bristle by the axis' share in the tangent plane of n_c
+        # g, and bends a holding bristle by the axis' share in the tangent plane of n_c (its damping
+        # over the share of the step it held)
         normal = 0.5 * (g[0] * slide[0] + g[1] * slide[1] + g[2] * slide[2]) ** 2
-        tangent = 1.0 - (n_c[0] * slide[0] + n_c[1] * slide[1] + n_c[2] * slide[2]) ** 2 if slack > 0.0 else 0.0
-        stiff_out[n] = normal * dF_ddelta + tangent * m.law.bristle.k_b
-        damp_out[n] = normal * dF_drate + tangent * m.law.bristle.c_b
+        tangent = 1.0 - (n_c[0] * slide[0] + n_c[1] * slide[1] + n_c[2] * slide[2]) ** 2
+        stiff_out[n] = normal * dF_ddelta + (tangent * m.law.bristle.k_b if slack > 0.0 else 0.0)
+        damp_out[n] = normal * dF_drate + tangent * held * m.law.bristle.c_b
         n += 1
     d.contacts = Contacts(out_m[:n], out_s[:n], out_key[:n], phi_out[:n], point_out[:n], c1_out[:n], c2_out[:n],
                           force_out[:n], speed_out[:n], state_out[:n], s_out[:n], v_minus_out[:n], slack_out[:n],

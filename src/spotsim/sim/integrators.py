@@ -125,7 +125,9 @@ def _euler_kind(m, d, rows, q, v, h, twist_of, origin_of, quat_of, set_state):
 def symplectic_euler(m, d, h):
     """Semi-implicit Euler, the paper's fixed-step explicit scheme: forces and accelerations
     at the step's start, velocities first, then positions with the new velocities."""
-    forces(m, d, h)
+    jump = not np.array_equal(d.fsal_rate, d.opening_rate)  # the drive has changed its rate
+    forces(m, d, h, jump)
+    d.fsal_rate[:] = d.opening_rate
     commit_memory(d)
     accelerations(m, d)
     _euler_bodies(m, d, d.q, d.v, h)
@@ -228,7 +230,9 @@ def adaptive_euler(m, d, h):
     the start (state, fingers, contacts) and tries SAFETY r^(-1/2) of h. The fingers move at
     the drive's rate through the step; a new rate (the drive's decision) re-evaluates the
     start for each try, the committed bristles bent over it (as symplectic Euler's start
-    bends them over its step), so that a rejected try leaves no trace. Its pairs are those
+    bends them over its step; a bristle that the new rate's jump of the normal force lets
+    hold damps for its share of the try, `friction.bristle`), so that a rejected try leaves
+    no trace. Its pairs are those
     the last evaluation found at the same poses (`contact_forces`).
 
     With its bristle switches located (the model's `locate_switches`), a try in which a
@@ -257,9 +261,9 @@ def adaptive_euler(m, d, h):
             if here:  # only the finger rates changed: the pairs found at this state stand
                 kinematics(m, d)
                 d.candidates = start[0]
-                contact_forces(m, d, h)
+                contact_forces(m, d, h, True)
             else:
-                forces(m, d, h)
+                forces(m, d, h, not np.array_equal(d.fsal_rate, d.opening_rate))
             accelerations(m, d)
             d.evaluations += 1
         if fresh or not rejected:
@@ -269,7 +273,7 @@ def adaptive_euler(m, d, h):
         _euler_bodies(m, d, d.q, d.v, h)
         for i in range(d.opening.shape[0]):
             d.opening[i] = opening0[i] + h * d.opening_rate[i]
-        forces(m, d, h)
+        forces(m, d, h, False)
         accelerations(m, d)
         d.evaluations += 1
         _centroid_accelerations(m, d, acc[1])
@@ -380,7 +384,7 @@ def _stage(m, d, y, dt, opening0, commit, external):
     unpack(m.bodies, y, d.q, d.v)
     for i in range(d.opening.shape[0]):
         d.opening[i] = opening0[i] + dt * d.opening_rate[i]
-    forces(m, d, dt)
+    forces(m, d, dt, False)
     if commit:
         commit_memory(d)
     accelerations(m, d)
