@@ -157,9 +157,9 @@ def pair_forces(m, d, h, jump):
         speed_out[n] = math.sqrt(v_rel[0] ** 2 + v_rel[1] ** 2 + v_rel[2] ** 2)
         # the finger closing by dx along its axis indents the pair by (g . axis)^2 dx / 2 along
         # g, and bends a holding bristle by the axis' share in the tangent plane of n_c (its damping
-        # over the share of the step it held)
+        # over the share of the step it held; a saturated one, which held none of it, not at all)
         normal = 0.5 * (g[0] * slide[0] + g[1] * slide[1] + g[2] * slide[2]) ** 2
-        tangent = 1.0 - (n_c[0] * slide[0] + n_c[1] * slide[1] + n_c[2] * slide[2]) ** 2
+        tangent = 1.0 - (n_c[0] * slide[0] + n_c[1] * slide[1] + n_c[2] * slide[2]) ** 2 if held > 0.0 else 0.0
         stiff_out[n] = normal * dF_ddelta + (tangent * m.law.bristle.k_b if slack > 0.0 else 0.0)
         damp_out[n] = normal * dF_drate + tangent * held * m.law.bristle.c_b
         n += 1

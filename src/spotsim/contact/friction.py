@@ -97,7 +97,7 @@ def _held(s, v_t, speed, s_max, dt):
     gap = s_max * s_max - (s[0] * s[0] + s[1] * s[1] + s[2] * s[2])
     if gap <= 0.0:
         return 0.0
-    if dt <= 0.0 or speed == 0.0:  # it cannot have saturated by bending
+    if dt <= 0.0 or speed == 0.0:  # unbent, it saturates only by round-off in |s|: as it was
         return 1.0
     av = s[0] * v_t[0] + s[1] * v_t[1] + s[2] * v_t[2]
     v2 = speed * speed

@@ -127,7 +127,7 @@ class DataFields(NamedTuple):
     h_next: float  # the step an adaptive integrator tries next, s (0: none yet)
     fsal: bool  # the last committed evaluation can be the next step's first stage
     fsal_t: float  # ... at this time,
-    fsal_rate: np.ndarray  # (n_f,) ... with these finger rates (every integrator's last evaluation's):
+    fsal_rate: np.ndarray  # (n_f,) ... with these finger rates (under every integrator, the last evaluation's):
     fsal_dy: np.ndarray  # (13 n_bodies,) its state derivative
     fsal_external: np.ndarray  # (6,) its external wrench (force, moment about the origin)
     # the record rows and replay snapshots of one call of the loop

@@ -121,12 +121,18 @@ def _euler_kind(m, d, rows, q, v, h, twist_of, origin_of, quat_of, set_state):
         set_state(m.bodies, b, q, v, p_G, v_G, quat, w)
 
 
+@njit_inline
+def rates_changed(d):
+    """Whether the finger rates differ from those of the last evaluation (d.fsal_rate): the
+    drive has decided a new rate since, and the pairs' normal forces may have jumped."""
+    return not np.array_equal(d.fsal_rate, d.opening_rate)
+
+
 @njit
 def symplectic_euler(m, d, h):
     """Semi-implicit Euler, the paper's fixed-step explicit scheme: forces and accelerations
     at the step's start, velocities first, then positions with the new velocities."""
-    jump = not np.array_equal(d.fsal_rate, d.opening_rate)  # the drive has changed its rate
-    forces(m, d, h, jump)
+    forces(m, d, h, rates_changed(d))
     d.fsal_rate[:] = d.opening_rate
     commit_memory(d)
     accelerations(m, d)
@@ -248,7 +254,8 @@ def adaptive_euler(m, d, h):
     # them. A new rate changes the pairs' normal damping at once, and a sliding pair's
     # bristle left at its old limit would hold, adding c_b v_t for a whole step.
     here = d.fsal and d.fsal_t == d.t  # the last evaluation was made at this state
-    fresh = not (here and np.array_equal(d.fsal_rate, d.opening_rate))
+    changed = rates_changed(d)
+    fresh = not here or changed
     n = m.bodies.joint.shape[0]
     acc = np.empty((2, n, 6))
     q0, v0, a0, opening0 = d.q.copy(), d.v.copy(), d.a.copy(), d.opening.copy()
@@ -261,9 +268,9 @@ def adaptive_euler(m, d, h):
             if here:  # only the finger rates changed: the pairs found at this state stand
                 kinematics(m, d)
                 d.candidates = start[0]
-                contact_forces(m, d, h, True)
+                contact_forces(m, d, h, changed)
             else:
-                forces(m, d, h, not np.array_equal(d.fsal_rate, d.opening_rate))
+                forces(m, d, h, changed)
             accelerations(m, d)
             d.evaluations += 1
         if fresh or not rejected:
@@ -427,7 +434,7 @@ def runge_kutta(m, d, h):
     y0 = pack(m.bodies, d.q, d.v)
     k = np.empty((s, y0.shape[0]))
     external = np.empty((s, 6))
-    if d.fsal and d.fsal_t == d.t and np.array_equal(d.fsal_rate, d.opening_rate):
+    if d.fsal and d.fsal_t == d.t and not rates_changed(d):
         k[0] = d.fsal_dy
         external[0] = d.fsal_external
     else:
