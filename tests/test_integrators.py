@@ -11,7 +11,9 @@ from spotsim.contact.friction import BristleParams, bristle
 from spotsim.contact.normal import hertz_stiffness, indentation, normal_force
 from spotsim.sim.bodies import bodies_momentum, centroid_acceleration, centroid_state, free_bodies, kinematics
 from spotsim.contact.forces import Memory, no_contacts
-from spotsim.sim.integrators import SWITCH_WINDOW, switch_fraction, tableau
+from spotsim.sim.dynamics import accelerations
+from spotsim.sim.forces import forces
+from spotsim.sim.integrators import SWITCH_WINDOW, _centroid_accelerations, euler_error, switch_fraction, tableau
 from spotsim.sim.run import Stepper
 from spotsim.sim.weld import world_momentum
 
@@ -370,3 +372,73 @@ def test_adaptive_euler_start_after_a_new_finger_rate_is_symplectic_eulers(recor
                 assert np.array_equal(a, b)
             checked += 1
     assert checked >= 10
+
+
+#: A step far longer than a bristle's hold after a new rate (microseconds): it holds for a
+#: share of the step alone.
+SHARE_STEP_S = 2e-5
+#: The tolerances either side of the try's estimated error without the share, relative: far
+#: tighter than the share's part in the estimate.
+ESTIMATE_BRACKET = 1e-6
+
+
+def test_adaptive_euler_judges_a_try_after_a_new_finger_rate_without_its_held_share(recorded_states, model_I):
+    """The damping that a new finger rate's jump of the normal force lets a saturated bristle
+    hold is a closed-form impulse over the try (`friction.bristle`), not a force the try
+    samples: its error estimate leaves it out. From a state in contact, with a new finger rate
+    that lets some bristle hold, adaptive_euler accepts the try at once at a velocity tolerance
+    just above the try's estimated error without the share, and rejects it just below, where
+    the share moves the estimate by far more than that. The step itself is symplectic Euler's
+    with the share (error control off, it is that step)."""
+    free = spotsim.build_model(spotsim.replace(model_I.scenario, simulation={"integrator": {
+        "method": "adaptive_euler", **NO_ERROR_CONTROL}}))
+    m, h = free.sim, SHARE_STEP_S
+    n = m.bodies.joint.shape[0]
+
+    def with_rate(state, scale):
+        data = state.copy()
+        data.opening_rate[:] = scale * state.view().opening_rate - (1.0 - scale) * EXTRA_CLOSING_M_S
+        return data
+
+    def start(data, jump):
+        """The free bodies' centroid accelerations at data's state, evaluated for a try of h,
+        and how many saturated bristles held a share of it."""
+        shared = forces(m, data, h, jump)
+        accelerations(m, data)
+        out = np.empty((n, 6))
+        _centroid_accelerations(m, data, out)
+        return out, shared
+
+    def first_try_accepted(state, scale, tol):
+        loose = m.integrator
+        m.assign(integrator=loose._replace(velocity_tol=tol))  # this test's own model
+        try:
+            data = with_rate(state, scale)
+            taken = Stepper(free, data).step(h)
+        finally:
+            m.assign(integrator=loose)
+        return taken == h and data.rejected == state.rejected
+
+    checked = 0
+    for state in recorded_states:
+        if state.view().drive_t - state.view().t <= h:
+            continue
+        for scale in RATE_SCALES:
+            stepper = Stepper(free, with_rate(state, scale))
+            assert stepper.step(h) == h
+            end = np.empty((n, 6))
+            _centroid_accelerations(m, stepper.data, end)
+            probe = with_rate(state, scale)
+            if stepper.broad is not None:
+                stepper.broad.refresh(probe)  # the pairs the step found
+            held, shared = start(probe, True)
+            plain, _ = start(probe, False)
+            # error ratios against the model's tolerance, which scales them
+            with_share, without = euler_error(m, held, end, h), euler_error(m, plain, end, h)
+            if shared == 0 or abs(with_share / without - 1.0) < 1e3 * ESTIMATE_BRACKET:
+                continue  # nothing held, or too little to tell the two estimates apart
+            estimate = m.integrator.velocity_tol * without
+            assert first_try_accepted(state, scale, estimate * (1.0 + ESTIMATE_BRACKET))
+            assert not first_try_accepted(state, scale, estimate * (1.0 - ESTIMATE_BRACKET))
+            checked += 1
+    assert checked >= 3

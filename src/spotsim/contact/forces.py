@@ -95,7 +95,8 @@ def pair_forces(m, d, h, jump):
     """Stage: d.contacts, the normal (Eq. 11-13) and bristle friction (Eq. 14-17) force of each
     candidate pair in contact, at d's kinematics, its bristles bent over h (s) from d.memory;
     `jump`: the finger rates changed since the memory's evaluation, and h is the step to come
-    (`friction.bristle`).
+    (`friction.bristle`). Returns how many saturated pairs held a share of the step (none
+    without a jump).
 
     One pass over the candidates, each pair's arithmetic in scalars. A pair in the memory
     keeps its onset indentation rate and bristle; a new one starts from its indentation rate
@@ -113,7 +114,7 @@ def pair_forces(m, d, h, jump):
     r1, r2 = m.law.r1, m.law.r2
     n_mem = d.memory.key.shape[0]
     pos = 0  # both key lists are sorted: the memory is merged, not searched
-    n = 0
+    n = shared = 0
     # fields are read where they are used: numba then takes no reference to them (a local
     # holding an array costs two atomic reference counts a call)
     for i in range(k):
@@ -162,7 +163,10 @@ def pair_forces(m, d, h, jump):
         tangent = 1.0 - (n_c[0] * slide[0] + n_c[1] * slide[1] + n_c[2] * slide[2]) ** 2 if held > 0.0 else 0.0
         stiff_out[n] = normal * dF_ddelta + (tangent * m.law.bristle.k_b if slack > 0.0 else 0.0)
         damp_out[n] = normal * dF_drate + tangent * held * m.law.bristle.c_b
+        if held > 0.0 and slack <= 0.0:
+            shared += 1
         n += 1
     d.contacts = Contacts(out_m[:n], out_s[:n], out_key[:n], phi_out[:n], point_out[:n], c1_out[:n], c2_out[:n],
                           force_out[:n], speed_out[:n], state_out[:n], s_out[:n], v_minus_out[:n], slack_out[:n],
                           stiff_out[:n], damp_out[:n])
+    return shared

@@ -20,16 +20,17 @@ def forces(m, d, h, jump):
     """The contact wrenches at d's state (q, v, the finger openings and rates), the bristles
     bent over h (s) from d.memory, which is left as it is. `jump`: the finger rates changed
     since the memory's evaluation (a controller tick), and h is the step to come
-    (`friction.bristle`)."""
+    (`friction.bristle`). Returns how many saturated pairs held a share of h (`pair_forces`)."""
     kinematics(m, d)  # Eq. (1): the bodies' poses and velocities
     find_pairs(m, d)  # Eq. (6)-(10): culled, or the paper's literal all-pairs search
-    contact_forces(m, d, h, jump)
+    return contact_forces(m, d, h, jump)
 
 
 @njit
 def contact_forces(m, d, h, jump):
     """`forces`' stages after the search: the wrenches of d.candidates at d's kinematics and
-    finger rates, the bristles bent over h (s) from d.memory (`forces`)."""
-    pair_forces(m, d, h, jump)  # Eq. (11)-(17), per pair
+    finger rates, the bristles bent over h (s) from d.memory (`forces`); returns `forces`'."""
+    shared = pair_forces(m, d, h, jump)  # Eq. (11)-(17), per pair
     body_wrenches(m, d)  # Eq. (18)-(21), one wrench per body
     contact_summary(m, d)  # the active module's wrench in O_a, the fastest and deepest pair
+    return shared

@@ -237,8 +237,8 @@ def adaptive_euler(m, d, h):
     the drive's rate through the step; a new rate (the drive's decision) re-evaluates the
     start for each try, the committed bristles bent over it (as symplectic Euler's start
     bends them over its step; a bristle that the new rate's jump of the normal force lets
-    hold damps for its share of the try, `friction.bristle`), so that a rejected try leaves
-    no trace. Its pairs are those
+    hold damps for its share of the try, `friction.bristle`: a closed-form impulse, which the
+    error estimate leaves out), so that a rejected try leaves no trace. Its pairs are those
     the last evaluation found at the same poses (`contact_forces`).
 
     With its bristle switches located (the model's `locate_switches`), a try in which a
@@ -268,13 +268,27 @@ def adaptive_euler(m, d, h):
             if here:  # only the finger rates changed: the pairs found at this state stand
                 kinematics(m, d)
                 d.candidates = start[0]
-                contact_forces(m, d, h, changed)
+                shared = contact_forces(m, d, h, changed)
             else:
-                forces(m, d, h, changed)
+                shared = forces(m, d, h, changed)
             accelerations(m, d)
             d.evaluations += 1
-        if fresh or not rejected:
             _centroid_accelerations(m, d, acc[0])
+            if shared:
+                # the damping that the new rate's jump lets a saturated bristle hold is its
+                # closed-form impulse over the try (`friction.bristle`), not a force the step
+                # samples: the step moves with it, and its error estimate compares the end
+                # with the start without it
+                with_share = (d.contacts, d.loads, d.summary, d.a.copy())
+                contact_forces(m, d, h, False)
+                accelerations(m, d)
+                d.evaluations += 1
+                _centroid_accelerations(m, d, acc[0])
+                d.contacts, d.loads, d.summary = with_share[:3]
+                d.a[:] = with_share[3]
+        elif not rejected:
+            _centroid_accelerations(m, d, acc[0])
+        if fresh or not rejected:
             external[:3] = d.loads.external_force_W
             external[3:] = d.loads.external_torque_O_W
         _euler_bodies(m, d, d.q, d.v, h)
