@@ -346,6 +346,14 @@ NO_ERROR_CONTROL = {"velocity_tol_m_s": 1e3, "onset_depth_m": 1.0}
 RATE_SCALES, EXTRA_CLOSING_M_S = (0.9, 0.5), 1e-3
 
 
+def with_new_rate(state, scale):
+    """A copy of the recorded state with a new finger rate (RATE_SCALES, EXTRA_CLOSING_M_S),
+    as the drive's decision would set it."""
+    data = state.copy()
+    data.opening_rate[:] = scale * state.view().opening_rate - (1.0 - scale) * EXTRA_CLOSING_M_S
+    return data
+
+
 def test_adaptive_euler_start_after_a_new_finger_rate_is_symplectic_eulers(recorded_states, model_I):
     """When the drive sets a new finger rate, adaptive_euler re-evaluates its start with the
     bristles bent over the coming step, as symplectic Euler evaluates every start: from a
@@ -362,9 +370,7 @@ def test_adaptive_euler_start_after_a_new_finger_rate_is_symplectic_eulers(recor
         for scale in RATE_SCALES:
             ends = []
             for model in models.values():
-                data = state.copy()
-                data.opening_rate[:] = scale * state.view().opening_rate - (1.0 - scale) * EXTRA_CLOSING_M_S
-                stepper = Stepper(model, data)
+                stepper = Stepper(model, with_new_rate(state, scale))
                 assert stepper.step(FIRST_STEP_S) == FIRST_STEP_S
                 v = stepper.data.view()
                 ends.append((v.q.copy(), v.v.copy(), v.opening.copy()))
@@ -380,6 +386,10 @@ SHARE_STEP_S = 2e-5
 #: The tolerances either side of the try's estimated error without the share, relative: far
 #: tighter than the share's part in the estimate.
 ESTIMATE_BRACKET = 1e-6
+#: A state is checked only where the share moves the estimate by this much, relative: a
+#: thousand brackets, so that tolerances a bracket either side of the estimate without the
+#: share tell it from the estimate with it.
+SHARE_PART_MIN = 1e3 * ESTIMATE_BRACKET
 
 
 def test_adaptive_euler_judges_a_try_after_a_new_finger_rate_without_its_held_share(recorded_states, model_I):
@@ -395,11 +405,6 @@ def test_adaptive_euler_judges_a_try_after_a_new_finger_rate_without_its_held_sh
     m, h = free.sim, SHARE_STEP_S
     n = m.bodies.joint.shape[0]
 
-    def with_rate(state, scale):
-        data = state.copy()
-        data.opening_rate[:] = scale * state.view().opening_rate - (1.0 - scale) * EXTRA_CLOSING_M_S
-        return data
-
     def start(data, jump):
         """The free bodies' centroid accelerations at data's state, evaluated for a try of h,
         and how many saturated bristles held a share of it."""
@@ -413,7 +418,7 @@ def test_adaptive_euler_judges_a_try_after_a_new_finger_rate_without_its_held_sh
         loose = m.integrator
         m.assign(integrator=loose._replace(velocity_tol=tol))  # this test's own model
         try:
-            data = with_rate(state, scale)
+            data = with_new_rate(state, scale)
             taken = Stepper(free, data).step(h)
         finally:
             m.assign(integrator=loose)
@@ -424,18 +429,18 @@ def test_adaptive_euler_judges_a_try_after_a_new_finger_rate_without_its_held_sh
         if state.view().drive_t - state.view().t <= h:
             continue
         for scale in RATE_SCALES:
-            stepper = Stepper(free, with_rate(state, scale))
+            stepper = Stepper(free, with_new_rate(state, scale))
             assert stepper.step(h) == h
             end = np.empty((n, 6))
             _centroid_accelerations(m, stepper.data, end)
-            probe = with_rate(state, scale)
+            probe = with_new_rate(state, scale)
             if stepper.broad is not None:
                 stepper.broad.refresh(probe)  # the pairs the step found
             held, shared = start(probe, True)
             plain, _ = start(probe, False)
             # error ratios against the model's tolerance, which scales them
             with_share, without = euler_error(m, held, end, h), euler_error(m, plain, end, h)
-            if shared == 0 or abs(with_share / without - 1.0) < 1e3 * ESTIMATE_BRACKET:
+            if shared == 0 or abs(with_share / without - 1.0) < SHARE_PART_MIN:
                 continue  # nothing held, or too little to tell the two estimates apart
             estimate = m.integrator.velocity_tol * without
             assert first_try_accepted(state, scale, estimate * (1.0 + ESTIMATE_BRACKET))
