@@ -316,6 +316,28 @@ def test_a_median_difference_carries_the_sampling_error_of_two_medians():
     assert c["peak_force_median_rel_error"] > 0.0 and c["residual_median_rel_error"] == 0.0
 
 
+def test_the_deterministic_target_is_judged_member_by_member():
+    """Members 1 % above their own reference members, whose forces spread over 50-85 N: the
+    member-by-member difference is exactly 1 % with no sampling error, and meets the 2 %
+    target, where the difference of the medians is as large but its error, from the spread
+    across starts, is not below it. Pairs go by member index, not by row order. The same values
+    decorrelated (each member against another start's reference) give a member-by-member error
+    of the spread's size, not a false precision."""
+    from spotsim.studies import accuracy_ensemble as ae
+
+    ref = [member(i, 0.1, 50.0 + 5.0 * i) for i in range(8)]
+    rows = [member(i, 0.1, 1.01 * (50.0 + 5.0 * i)) for i in reversed(range(8))]
+    c = ae.compare(rows, ref, 1, dual=False)
+    assert c["peak_force_paired_rel"] == pytest.approx(0.01) and c["peak_force_paired_rel_error"] == pytest.approx(0.0)
+    assert c["peak_force_paired_p90_abs"] == pytest.approx(0.01)
+    assert c["peak_force_median_rel"] == pytest.approx(0.01) and c["peak_force_median_rel_error"] > 0.01
+    assert c["max_deterministic_rel"] == pytest.approx(0.01) and c["deterministic_ok"] and c["meets_targets"]
+    shuffled = [member(i, 0.1, 1.01 * (50.0 + 5.0 * (7 - i))) for i in range(8)]
+    d = ae.compare(shuffled, ref, 1, dual=False)
+    assert d["peak_force_median_rel"] == pytest.approx(0.01)
+    assert d["peak_force_paired_rel_error"] > 0.05 and d["peak_force_paired_p90_abs"] > 0.3
+
+
 def test_a_smaller_ensemble_is_compared_with_the_same_members_of_the_reference():
     """A confirmation of k members is compared with the reference's first k members only."""
     from spotsim.studies import accuracy_ensemble as ae
