@@ -1,0 +1,182 @@
+"""Where a default run's time goes: its steps over time, and one step's stages at a clamp.
+
+    python benchmarks/profile.py [--case dual] [--chunk 0.25] [--repeat 5]
+
+1. The default run's wall time, the fastest of REPEAT runs, and the run in chunks of CHUNK
+   simulated seconds: for each, the accepted steps and force evaluations (from runs of the
+   same scenario ended at the chunk's end: a run is deterministic, so these are exact), the
+   mean number of pairs in contact, and the drive controller's ticks in it (its simulated
+   time over the controller's period). While the fingers touch, an adaptive step ends at
+   every tick (the drive may set a new speed there), so the ticks are the fewest steps a
+   chunk in contact can take.
+2. One step at a clamp (the first grasp, CLAMP_BEFORE before it completes; reached by steps
+   of one controller period, `Stepper`): the whole default step, with its force
+   evaluations, and the stages of one evaluation, each timed in a compiled loop on a copy of
+   that state.
+3. The bound these set: at one step per tick, a chunk in which the fingers clamp runs at most
+   (controller period) / (step at the clamp) times faster than real time.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+from numba import njit
+
+import spotsim
+from speed import CASES, ROOT, measured_at, repeat_forces
+from spotsim.contact.search import find_pairs
+from spotsim.contact.forces import pair_forces
+from spotsim.contact.wrenches import body_wrenches, contact_summary
+from spotsim.sim.dynamics import accelerations
+from spotsim.sim.run import Stepper
+from spotsim.sim.step import step
+
+#: The clamp whose step is timed: this long before the first grasp completes, s.
+CLAMP_BEFORE = 0.1
+#: Calls of each stage per timing, and timings (the fastest is kept). Whole steps move the
+#: state on: STEP_CALLS of one controller period stay well within CLAMP_BEFORE.
+CALLS, STEP_CALLS, TIMINGS = 2000, 200, 5
+
+
+@njit
+def repeat_search(m, d, n):
+    for _ in range(n):
+        find_pairs(m, d)
+
+
+@njit
+def repeat_pair_forces(m, d, h, n):
+    for _ in range(n):
+        pair_forces(m, d, h, False)
+
+
+@njit
+def repeat_wrenches(m, d, n):
+    for _ in range(n):
+        body_wrenches(m, d)
+        contact_summary(m, d)
+
+
+@njit
+def repeat_accelerations(m, d, n):
+    for _ in range(n):
+        accelerations(m, d)
+
+
+@njit
+def repeat_steps(m, d, h, n):
+    """n whole steps of at most h (s) from d's state (d moves on)."""
+    for _ in range(n):
+        step(m, d, h)
+
+
+def evaluations_per_step(m, data, h) -> float:
+    """The force evaluations of a whole step of at most h (s) at data's state, on average over
+    STEP_CALLS steps of a copy."""
+    d = data.copy()
+    before = d.evaluations
+    repeat_steps(m, d, h, STEP_CALLS)
+    return (d.evaluations - before) / STEP_CALLS
+
+
+def fastest_us(call, data, calls: int = CALLS) -> float:
+    """The fastest of TIMINGS timings of `call(copy of data, calls)`, µs per call."""
+    best = np.inf
+    for _ in range(TIMINGS):
+        d = data.copy()
+        call(d, 1)  # compiled, and the copy warm
+        t0 = time.perf_counter()
+        call(d, calls)
+        best = min(best, (time.perf_counter() - t0) / calls)
+    return best * 1e6
+
+
+def chunks(scenario, end: float, chunk: float) -> list[dict]:
+    """The run's accepted steps and force evaluations up to each chunk's end (cumulative)."""
+    out = []
+    for t in list(np.arange(chunk, end, chunk)) + [end]:
+        summary = spotsim.simulate(spotsim.replace(scenario, simulation={"duration_s": float(t)})).summary
+        out.append({"t": float(t), "steps": summary["integrator"]["accepted_steps"],
+                    "evaluations": summary["integrator"]["force_evaluations"]})
+    return out
+
+
+def chunk_row(label: str, grasp, mean_pairs: str, a: dict, b: dict, period: float) -> str:
+    """The table row of the run between the cumulative counts a and b."""
+    steps, evaluations = b["steps"] - a["steps"], b["evaluations"] - a["evaluations"]
+    ticks = (b["t"] - a["t"]) / period
+    return (f"| {label} | {grasp} | {mean_pairs} | {steps} | {evaluations} | {ticks:.0f} | {steps / ticks:.2f} | "
+            f"{evaluations / max(steps, 1):.2f} |")
+
+
+def clamp_state(scenario, t: float):
+    """The model and data of the scenario stepped to t (s) by steps of one controller period."""
+    model = spotsim.build_model(scenario)
+    stepper = Stepper(model)
+    h = scenario.end_effector.control_period_s
+    while stepper.data.t < t:
+        stepper.step(h)
+    return model, stepper.data
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--case", default="dual", choices=list(CASES))
+    ap.add_argument("--chunk", type=float, default=0.25, help="simulated seconds per chunk")
+    ap.add_argument("--repeat", type=int, default=5, help="whole runs timed (the fastest is kept)")
+    args = ap.parse_args()
+    scenario = spotsim.load_scenario(ROOT / "config" / CASES[args.case])
+    period = scenario.end_effector.control_period_s
+    model = spotsim.build_model(scenario)
+    full = spotsim.simulate(scenario, model=model)  # every kernel loaded from numba's cache
+    wall = min(spotsim.simulate(scenario, model=model).summary["wall_time_s"] for _ in range(args.repeat))
+    end = full.summary["sim_time_s"]
+    series = full.timeseries
+    t, pairs = series["t"], series["pairs_slipping"] + series["pairs_sticking"]
+    print(f"Measured by `python benchmarks/profile.py --case {args.case}` at {measured_at()}: the default run in "
+          f"chunks of {args.chunk:g} s simulated, and one default step at a clamp")
+    print(f"\nThe run: {end:.3f} s simulated in {wall:.3f} s (the fastest of {args.repeat}), {end / wall:.2f} times "
+          f"faster than real time; the controller's period {period * 1e3:g} ms:\n")
+    print("| chunk (s) | grasp | mean pairs in contact | accepted steps | force evaluations | controller ticks | "
+          "steps per tick | evaluations per step |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- |")
+    rows = chunks(scenario, end, args.chunk)
+    start = {"t": 0.0, "steps": 0, "evaluations": 0}
+    for a, b in zip([start] + rows[:-1], rows, strict=True):
+        inside = (t > a["t"]) & (t <= b["t"] + 1e-12)
+        print(chunk_row(f"{a['t']:.2f}-{b['t']:.2f}", int(series["grasp"][inside][-1]) + 1,
+                        f"{pairs[inside].mean():.1f}", a, b, period))
+    print(chunk_row("all", "", "", start, rows[-1], period))
+
+    grasp = full.summary["grasps"][0]
+    at = grasp["completed_s"] - CLAMP_BEFORE
+    model, data = clamp_state(scenario, at)
+    m, h = model.sim, period
+    n_pairs = len(data.contacts.key)
+    per_step = evaluations_per_step(m, data, h)
+    timed = {
+        f"whole step ({per_step:.2f} force evaluations, the drive, grasp phase, bookkeeping)": fastest_us(
+            lambda d, n: repeat_steps(m, d, h, n), data, STEP_CALLS),
+        "force evaluation (kinematics, pairs, pair forces, wrenches)": fastest_us(
+            lambda d, n: repeat_forces(m, d, h, n), data),
+        "  sphere pairs (culled search)": fastest_us(lambda d, n: repeat_search(m, d, n), data),
+        "  pair forces": fastest_us(lambda d, n: repeat_pair_forces(m, d, h, n), data),
+        "  wrenches and summary": fastest_us(lambda d, n: repeat_wrenches(m, d, n), data),
+        "accelerations (free-body dynamics)": fastest_us(lambda d, n: repeat_accelerations(m, d, n), data),
+    }
+    whole = next(iter(timed.values()))
+    print(f"\nOne step at the clamp (grasp 1, {at:.3f} s, {n_pairs} pairs in contact), each stage timed "
+          f"{CALLS} times ({STEP_CALLS} whole steps) on a copy of the state, the fastest of {TIMINGS}:\n")
+    print("| stage | µs per call | share of the step |")
+    print("| --- | --- | --- |")
+    for name, us in timed.items():
+        print(f"| {name} | {us:.2f} | {100 * us / whole:.0f} % |")
+    print(f"\nAt one step per controller tick, a clamp runs at most {period * 1e6 / whole:.1f} times faster than real "
+          f"time ({period * 1e6:g} µs simulated per {whole:.2f} µs step).")
+
+
+if __name__ == "__main__":
+    main()
