@@ -22,13 +22,12 @@ of these errors is not resolved by N members.
 A setting meets the targets when every deterministic quantity's member-by-member median
 difference is within DETERMINISTIC_REL, and every grasp's residual has a KS p-value above
 KS_ALPHA and a median within RESIDUAL_MEDIAN_REL of the reference's. Both differences of a
-deterministic quantity measure how far its distribution has moved. A peak force is reached in
-the first impacts, before the bounces decorrelate the members, so a member and its reference
-stay correlated (r = 0.6-0.99 on the shipped cases), and the median of their own differences
-resolves a shift that the difference of two medians cannot: Case I's force spans 58-85 N
-(p10-p90) across starts, which gives that difference a sampling error of ~5 % at 32 members,
-against ~0.4 % member by member. Its bootstrap resamples whole pairs, so where the members do
-decorrelate its error grows with their spread and claims no precision the pairs lack.
+deterministic quantity measure how far its distribution has moved. A peak is reached in the
+first impacts, before the bounces decorrelate the members, so a member and its reference stay
+correlated, and the median of their own differences resolves a shift that the difference of
+two medians of a wide spread across starts cannot. Its bootstrap resamples whole pairs, so
+where the members do decorrelate its error grows with their spread and claims no precision
+the pairs lack.
 """
 
 from __future__ import annotations
@@ -57,9 +56,9 @@ from .ensemble import (
 )
 from .runs import RowWriter, markdown_table, percent, sig, warm_up
 
-#: Targets of a setting against the reference (issue 14): the near-deterministic quantities'
-#: medians within 2 %; the residual offset's distribution not told apart from the reference's
-#: by a KS test at 5 %, and its median within 5 %.
+#: Targets of a setting against the reference (issue 14): the near-deterministic quantities
+#: within 2 %, member by member (`paired_rel`); the residual offset's distribution not told
+#: apart from the reference's by a KS test at 5 %, and its median within 5 %.
 DETERMINISTIC_REL = 0.02
 KS_ALPHA = 0.05
 RESIDUAL_MEDIAN_REL = 0.05
