@@ -27,8 +27,8 @@ from numba import njit
 
 import spotsim
 from speed import CASES, ROOT, measured_at, repeat_forces
-from spotsim.contact.search import find_pairs
 from spotsim.contact.forces import pair_forces
+from spotsim.contact.search import find_pairs
 from spotsim.contact.wrenches import body_wrenches, contact_summary
 from spotsim.sim.dynamics import accelerations
 from spotsim.sim.run import Stepper
