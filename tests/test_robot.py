@@ -2,6 +2,8 @@
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from spotsim.build import assets
 from spotsim.build.robot import DUAL_ARM_XACRO, TABLE5, TABLE6, fit_base, locked_robot
@@ -41,3 +43,22 @@ def test_table_6_angles_are_within_the_ur3_limits():
     for angles in TABLE6.values():
         q = np.array(angles)
         assert np.all(q >= m.lowerPositionLimit) and np.all(q <= m.upperPositionLimit)
+
+
+@settings(max_examples=200, deadline=None)
+@given(offset=st.tuples(*[st.floats(-2.0, 2.0)] * 3),
+       angles=st.tuples(*[st.floats(-np.pi, np.pi)] * 3))
+def test_no_placement_of_tm1_gives_table_5_body_4_as_principal_moments(offset, angles):
+    """Rigidly joined anywhere, in any orientation, FDR (body 3) and TM-1 (body 1) have, about
+    the line through their centroids, only their own moments: the parallel-axis term adds none
+    about it. So the composite's smallest principal moment is at most body 3's largest plus
+    body 1's largest (4.094 kg m^2), below every moment Table 5 gives body 4 (8.039 least)."""
+    import pinocchio as pin
+
+    body3 = pin.Inertia(TABLE5[3].mass, np.zeros(3), np.diag(TABLE5[3].inertia))
+    R = pin.rpy.rpyToMatrix(*angles)
+    body1 = pin.Inertia(TABLE5[1].mass, np.array(offset), R @ np.diag(TABLE5[1].inertia) @ R.T)
+    both = body3 + body1
+    bound = max(TABLE5[3].inertia) + max(TABLE5[1].inertia)
+    assert np.linalg.eigvalsh(both.inertia).min() <= bound * (1 + 1e-12)
+    assert bound < min(TABLE5[4].inertia)
