@@ -24,6 +24,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from speed import measured_at
 from spotsim.studies import sweep as sw
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -57,6 +58,7 @@ def main() -> None:
     args = ap.parse_args()
     estimate = not args.no_error_estimate
     cores = os.cpu_count() or 1
+    print(f"Measured by `python benchmarks/sweep.py` at {measured_at()}")
 
     report, wall = timed(grid(args.points), cores, estimate)
     t = report.table
