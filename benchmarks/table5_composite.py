@@ -15,8 +15,8 @@ change (the smallest sum of squared moves).
 
 The parts' mass properties come from the shipped XACRO at Table 6's angles (base massless):
 arm 1 and its end-effector, arm 2 and its end-effector, TM-1 welded to EE-1. The UR3 base links,
-which Pinocchio merges into the base's body, are 2 kg each at their mount, with the UR3 URDF's
-base-link inertia; the parts reproduce the shipped composite's moments (the first line).
+which Pinocchio merges into the base's body, are taken from the UR3 URDF and placed at their
+mounts; the parts reproduce the shipped composite's moments (the first line).
 """
 
 from __future__ import annotations
@@ -29,20 +29,32 @@ from scipy.optimize import minimize
 
 from speed import measured_at
 from spotsim.build import assets
-from spotsim.build.robot import ARM, ARM_JOINTS, DUAL_ARM_XACRO, TABLE5, TABLE6, locked_robot
+from spotsim.build.robot import (
+    ARM,
+    DUAL_ARM_XACRO,
+    MASSLESS_BASE,
+    TABLE5,
+    TABLE6,
+    arms_at,
+    locked_robot,
+    parallel_axis,
+)
 
-#: The UR3 base link (URDF): mass (kg) and inertia about its centroid at the mount (kg m^2).
-BASE_LINK = (2.0, np.diag([0.0030531654454, 0.0030531654454, 0.005625]))
-#: The shipped mounts (XACRO defaults), m.
-MOUNTS = {"arm1_": np.array([0.1, 0.18, 0.2]), "arm2_": np.array([0.1, -0.18, 0.2])}
-MASSLESS_BASE = {"base_mass_kg": 1e-9, "base_ixx": 1e-12, "base_iyy": 1e-12, "base_izz": 1e-12,
-                 "base_ixy": 0, "base_ixz": 0, "base_iyz": 0}
 WELDED = {"tm1_joint_type": "fixed", "tm1_parent": "ee1_grasp"}
 
 
-def shift(m, d):
-    """The parallel-axis term of a mass m offset by d."""
-    return m * (d @ d * np.eye(3) - np.outer(d, d))
+def base_link() -> tuple[float, np.ndarray]:
+    """The UR3's base link, fixed to its mount: mass (kg) and inertia about its centroid, which
+    is its frame's origin (kg m^2), from the arm's URDF (Pinocchio puts it on the universe)."""
+    Y = pin.buildModelFromUrdf(str(assets.example_robot_data_dir() / assets.ARM_URDFS[ARM])).inertias[0]
+    assert np.allclose(Y.lever, 0.0)
+    return Y.mass, Y.inertia.copy()
+
+
+def mounts() -> dict[str, np.ndarray]:
+    """The shipped arm mounts (the XACRO's defaults), m, by arm prefix."""
+    defaults = assets.xacro_arg_defaults(DUAL_ARM_XACRO)
+    return {p: 1e-3 * np.array([float(x) for x in defaults[f"{p}mount_mm"].split()]) for p in TABLE6}
 
 
 def arm_parts(args: dict) -> dict[str, tuple[float, np.ndarray, np.ndarray]]:
@@ -50,12 +62,7 @@ def arm_parts(args: dict) -> dict[str, tuple[float, np.ndarray, np.ndarray]]:
     (without its base link), at Table 6's angles."""
     model = pin.buildModelFromXML(assets.compile_xacro(DUAL_ARM_XACRO, {**MASSLESS_BASE, **args}))
     data = model.createData()
-    q = pin.neutral(model)
-    for prefix, values in TABLE6.items():
-        for name, value in zip(ARM_JOINTS, values, strict=True):
-            j = model.getJointId(prefix + name)
-            q[model.idx_qs[j]] = value
-    pin.forwardKinematics(model, data, q)
+    pin.forwardKinematics(model, data, arms_at(model))
     to_base = data.oMi[model.getJointId("fdr_free_flyer")].inverse()
     parts = {}
     for k, side in ((1, "arm1_"), (2, "arm2_")):
@@ -73,7 +80,7 @@ def tm1_part() -> tuple[float, np.ndarray, np.ndarray]:
     mf, cf, If = arm_parts({})["arm1_"]
     m = mw - mf
     c = (mw * cw - mf * cf) / m
-    return m, c, Iw + shift(mw, cw - c) - If - shift(mf, cf - c)
+    return m, c, Iw + parallel_axis(mw, cw - c) - If - parallel_axis(mf, cf - c)
 
 
 class Geometry:
@@ -82,6 +89,8 @@ class Geometry:
     def __init__(self):
         self.arms = arm_parts({})
         self.tm1 = tm1_part()
+        self.mounts = mounts()
+        self.base_link = base_link()
         self.T3 = np.diag(TABLE5[3].inertia)
         self.T4 = np.array(TABLE5[4].inertia)
 
@@ -91,15 +100,15 @@ class Geometry:
         parts = []
         for side, (m, c, I) in self.arms.items():
             parts.append((m, c + d[side], I))
-            parts.append((BASE_LINK[0], MOUNTS[side] + d[side], BASE_LINK[1]))
+            parts.append((self.base_link[0], self.mounts[side] + d[side], self.base_link[1]))
         M3 = TABLE5[3].mass
         m_b = M3 - sum(p[0] for p in parts)
         c3 = (m_b * c_b + sum(p[0] * p[1] for p in parts)) / M3
-        I_b = self.T3 - sum(p[2] + shift(p[0], p[1] - c3) for p in parts) - shift(m_b, c_b - c3)
+        I_b = self.T3 - sum(p[2] + parallel_axis(p[0], p[1] - c3) for p in parts) - parallel_axis(m_b, c_b - c3)
         m1, c1, I1 = self.tm1
         c1 = c1 + d["arm1_"] + move
         c4 = (M3 * c3 + m1 * c1) / (M3 + m1)
-        I4 = self.T3 + shift(M3, c3 - c4) + I1 + shift(m1, c1 - c4)
+        I4 = self.T3 + parallel_axis(M3, c3 - c4) + I1 + parallel_axis(m1, c1 - c4)
         return np.diag(I4) / self.T4 - 1, np.linalg.eigvalsh(I_b), float(np.linalg.norm(c1 - c3))
 
 

@@ -19,6 +19,11 @@ FINGERS = ("ee1_finger_upper", "ee1_finger_lower", "ee2_finger_upper", "ee2_fing
 TABLE6 = {"arm1_": TABLE6_ARM1, "arm2_": TABLE6_ARM2}
 
 
+#: XACRO arguments that leave the base (nearly) massless: the robot's other parts alone.
+MASSLESS_BASE = {"base_mass_kg": 1e-9, "base_ixx": 1e-12, "base_iyy": 1e-12, "base_izz": 1e-12,
+                 "base_ixy": 0, "base_ixz": 0, "base_iyz": 0}
+
+
 @dataclass(frozen=True)
 class Body:
     """Mass (kg) and principal moments of inertia about the centroid (kg m^2), Table 5."""
@@ -35,16 +40,25 @@ def locked_robot(urdf: str, angles=TABLE6) -> tuple[pin.Model, int]:
     """The scene with both arms locked at `angles` and the fingers at opening 0, and the
     FDR's free-flyer joint, whose body is then the whole robot."""
     full = pin.buildModelFromXML(urdf)
-    q = pin.neutral(full)
-    lock = []
+    lock = [full.getJointId(prefix + name) for prefix in angles for name in ARM_JOINTS]
+    lock += [full.getJointId(name) for name in FINGERS]
+    model = pin.buildReducedModel(full, lock, arms_at(full, angles))
+    return model, model.getJointId("fdr_free_flyer")
+
+
+def arms_at(model: pin.Model, angles=TABLE6) -> np.ndarray:
+    """The scene's neutral configuration with the arms' joints at `angles` ({prefix: six
+    angles}, rad)."""
+    q = pin.neutral(model)
     for prefix, values in angles.items():
         for name, value in zip(ARM_JOINTS, values, strict=True):
-            j = full.getJointId(prefix + name)
-            q[full.idx_qs[j]] = value
-            lock.append(j)
-    lock += [full.getJointId(name) for name in FINGERS]
-    model = pin.buildReducedModel(full, lock, q)
-    return model, model.getJointId("fdr_free_flyer")
+            q[model.idx_qs[model.getJointId(prefix + name)]] = value
+    return q
+
+
+def parallel_axis(m: float, d: np.ndarray) -> np.ndarray:
+    """The inertia (3, 3) a mass m adds about a point at d from it: m (|d|^2 1 - d d^T)."""
+    return m * (d @ d * np.eye(3) - np.outer(d, d))
 
 
 def composite(inertia: pin.Inertia) -> tuple[float, np.ndarray, np.ndarray]:
@@ -61,18 +75,14 @@ def fit_base(args: dict | None = None) -> dict[str, float]:
     """
     for prefix in TABLE6:
         assets.prefixed_arm(ARM, prefix)
-    probe = {**(args or {}), "base_mass_kg": 1e-9, "base_ixx": 1e-12, "base_iyy": 1e-12,
-             "base_izz": 1e-12, "base_ixy": 0, "base_ixz": 0, "base_iyz": 0}
+    probe = {**(args or {}), **MASSLESS_BASE}
     model, j = locked_robot(assets.compile_xacro(DUAL_ARM_XACRO, probe))
     m_r, c_r, I_r = composite(model.inertias[j])
     target = TABLE5[3]
     m_b = target.mass - m_r
     c = m_r * c_r / target.mass  # the robot's centroid, with the base's at the origin
 
-    def shift(m, d):
-        return m * (d @ d * np.eye(3) - np.outer(d, d))
-
-    I_b = np.diag(target.inertia) - I_r - shift(m_r, c_r - c) - shift(m_b, -c)
+    I_b = np.diag(target.inertia) - I_r - parallel_axis(m_r, c_r - c) - parallel_axis(m_b, -c)
     eig = np.linalg.eigvalsh(I_b)
     if m_b <= 0 or eig.min() <= 0 or 2 * eig.max() > eig.sum():
         raise ValueError(f"no physical base gives Table 5 body 3: base mass {m_b:.3f} kg, "
