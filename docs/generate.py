@@ -1,7 +1,9 @@
 """The generated parts of spotsim's documentation.
 
     python docs/generate.py results   # rerun what the tables need: writes docs/results/
-    python docs/generate.py ensembles # rerun only the ensemble accuracy studies (~22 min)
+    python docs/generate.py ensembles # rerun only the ensemble accuracy studies (~25 min), then spreads
+    python docs/generate.py spreads   # the studied configs' typical spreads over starts, from those
+                                      # studies (package data: src/spotsim/studies/typical_spread.json)
     python docs/generate.py drives    # rerun only the drive comparison's ensembles (~10 min)
     python docs/generate.py envelope  # rerun only Case I's capture envelopes (about a minute)
     python docs/generate.py runs      # rerun all but the ensemble studies (~2 min)
@@ -60,8 +62,9 @@ STUDIES = [
                                          "--reference", "symplectic_euler:80", "--no-plot"]),
     ("stability", "single_arm_case_I", ["config/single_arm_case_I.yaml"]),
 ] + [
-    # each run's error estimate against the converged reference, 8 seeded starts per case
-    ("estimate", name, [f"config/{name}.yaml", "--members", "8"])
+    # each run's error estimate and bound against the converged reference, 8 perturbed starts per
+    # case, seed 1: other starts than the ensemble studies' (seed 0), whose spreads the bound uses
+    ("estimate", name, [f"config/{name}.yaml", "--members", "8", "--seed", "1"])
     for name in ("single_arm_case_I", "single_arm_case_II", "single_arm_case_III", "dual_arm_sequential")
 ]
 #: The ensemble accuracy studies: 32 members (seed 0) per setting, 2 workers, against symplectic
@@ -292,10 +295,12 @@ def extras(results: dict) -> dict:
 
 
 def results_command() -> None:
-    """Everything the pages need: the runs and single-run studies, then the ensemble studies
-    and the drive comparison."""
+    """Everything the pages need: the runs and single-run studies, the ensemble studies and their
+    spreads, the runs and single-run studies again (the error-estimate studies' bounds use those
+    spreads), and the drive comparison."""
     runs_command(keep_ensembles=False)
     ensembles_command()
+    runs_command()
     drives_command()
 
 
@@ -344,7 +349,43 @@ def ensembles_command() -> None:
     outs = {d["out"] for d in done}
     meta["studies"] = [s for s in meta["studies"] if s.get("out") not in outs] + done
     write_json(RESULTS / "meta.json", meta)
+    spreads_command()
     print(f"results in {RESULTS.relative_to(ROOT)}; now run `{GENERATE} pages`")
+
+
+#: The studied configs' typical spreads over starts: package data that a run's error estimate reads
+#: (`spotsim.studies.estimate.typical_spread`).
+SPREADS = ROOT / "src" / "spotsim" / "studies" / "typical_spread.json"
+
+
+def spreads_command() -> None:
+    """Each ensemble-studied config's typical spread over starts (`studies.estimate.study_spread`),
+    from its ensemble accuracy study in docs/results/: the members at the config's own setting
+    and at the reference, pooled; keyed by the config's `scenario.fingerprint`."""
+    import spotsim
+    from spotsim.scenario import fingerprint
+    from spotsim.studies.accuracy import parse_setting, setting_of
+    from spotsim.studies.accuracy_ensemble import slug
+    from spotsim.studies.estimate import study_spread
+
+    studies = {s["out"]: s for s in json.loads((RESULTS / "meta.json").read_text())["studies"]}
+    reference = parse_setting(ENSEMBLE_ARGS[ENSEMBLE_ARGS.index("--reference") + 1])
+    seed = ENSEMBLE_ARGS[ENSEMBLE_ARGS.index("--seed") + 1]
+    scenarios = {}
+    for kind, name, args in ENSEMBLE_STUDIES:
+        scenario = spotsim.load_scenario(ROOT / args[0])
+        out = RESULTS / kind / name
+        dt = scenario.simulation.dt_s
+        own, ref = (setting_of(scenario).label(dt), reference.label(dt))
+        rows = [[{k: None if v == "" else v for k, v in row.items()}
+                 for row in read_csv(out / "members" / f"{slug(label)}.csv")] for label in (own, ref)]
+        study = studies[str(out.relative_to(ROOT))]
+        about = (f"the ensemble accuracy study's {len(rows[0])} starts (seed {seed}) at {own} and at the converged "
+                 f"{ref}, pooled ({study['out']}, commit {study['commit']})")
+        scenarios[fingerprint(scenario)] = study_spread(scenario, *rows, about)
+        print(f"  {name}: {about}")
+    write_json(SPREADS, {"about": "written by `python docs/generate.py spreads`; read by "
+                                  "spotsim.studies.estimate.typical_spread", "scenarios": scenarios})
 
 
 def drives_command(only: tuple[str, ...] = tuple(DRIVES)) -> None:
@@ -964,7 +1005,9 @@ def estimate_table(r: Results) -> str:
     def row(x: dict) -> dict:  # estimate.csv's row as `validate` made it
         missing = lambda v: None if v == "" else v  # noqa: E731
         return {**x, "grasp": int(x["grasp"]), "estimate": missing(x["estimate"]), "error": missing(x["error"]),
-                "within": x["within"] == "True", "within_uncertainty": x["within_uncertainty"] == "True"}
+                "bound": missing(x["bound"]), "within": x["within"] == "True",
+                "within_uncertainty": x["within_uncertainty"] == "True",
+                "within_bound": {"True": True, "False": False}.get(x["within_bound"])}
 
     rows = []
     for name in ("single_arm_case_I", "single_arm_case_II", "single_arm_case_III", "dual_arm_sequential"):
@@ -976,12 +1019,14 @@ def estimate_table(r: Results) -> str:
         for q in sorted(found, key=lambda q: (q["grasp"], list(ESTIMATE_QUANTITIES).index(q["quantity"]))):
             rows.append([label + (f", grasp {q['grasp']}" if name == "dual_arm_sequential" else ""),
                          ESTIMATE_QUANTITIES.get(q["quantity"], q["quantity"]), num(q["median_estimate"]),
+                         num(q["median_bound"]) if q["median_bound"] is not None else "–",
                          num(q["median_error"]), f"{q['within']} of {q['members']}",
-                         f"{q['within_uncertainty']} of {q['members']}"])
+                         f"{q['within_uncertainty']} of {q['members']}",
+                         f"{q['within_bound']} of {q['members']}" if q["within_bound"] is not None else "–"])
     if not rows:
         return f"No error-estimate study in docs/results/estimate/: run `{GENERATE} runs`."
-    return table(["case", "quantity", "median estimate", "median true error", "error within the estimate",
-                  "within the uncertainty (3x)"], rows)
+    return table(["case", "quantity", "median estimate", "median bound", "median true error",
+                  "error within the estimate", "within the uncertainty (3x)", "within the bound"], rows)
 
 
 def drives_table(r: Results) -> str:
@@ -1397,10 +1442,10 @@ def pages_command() -> None:
 
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("command", choices=["results", "runs", "ensembles", "drives", "envelope", "pages"])
+    parser.add_argument("command", choices=["results", "runs", "ensembles", "spreads", "drives", "envelope", "pages"])
     args = parser.parse_args(argv)
-    {"results": results_command, "runs": runs_command, "ensembles": ensembles_command, "drives": drives_command,
-     "envelope": envelope_command, "pages": pages_command}[args.command]()
+    {"results": results_command, "runs": runs_command, "ensembles": ensembles_command, "spreads": spreads_command,
+     "drives": drives_command, "envelope": envelope_command, "pages": pages_command}[args.command]()
 
 
 if __name__ == "__main__":

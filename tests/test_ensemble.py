@@ -176,6 +176,7 @@ def test_the_command_line_writes_the_ensemble_and_exits_with_its_code(tmp_path, 
     table = (out / "members.csv").read_text().splitlines()
     assert len(table) == 4 and table[0].startswith("member,status,module_offset_x_mm")
     assert (out / "scenario.yaml").exists() and "outcome" in capsys.readouterr().out
+    assert doc["error_estimate"]["spread"]["source"] == "ensemble"  # member 0's bound: this ensemble's spread
     assert main(["run", str(CASE_I), "--ensemble", "0", "--out", str(tmp_path / "bad"), "--quiet"]) == 2
 
 

@@ -7,7 +7,18 @@ import pytest
 
 import spotsim
 from spotsim.cli import main
-from spotsim.studies.estimate import QUANTITIES, companion, error_estimate, quantities
+from spotsim.studies.accuracy import parse_setting
+from spotsim.studies.estimate import (
+    QUANTITIES,
+    companion,
+    error_estimate,
+    quantities,
+    study_spread,
+    typical_spread,
+    typical_spreads,
+)
+
+from conftest import ROOT
 
 
 def test_companion_takes_steps_twice_as_long(case_I):
@@ -54,6 +65,59 @@ def test_estimate_is_the_difference_to_the_companion():
     assert set(quantities(run)[1]) == set(QUANTITIES)
 
 
+def stats(low, high):
+    return {"median": (low + high) / 2, "p10": low, "p90": high, "min": low, "max": high, "count": 8}
+
+
+def test_the_bound_adds_the_chance_range_over_starts_to_the_uncertainty():
+    """With a spread over starts, each quantity's chance range is its largest minus its
+    smallest value and the bound is the uncertainty plus it; a quantity the spread lacks, or a
+    run without a spread, has neither."""
+    run = summary(grasp(0.15, 50.0, 2.0), grasp(0.05, 80.0, 9.0))
+    other = summary(grasp(0.12, 51.0, 1.9), grasp(0.06, 78.0, 9.5))
+    spread = {"source": "ensemble", "about": "test",
+              "grasps": {"grasp_1": {"peak_force_norm_N": stats(45.0, 55.0), "residual_norm_mm": stats(0.1, 0.2)},
+                         "grasp_2": {}}}
+    first, second = error_estimate(run, other, spread)["grasps"]
+    force = first["peak_force_norm_N"]
+    assert force["chance"] == 10.0 and force["bound"] == 3.0 + 10.0 and force["spread"]["p90"] == 55.0
+    assert first["residual_offset_norm_mm"]["bound"] == pytest.approx(3 * 0.03 + 0.1, abs=1e-15)
+    assert first["peak_torque_norm_Nm"]["bound"] is None and first["peak_torque_norm_Nm"]["chance"] is None
+    assert all(q["bound"] is None for q in second.values())
+    alone = error_estimate(run, other)
+    assert alone["spread"]["source"] is None and alone["grasps"][0]["peak_force_norm_N"]["bound"] is None
+
+
+def test_a_study_spread_pools_the_run_setting_and_the_reference(case_I):
+    """`study_spread` takes each quantity's statistics over the members at both settings
+    together, leaving out the interrupted ones."""
+    def row(status, force):
+        return {"member": 0, "status": status, "peak_force_norm_N": force, "residual_norm_mm": None}
+
+    spread = study_spread(case_I, [row("completed", 50.0), row("completed", 60.0)],
+                          [row("completed", 40.0), row("interrupted", 99.0)], "test")
+    force = spread["grasps"]["grasp"]["peak_force_norm_N"]
+    assert (force["min"], force["max"], force["count"]) == (40.0, 60.0, 3)
+    assert spread["grasps"]["grasp"]["residual_norm_mm"]["count"] == 0
+
+
+@pytest.mark.parametrize("name", ["single_arm_case_I", "single_arm_case_II", "single_arm_case_III",
+                                  "dual_arm_sequential"])
+def test_each_studied_config_finds_its_typical_spread(name):
+    """The shipped typical spreads belong to the shipped configs as they are: each studied
+    config finds its own (its name and description aside), over both ensembles' members;
+    the same scenario at another setting finds none."""
+    scenario = spotsim.load_scenario(ROOT / "config" / f"{name}.yaml")
+    spread = typical_spread(scenario)
+    assert spread is not None and spread["scenario"] == name
+    assert typical_spread(spotsim.replace(scenario, name="renamed", description="other words")) == spread
+    assert typical_spread(parse_setting("symplectic_euler:20").apply(scenario)) is None
+    for by in spread["grasps"].values():
+        for column in ("residual_norm_mm", "peak_force_norm_N", "peak_torque_norm_Nm"):
+            assert by[column]["count"] == 64 and by[column]["min"] <= by[column]["p10"] <= by[column]["max"]
+    assert name in {s["scenario"] for s in typical_spreads().values()}
+
+
 def test_no_companion_is_said_not_estimated():
     """An integrator without a companion gets a note, not numbers."""
     e = error_estimate(summary(grasp(0.1)), None)
@@ -81,11 +145,13 @@ def test_estimate_study_compares_each_start_with_the_reference(tmp_path, capsys)
                  "--duration", "1.5", "--quiet", "--out", str(out)])
     assert code == 0
     rows = list(csv.DictReader((out / "estimate.csv").open()))
-    assert {r["member"] for r in rows} == {"0", "1"}
+    assert {r["member"] for r in rows} == {"1", "2"}  # perturbed starts only: member 0 is in the study
     for r in rows:
         if r["error"]:
             error, estimate = float(r["error"]), float(r["estimate"])
             assert error == pytest.approx(abs(float(r["value"]) - float(r["reference"])), abs=1e-12)
             assert (r["within"] == "True") == (error <= estimate)
             assert float(r["uncertainty"]) == pytest.approx(3 * estimate, rel=1e-15)
-    assert "error within the estimate for" in capsys.readouterr().out
+        assert r["bound"] == r["within_bound"] == ""  # a shortened run is not the studied scenario
+    text = capsys.readouterr().out
+    assert "error within the estimate for" in text and "no bound" in text

@@ -269,6 +269,9 @@ def _study_parser(sub) -> None:
                      help="the converged setting (default symplectic_euler:1280, 0.78125 us at dt 1 ms: the "
                           "ensemble accuracy studies' confirmed reference)")
     est.add_argument("--workers", type=COUNT, metavar="W", help="parallel processes (default: one per core)")
+    est.add_argument("--seed", type=SEED, default=1, metavar="S",
+                     help="the starts' seed (default 1: other starts than the ensemble accuracy study's, seed 0, "
+                          "whose spread the bound uses)")
     acc.add_argument("--ensemble", type=COUNT, metavar="N",
                      help="run every setting as an N-member ensemble from the same perturbed starts and compare "
                           "distributions (KS test, medians) with the reference's ensemble")
@@ -408,7 +411,8 @@ def _estimate_study(scenario, reference, args, out: Path, progress: bool) -> int
     from .studies.estimate import validate, validation_table
 
     try:
-        rows = validate(scenario, reference.apply(scenario), args.members, workers=args.workers, progress=progress)
+        rows = validate(scenario, reference.apply(scenario), args.members, seed=args.seed, workers=args.workers,
+                        progress=progress)
     except ValueError as e:
         print(e, file=sys.stderr)
         return 2
@@ -422,12 +426,14 @@ def _estimate_study(scenario, reference, args, out: Path, progress: bool) -> int
     w.writerows(rows)
     atomic_write(path, text.getvalue())
     print(f"{scenario.name}: error estimate against {reference.label(scenario.simulation.dt_s)}, "
-          f"{args.members} starts")
+          f"{args.members} perturbed starts (seed {args.seed})")
     for r in validation_table(rows):
         kind = " (a distribution)" if r["distribution"] else ""
+        bound = ("no bound (no study's spread for this scenario)" if r["within_bound"] is None else
+                 f"within the bound for {r['within_bound']} (median bound {r['median_bound']:.3g})")
         print(f"  grasp {r['grasp']} {r['quantity']}{kind}: error within the estimate for {r['within']} of "
-              f"{r['members']}, within the uncertainty (3x) for {r['within_uncertainty']}; median estimate "
-              f"{r['median_estimate']:.3g}, median error {r['median_error']:.3g}")
+              f"{r['members']}, within the uncertainty (3x) for {r['within_uncertainty']}, {bound}; median "
+              f"estimate {r['median_estimate']:.3g}, median error {r['median_error']:.3g}")
     print(f"  {path}")
     return 0
 
@@ -525,10 +531,10 @@ def _ensemble(args, scenario, model, path: Path, out: Path) -> int:
                  model=model, source=str(path))
     first = e.members[0] if e.members else None
     if not args.no_error_estimate and not e.interrupted and first is not None and first.summary:
-        from .studies.estimate import estimate
+        from .studies.estimate import ensemble_spread, estimate
 
         try:  # member 0 runs the scenario's own start: its companion estimates the step's share
-            e.error_estimate = estimate(scenario, first.summary, source=str(path))
+            e.error_estimate = estimate(scenario, first.summary, source=str(path), spread=ensemble_spread(e))
         except KeyboardInterrupt:
             e.interrupted = True
     try:
@@ -558,14 +564,18 @@ def estimate_lines(entry: dict) -> str:
         return f"  discretisation error: {entry['note']}"
     names = {"residual_offset_norm_mm": ("e", "mm"), "peak_force_norm_N": ("peak |F|", "N"),
              "peak_torque_norm_Nm": ("peak |T|", "N m"), "robot_centroid_displacement_norm_mm": ("|centroid d|", "mm")}
-    lines = ["  discretisation error, estimate (uncertainty), from a companion run with twice the step:"]
+    spread = entry.get("spread") or {}
+    lines = ["  discretisation error, estimate (+-uncertainty), from a companion run with twice the step; chance: "
+             "the range over starts; bound (uncertainty + chance): how far the run may lie from the converged run "
+             "from its start",
+             f"  spread over starts: {spread.get('about', 'none')}"]
     for g, grasp in enumerate(entry["grasps"]):
         cells = []
         for name, q in grasp.items():
             label, unit = names[name]
             if q["estimate"] is not None:
-                chance = " (or chance: a distribution)" if q["distribution"] else ""
-                cells.append(f"{label} ~{q['estimate']:.3g} (+-{q['uncertainty']:.3g}) {unit}{chance}")
+                bound = "" if q.get("bound") is None else f", chance {q['chance']:.3g}, bound {q['bound']:.3g}"
+                cells.append(f"{label} ~{q['estimate']:.3g} (+-{q['uncertainty']:.3g}{bound}) {unit}")
         lines.append(f"    grasp {g + 1}: " + ("; ".join(cells) or "not estimated (incomplete)"))
     return "\n".join(lines)
 

@@ -8,6 +8,8 @@ out; the resolved scenario (`spotsim validate`) shows every value used. Problems
 from __future__ import annotations
 
 import dataclasses
+import hashlib
+import json
 import math
 import re
 import typing
@@ -719,6 +721,13 @@ def to_dict(s) -> dict:
 
 def to_yaml(s: Scenario) -> str:
     return yaml.safe_dump(to_dict(s), sort_keys=False)
+
+
+def fingerprint(s) -> str:
+    """The scene a scenario runs, as a short hash of every value but its name and description:
+    equal for two scenarios that run the same physics at the same settings."""
+    raw = {k: v for k, v in to_dict(s).items() if k not in ("name", "description")}
+    return hashlib.sha256(json.dumps(raw, sort_keys=True).encode()).hexdigest()[:16]
 
 
 def replace(s: Scenario, **changes) -> Scenario:

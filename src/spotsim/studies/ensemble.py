@@ -370,6 +370,24 @@ HEADLINE = ("residual_norm_mm", "residual_x_mm", "residual_y_mm", "residual_z_mm
             "centroid_displacement_z_mm", "centroid_displacement_norm_mm")
 
 
+def grasp_key(g: int, n_grasps: int) -> str:
+    """The statistics' key of grasp g: `grasp` for one grasp, `grasp_1`, `grasp_2`... for several."""
+    return f"grasp_{g + 1}" if n_grasps > 1 else "grasp"
+
+
+def headline_statistics(rows: list[dict], n_grasps: int, columns=None) -> dict:
+    """Per grasp (`grasp_key`), the `statistics` of each HEADLINE quantity in `columns`
+    (default: the first row's) over members-table rows (`member_row`, or members.csv's rows
+    read back) of members that ran."""
+    columns = rows[0] if columns is None and rows else columns or ()
+    out = {}
+    for g in range(n_grasps):
+        p = grasp_prefix(g, n_grasps)
+        out[grasp_key(g, n_grasps)] = {q: statistics(r.get(f"{p}{q}") for r in rows)
+                                       for q in HEADLINE if f"{p}{q}" in columns}
+    return out
+
+
 def summarise(e: EnsembleResult) -> dict:
     """What ensemble.json holds besides the members' starts: the status counts; per grasp the
     statistics of each headline quantity over its completed members and the outcome classes
@@ -380,11 +398,10 @@ def summarise(e: EnsembleResult) -> dict:
     for m in e.members:
         statuses[m.status] = statuses.get(m.status, 0) + 1
     ran = [r for r in rows if r["status"] not in NOT_RUN]
-    stats, classes = {}, {}
+    stats, classes = headline_statistics(ran, n_grasps, columns=rows[0]), {}
     for g in range(n_grasps):
         p = grasp_prefix(g, n_grasps)
-        key = f"grasp_{g + 1}" if n_grasps > 1 else "grasp"
-        stats[key] = {q: statistics(r.get(f"{p}{q}") for r in ran) for q in HEADLINE if f"{p}{q}" in rows[0]}
+        key = grasp_key(g, n_grasps)
         counts: dict[str, int] = {}
         for r in ran:
             counts[r[f"{p}class"]] = counts.get(r[f"{p}class"], 0) + 1

@@ -1,4 +1,5 @@
-"""A run's discretisation error, estimated from one companion run with steps twice as long.
+"""A run's discretisation error, estimated from one companion run with steps twice as long,
+and the bound on how far it lies from the converged run from the same start.
 
 The default integrator and the paper's step are first order: a quantity's error falls in
 proportion to the step, e(h) ~ C h. A companion run whose steps are twice as long therefore
@@ -11,28 +12,51 @@ An estimate from two step sizes is itself uncertain: where a quantity does not y
 smoothly with the step, the companion may land nearer the converged value than the run.
 Roache's grid convergence index (Roache 1994, J. Fluids Eng. 116:405; ASME V&V 20-2009) turns
 a two-step estimate into an uncertainty band with a factor of safety of 3: GCI = 3 |Q(h) -
-Q(2h)| / (2^p - 1), here with p = 1. Both are reported; `spotsim study estimate` counts how
-often the true error lies within each.
+Q(2h)| / (2^p - 1), here with p = 1.
 
-A grasp's residual offset is also a distribution over microscopic start perturbations
-(model.md Sec. 9): the companion may seat where the run wedges, so the difference is then
-chance, not discretisation. Such quantities are marked `distribution`; their spread over
-starts is what `spotsim run --ensemble N` measures.
+Neither bounds how far a run lies from the converged run from the same start. A grasp's
+bounces decorrelate two runs that start alike, and two runs at different steps alike: its
+residual offset is a distribution over microscopic start perturbations (model.md Sec. 9), and
+its peak force partly so. That share of a run's error is chance, the difference between two
+draws from the distribution over starts, which no companion run can measure. Each quantity's
+`spread` over starts says how large it can be, and its `chance` range (largest minus smallest
+over those starts) bounds it: the `bound` is the uncertainty plus the chance range. The spread
+comes from the run's own ensemble (`spotsim run --ensemble N`, whose member 0 is estimated),
+or, for a single run of a scenario that the ensemble accuracy study ran, from that study: its
+members at the run's own setting and at the converged reference, pooled (TYPICAL_SPREAD,
+written by `python docs/generate.py spreads`). A scenario nobody studied has no spread and no
+bound; its ensemble measures them. `spotsim study estimate` counts how often the true error
+lies within the estimate, the uncertainty and the bound.
 """
 
 from __future__ import annotations
 
+import json
 import math
+from importlib import resources
+from typing import NamedTuple
 
+from ..scenario import fingerprint, modules_of
+from .ensemble import NOT_RUN, grasp_key, headline_statistics
 from .runs import step_scaled
 
-#: The quantities estimated, per grasp: summary key -> whether it is a distribution over starts.
+
+class Quantity(NamedTuple):
+    column: str  # its members-table column (`ensemble.member_row`), without the grasp prefix
+    distribution: bool  # a distribution over starts, not a near-deterministic value
+
+
+#: The quantities estimated, per grasp, by summary key.
 QUANTITIES = {
-    "residual_offset_norm_mm": True,
-    "peak_force_norm_N": False,
-    "peak_torque_norm_Nm": False,
-    "robot_centroid_displacement_norm_mm": False,
+    "residual_offset_norm_mm": Quantity("residual_norm_mm", True),
+    "peak_force_norm_N": Quantity("peak_force_norm_N", False),
+    "peak_torque_norm_Nm": Quantity("peak_torque_norm_Nm", False),
+    "robot_centroid_displacement_norm_mm": Quantity("centroid_displacement_norm_mm", False),
 }
+#: The studied scenarios' typical spreads over starts, by `scenario.fingerprint` (package data).
+TYPICAL_SPREAD = "typical_spread.json"
+#: What a spread reports of each quantity (`ensemble.statistics`).
+SPREAD_KEYS = ("median", "p10", "p90", "min", "max", "count")
 #: Roache's factor of safety for a grid convergence index from two grids.
 GCI_SAFETY = 3.0
 METHOD = ("estimate: Richardson, first order: |Q(run) - Q(companion)|, the companion's steps twice as long "
@@ -63,78 +87,122 @@ def quantities(summary: dict) -> list[dict]:
     return out
 
 
-def error_estimate(summary: dict, companion_summary: dict | None) -> dict:
+def error_estimate(summary: dict, companion_summary: dict | None, spread: dict | None = None) -> dict:
     """The `error_estimate` entry of a summary: per grasp and quantity, its value, the
-    companion's and the estimate |difference|."""
+    companion's, the estimate |difference| and its uncertainty; with a `spread` over starts
+    (`ensemble_spread`, `typical_spread`), that spread, its chance range and the bound."""
     if companion_summary is None:
         return {"method": METHOD, "companion": None,
                 "note": "no companion with twice the step for this integrator: not estimated"}
+    n = len(summary["grasps"])
     grasps = []
-    for mine, theirs in zip(quantities(summary), quantities(companion_summary), strict=True):
+    for g, (mine, theirs) in enumerate(zip(quantities(summary), quantities(companion_summary), strict=True)):
+        spreads = spread["grasps"].get(grasp_key(g, n), {}) if spread else {}
         entry = {}
         for name, value in mine.items():
             other = theirs.get(name)
             estimate = None if value is None or other is None else abs(value - other)
+            uncertainty = None if estimate is None else GCI_SAFETY * estimate
+            st = spreads.get(QUANTITIES[name].column)
+            chance = st["max"] - st["min"] if st and st["count"] else None
             entry[name] = {"value": value, "companion": other, "estimate": estimate,
                            "estimate_rel": None if estimate is None or not value else estimate / abs(value),
-                           "uncertainty": None if estimate is None else GCI_SAFETY * estimate,
-                           "distribution": QUANTITIES[name]}
+                           "uncertainty": uncertainty, "distribution": QUANTITIES[name].distribution,
+                           "spread": {k: st[k] for k in SPREAD_KEYS} if chance is not None else None,
+                           "chance": chance,
+                           "bound": None if uncertainty is None or chance is None else uncertainty + chance}
         grasps.append(entry)
     c = companion_summary
     return {"method": METHOD,
             "companion": {"status": c["status"], "integrator": c["integrator"], "wall_time_s": c["wall_time_s"]},
+            "spread": ({k: v for k, v in spread.items() if k != "grasps"} if spread else
+                       {"source": None, "about": "no ensemble, and no study of this scenario: `spotsim run "
+                                                 "--ensemble N` measures the spread over starts and the bound"}),
             "grasps": grasps,
-            "note": ("a residual offset is one sample of a distribution over starts: where the run and its "
-                     "companion end in different outcome classes (seated, wedged) the difference is chance; "
-                     "`spotsim run --ensemble N` measures the spread")}
+            "note": ("the estimate and its uncertainty say how far the run moves with the step; the bound adds "
+                     "the chance range over starts (largest - smallest), since the bounces decorrelate runs that "
+                     "start alike: the run lies within the bound of the converged run from its own start")}
 
 
-def estimate(scenario, summary: dict, source: str = "<scenario>") -> dict:
+def ensemble_spread(e) -> dict:
+    """The spread over an ensemble's own members (`ensemble.EnsembleResult`)."""
+    return {"source": "ensemble", "about": f"this ensemble's {len(e.members)} members (seed {e.seed})",
+            "grasps": e.statistics}
+
+
+def study_spread(scenario, run_rows: list[dict], reference_rows: list[dict], about: str) -> dict:
+    """A studied scenario's typical spread: the statistics over its members (members-table
+    rows) at its own setting and at the converged reference, pooled."""
+    rows = [r for r in run_rows + reference_rows if r["status"] not in NOT_RUN]
+    columns = {q.column for q in QUANTITIES.values()}
+    stats = headline_statistics(rows, len(modules_of(scenario)))
+    return {"source": "study", "about": about, "scenario": scenario.name,
+            "grasps": {g: {c: st for c, st in by.items() if c in columns} for g, by in stats.items()}}
+
+
+def typical_spreads() -> dict:
+    """The shipped typical spreads: `scenario.fingerprint` -> `study_spread` entry."""
+    return json.loads(resources.files(__package__).joinpath(TYPICAL_SPREAD).read_text())["scenarios"]
+
+
+def typical_spread(scenario) -> dict | None:
+    """The study's spread for exactly this scenario (the same `fingerprint`), or None."""
+    return typical_spreads().get(fingerprint(scenario))
+
+
+def estimate(scenario, summary: dict, source: str = "<scenario>", spread: dict | None = None) -> dict:
     """Run the companion of `scenario`, whose run gave `summary`, and return the error
-    estimate entry for that summary."""
+    estimate entry for that summary, with `spread` (default: the study's, `typical_spread`)."""
     from ..sim.run import simulate
 
     s = companion(scenario)
-    return error_estimate(summary, None if s is None else simulate(s, source=source).summary)
+    return error_estimate(summary, None if s is None else simulate(s, source=source).summary,
+                          spread or typical_spread(scenario))
 
 
 # ---------------------------------------------------------------------------- validation
 
 
-def validate(scenario, reference, n: int = 8, *, seed: int = 0, workers: int | None = None,
+def validate(scenario, reference, n: int = 8, *, seed: int = 1, workers: int | None = None,
              progress: bool = False) -> list[dict]:
-    """Check the estimate against a converged reference from n starts (`ensemble`'s, seeded):
-    one row per member, grasp and quantity with the run's value, the companion's, the
-    estimate and uncertainty, the reference's, the true error |run - reference| and whether it
-    lies within each. `reference`: the scenario at a converged setting."""
+    """Check the estimate against a converged reference from n perturbed starts (members 1..n
+    of `ensemble`'s, seeded; member 0, the unperturbed start, is every seed's, so it is among
+    the study's behind `typical_spread`): one row per member, grasp and quantity with the
+    run's value, the companion's, the estimate, uncertainty and bound, the reference's, the
+    true error |run - reference| and whether it lies within each. `reference`: the scenario
+    at a converged setting."""
     from .ensemble import ensemble
 
     other = companion(scenario)
     if other is None:
         raise ValueError(f"{scenario.simulation.integrator.method}: no companion to estimate with")
-    runs = [ensemble(s, n, seed=seed, workers=workers, progress=progress).members
+    spread = typical_spread(scenario)
+    runs = [ensemble(s, n + 1, seed=seed, workers=workers, progress=progress).members[1:]
             for s in (scenario, other, reference)]
     rows = []
     for run, comp, ref in zip(*runs, strict=True):
         if not (run.summary and comp.summary and ref.summary):
             continue
         truth = quantities(ref.summary)
-        for g, entry in enumerate(error_estimate(run.summary, comp.summary)["grasps"]):
+        for g, entry in enumerate(error_estimate(run.summary, comp.summary, spread)["grasps"]):
             for name, q in entry.items():
                 r = truth[g].get(name) if g < len(truth) else None
                 error = None if q["value"] is None or r is None else abs(q["value"] - r)
                 known = error is not None and q["estimate"] is not None
                 rows.append({"member": run.index, "grasp": g + 1, "quantity": name, "value": q["value"],
                              "companion": q["companion"], "estimate": q["estimate"], "uncertainty": q["uncertainty"],
-                             "reference": r, "error": error, "distribution": q["distribution"],
+                             "chance": q["chance"], "bound": q["bound"], "reference": r, "error": error,
+                             "distribution": q["distribution"],
                              "within": known and error <= q["estimate"],
-                             "within_uncertainty": known and error <= q["uncertainty"]})
+                             "within_uncertainty": known and error <= q["uncertainty"],
+                             "within_bound": None if not known or q["bound"] is None else error <= q["bound"]})
     return rows
 
 
 def validation_table(rows: list[dict]) -> list[dict]:
-    """Per grasp and quantity: how many members' true errors lay within their estimates and
-    their uncertainties, and the median estimate and error."""
+    """Per grasp and quantity: how many members' true errors lay within their estimates, their
+    uncertainties and their bounds (None without a spread), and the median estimate, bound
+    and true error."""
     import numpy as np
 
     out = []
@@ -143,10 +211,13 @@ def validation_table(rows: list[dict]) -> list[dict]:
                  and r["estimate"] is not None]
         if not group:
             continue
+        bounded = [r for r in group if r["within_bound"] is not None]
         out.append({"grasp": key[0], "quantity": key[1], "members": len(group),
                     "within": sum(r["within"] for r in group),
                     "within_uncertainty": sum(r["within_uncertainty"] for r in group),
+                    "within_bound": sum(r["within_bound"] for r in bounded) if bounded else None,
                     "median_estimate": float(np.median([r["estimate"] for r in group])),
+                    "median_bound": float(np.median([r["bound"] for r in bounded])) if bounded else None,
                     "median_error": float(np.median([r["error"] for r in group])),
                     "distribution": group[0]["distribution"]})
     return out
