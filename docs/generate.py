@@ -1029,6 +1029,29 @@ def estimate_table(r: Results) -> str:
                   "error within the estimate", "within the uncertainty (3x)", "within the bound"], rows)
 
 
+def spreads_table(r: Results) -> str:
+    """The typical spreads over starts that single runs of the studied configs report
+    (SPREADS, `spotsim.studies.estimate.typical_spread`): per quantity its median [p10, p90],
+    smallest and largest value and chance range."""
+    from spotsim.studies.estimate import QUANTITIES
+
+    if not SPREADS.exists():
+        return f"No typical spreads: run `{GENERATE} spreads`."
+    rows = []
+    for entry in json.loads(SPREADS.read_text())["scenarios"].values():
+        name = entry["scenario"]
+        label = PAPER_CASES[name]["label"] if name in PAPER_CASES else "dual arm"
+        for key, by in entry["grasps"].items():
+            for q in ESTIMATE_QUANTITIES:
+                st = by.get(QUANTITIES[q].column)
+                if not st or not st["count"]:
+                    continue
+                rows.append([label + (f", {key.replace('_', ' ')}" if key != "grasp" else ""), ESTIMATE_QUANTITIES[q],
+                             f"{num(st['median'])} [{num(st['p10'])}, {num(st['p90'])}]",
+                             f"{num(st['min'])} – {num(st['max'])}", num(st["max"] - st["min"]), str(st["count"])])
+    return table(["case", "quantity", "median [p10, p90]", "smallest – largest", "chance range", "runs"], rows)
+
+
 def drives_table(r: Results) -> str:
     """Relay against actuator: each case's 32-member ensemble with each drive, at the default
     integrator and at a fine fixed step (docs/results/drives/)."""
@@ -1401,6 +1424,7 @@ RENDER = {
     "accuracy-ensembles": accuracy_ensembles_table,
     "drives-table": drives_table,
     "estimate-table": estimate_table,
+    "typical-spreads": spreads_table,
     "stability-table": stability_table,
     "envelope-table": envelope_table,
     "cli-usage": cli_usage,
