@@ -1,6 +1,6 @@
 """Can the dual-arm robot's geometry give Table 5's body 4 (the FDR + TM-1 composite)?
 
-    python benchmarks/table5_composite.py [--starts 60] [--tm1-move 0.2]
+    python benchmarks/table5_composite.py [--starts 60] [--tm1-move 0.2] [--arm ur3]
 
 Table 5 lists body 4's moments of inertia along its axes, not its products, so they are read
 here as moments along the FDR base's axes (as principal moments no placement can give them:
@@ -17,6 +17,11 @@ The parts' mass properties come from the shipped XACRO at Table 6's angles (base
 arm 1 and its end-effector, arm 2 and its end-effector, TM-1 welded to EE-1. The UR3 base links,
 which Pinocchio merges into the base's body, are taken from the UR3 URDF and placed at their
 mounts; the parts reproduce the shipped composite's moments (the first line).
+
+--arm puts another Universal Robots model from example-robot-data (ur5, ur10) in place of
+the UR3 (the XACRO's arm_model), the base refitted to Table 5 body 3 with what mass is left;
+where none is left the searches are not run, and where no start finds a physical base the row
+gives the start that comes nearest one (the largest of its base's constraint violations).
 """
 
 from __future__ import annotations
@@ -36,17 +41,21 @@ from spotsim.build.robot import (
     TABLE5,
     TABLE6,
     arms_at,
+    fit_base,
     locked_robot,
     parallel_axis,
 )
 
+#: the arm models the XACRO can take here (Table 6's six UR joint names)
+ARMS = ("ur3", "ur5", "ur10")
+
 WELDED = {"tm1_joint_type": "fixed", "tm1_parent": "ee1_grasp"}
 
 
-def base_link() -> tuple[float, np.ndarray]:
-    """The UR3's base link, fixed to its mount: mass (kg) and inertia about its centroid, which
+def base_link(arm: str = ARM) -> tuple[float, np.ndarray]:
+    """The arm's base link, fixed to its mount: mass (kg) and inertia about its centroid, which
     is its frame's origin (kg m^2), from the arm's URDF (Pinocchio puts it on the universe)."""
-    Y = pin.buildModelFromUrdf(str(assets.example_robot_data_dir() / assets.ARM_URDFS[ARM])).inertias[0]
+    Y = pin.buildModelFromUrdf(str(assets.example_robot_data_dir() / assets.ARM_URDFS[arm])).inertias[0]
     assert np.allclose(Y.lever, 0.0)
     return Y.mass, Y.inertia.copy()
 
@@ -74,10 +83,10 @@ def arm_parts(args: dict) -> dict[str, tuple[float, np.ndarray, np.ndarray]]:
     return parts
 
 
-def tm1_part() -> tuple[float, np.ndarray, np.ndarray]:
+def tm1_part(args: dict) -> tuple[float, np.ndarray, np.ndarray]:
     """TM-1 welded to EE-1: arm 1's part with it less arm 1's part without it."""
-    mw, cw, Iw = arm_parts(WELDED)["arm1_"]
-    mf, cf, If = arm_parts({})["arm1_"]
+    mw, cw, Iw = arm_parts({**WELDED, **args})["arm1_"]
+    mf, cf, If = arm_parts(args)["arm1_"]
     m = mw - mf
     c = (mw * cw - mf * cf) / m
     return m, c, Iw + parallel_axis(mw, cw - c) - If - parallel_axis(mf, cf - c)
@@ -86,11 +95,12 @@ def tm1_part() -> tuple[float, np.ndarray, np.ndarray]:
 class Geometry:
     """The composite for mount shifts d1, d2, a base centroid c_b and a TM-1 centroid move."""
 
-    def __init__(self):
-        self.arms = arm_parts({})
-        self.tm1 = tm1_part()
+    def __init__(self, arm: str = ARM):
+        args = {"arm_model": arm}
+        self.arms = arm_parts(args)
+        self.tm1 = tm1_part(args)
         self.mounts = mounts()
-        self.base_link = base_link()
+        self.base_link = base_link(arm)
         self.T3 = np.diag(TABLE5[3].inertia)
         self.T4 = np.array(TABLE5[4].inertia)
 
@@ -112,6 +122,20 @@ class Geometry:
         return np.diag(I4) / self.T4 - 1, np.linalg.eigvalsh(I_b), float(np.linalg.norm(c1 - c3))
 
 
+def arms_own(g: Geometry) -> np.ndarray:
+    """The eigenvalues of Table 5 body 3's inertia less each arm's own (with its end-effector and
+    base link, about its centroid): the base's inertia is at most this for any mounts and base
+    centroid (the parallel-axis terms are positive semidefinite), so a negative one rules out a
+    physical base."""
+    rest = g.T3.copy()
+    for side, (m, c, I) in g.arms.items():
+        mb, Ib = g.base_link
+        cb = g.mounts[side]
+        C = (m * c + mb * cb) / (m + mb)
+        rest -= I + parallel_axis(m, c - C) + Ib + parallel_axis(mb, cb - C)
+    return np.linalg.eigvalsh(rest)
+
+
 def closest(g: Geometry, starts: int, tm1_move: float, seed: int = 0):
     """The least squared residual of body 4's moments with a physical base, over `starts`
     SLSQP starts; TM-1's centroid moves at most tm1_move (m) per axis."""
@@ -122,14 +146,21 @@ def closest(g: Geometry, starts: int, tm1_move: float, seed: int = 0):
     cons = [{"type": "ineq", "fun": physical}]
     bounds = [(None, None)] * 9 + [(-tm1_move, tm1_move)] * 3
     rng = np.random.default_rng(seed)
-    found = []
+    found, unphysical = [], []
     for k in range(starts):
         x0 = np.zeros(12) if k == 0 else np.r_[rng.normal(0, 0.5, 9), rng.uniform(-tm1_move, tm1_move, 3)]
         res = minimize(lambda x: (lambda r: r @ r)(g.evaluate(x)[0]), x0, constraints=cons, bounds=bounds,
                        method="SLSQP", options={"maxiter": 1000, "ftol": 1e-12})
         if np.all(physical(res.x) >= -1e-9):
             found.append(res)
+        else:
+            unphysical.append(res)
+    if not found:  # the start nearest a physical base
+        nearest = min(unphysical, key=lambda r: -physical(r.x).min())
+        nearest.physical = False
+        return nearest
     best = min(found, key=lambda r: r.fun)
+    best.physical = True
     # where body 4 is met: the least change of the shipped geometry that meets it, from every
     # start that met it
     meet = cons + [{"type": "eq", "fun": lambda x: g.evaluate(x)[0]}]
@@ -137,24 +168,42 @@ def closest(g: Geometry, starts: int, tm1_move: float, seed: int = 0):
                       options={"maxiter": 1000}) for r in found if r.fun < 1e-10]
     least = [r for r in least if r.success and np.all(physical(r.x) >= -1e-6)
              and np.abs(g.evaluate(r.x)[0]).max() < 1e-6]
-    return min(least, key=lambda r: r.fun) if least else best
+    if least:
+        best = min(least, key=lambda r: r.fun)
+        best.physical = True
+    return best
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--starts", type=int, default=60)
     parser.add_argument("--tm1-move", type=float, default=0.2)
+    parser.add_argument("--arm", choices=ARMS, default=ARM, help="the arms' model (default %(default)s)")
     args = parser.parse_args()
     for prefix in TABLE6:
-        assets.prefixed_arm(ARM, prefix)
-    g = Geometry()
-    model, j = locked_robot(assets.compile_xacro(DUAL_ARM_XACRO, WELDED))
-    shipped = np.diag(model.inertias[j].inertia) / g.T4 - 1
-    print(f"Measured by `python benchmarks/table5_composite.py` at {measured_at()}: "
-          f"{args.starts} SLSQP starts per search\n")
+        assets.prefixed_arm(args.arm, prefix)
+    g = Geometry(args.arm)
+    print(f"Measured by `python benchmarks/table5_composite.py{'' if args.arm == ARM else ' --arm ' + args.arm}` "
+          f"at {measured_at()}: {args.starts} SLSQP starts per search\n")
+    m_b = TABLE5[3].mass - sum(g.base_link[0] + m for m, _, _ in g.arms.values())
+    shipped = "(the XACRO robot not built: no base mass)"
+    if m_b > 0:  # the shipped XACRO's base is fitted to the UR3; other arms get theirs (physical or not)
+        base = {} if args.arm == ARM else fit_base(arm=args.arm, physical=False)
+        model, j = locked_robot(assets.compile_xacro(DUAL_ARM_XACRO, {**WELDED, "arm_model": args.arm, **base}))
+        shipped = f"{np.round(100 * (np.diag(model.inertias[j].inertia) / g.T4 - 1), 1)} % from Table 5"
+    if args.arm != ARM:
+        print(f"{args.arm}: {g.base_link[0] + g.arms['arm1_'][0]:.3f} kg per arm with its end-effector, "
+              f"base mass left {m_b:.3f} kg of Table 5 body 3's {TABLE5[3].mass} kg\n")
     r, e, D = g.evaluate(np.zeros(12))
-    print(f"shipped geometry: body 4 moments {np.round(100 * shipped, 1)} % from Table 5 (the parts: "
-          f"{np.round(100 * r, 1)} %), TM-1 {D:.3f} m from the FDR's centroid\n")
+    print(f"shipped geometry: body 4 moments {shipped} (the parts: "
+          f"{np.round(100 * r, 1)} %), TM-1 {D:.3f} m from the FDR's centroid"
+          + ("" if args.arm == ARM else f"; base inertia eigenvalues {np.round(e, 2)} kg m²") + "\n")
+    if args.arm != ARM:
+        print(f"Table 5 body 3's inertia less the arms' own: eigenvalues {np.round(arms_own(g), 3)} kg m² "
+              "(a bound on the base's for any mounts and base centroid)\n")
+    if m_b <= 0:
+        print("no mass left for the base: no search")
+        return
     print("| search | body 4 moments vs Table 5 (%) | arm 1 mount moved (m) | arm 2 mount moved (m) "
           "| base centroid (m) | TM-1 centroid moved (m) | base inertia eigenvalues (kg m²) | TM-1 to FDR (m) |")
     print("| --- | --- | --- | --- | --- | --- | --- | --- |")
@@ -163,6 +212,8 @@ def main() -> None:
         best = closest(g, args.starts, move)
         r, e, D = g.evaluate(best.x)
         x = np.round(best.x, 3) + 0.0
+        if not best.physical:
+            name += " (no physical base: the start nearest one)"
         print(f"| {name} | {np.round(100 * r, 1) + 0.0} | {x[0:3]} | {x[3:6]} | {x[6:9]} | {x[9:12]} "
               f"| {np.round(e, 2)} | {D:.3f} |")
 

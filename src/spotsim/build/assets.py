@@ -47,7 +47,8 @@ def example_robot_data_dir() -> Path:
 
 
 #: example-robot-data's arm URDFs, by the `arm_model` names scenarios use.
-ARM_URDFS = {"z1": "robots/z1_description/urdf/z1.urdf", "ur3": "robots/ur_description/urdf/ur3_robot.urdf"}
+ARM_URDFS = {"z1": "robots/z1_description/urdf/z1.urdf", "ur3": "robots/ur_description/urdf/ur3_robot.urdf",
+             "ur5": "robots/ur_description/urdf/ur5_robot.urdf", "ur10": "robots/ur_description/urdf/ur10_robot.urdf"}
 
 
 def generated_dir() -> Path:

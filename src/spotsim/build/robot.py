@@ -66,16 +66,17 @@ def composite(inertia: pin.Inertia) -> tuple[float, np.ndarray, np.ndarray]:
     return inertia.mass, inertia.lever.copy(), inertia.inertia.copy()
 
 
-def fit_base(args: dict | None = None) -> dict[str, float]:
+def fit_base(args: dict | None = None, arm: str = ARM, physical: bool = True) -> dict[str, float]:
     """The base mass and inertia (about the base origin, base axes) that give the locked robot
     Table 5 body 3's mass and inertia about its centroid (products of inertia zero).
 
-    The base's centroid is its frame's origin. Returns the XACRO arguments base_mass_kg and
-    base_i**; raises ValueError if no physical base can do it.
+    The base's centroid is its frame's origin. arm: the arms' model (the XACRO's arm_model).
+    Returns the XACRO arguments base_mass_kg and base_i**; raises ValueError if no physical
+    base can do it (unless physical is False: then the base returned may be unphysical).
     """
     for prefix in TABLE6:
-        assets.prefixed_arm(ARM, prefix)
-    probe = {**(args or {}), **MASSLESS_BASE}
+        assets.prefixed_arm(arm, prefix)
+    probe = {**(args or {}), "arm_model": arm, **MASSLESS_BASE}
     model, j = locked_robot(assets.compile_xacro(DUAL_ARM_XACRO, probe))
     m_r, c_r, I_r = composite(model.inertias[j])
     target = TABLE5[3]
@@ -84,7 +85,7 @@ def fit_base(args: dict | None = None) -> dict[str, float]:
 
     I_b = np.diag(target.inertia) - I_r - parallel_axis(m_r, c_r - c) - parallel_axis(m_b, -c)
     eig = np.linalg.eigvalsh(I_b)
-    if m_b <= 0 or eig.min() <= 0 or 2 * eig.max() > eig.sum():
+    if physical and (m_b <= 0 or eig.min() <= 0 or 2 * eig.max() > eig.sum()):
         raise ValueError(f"no physical base gives Table 5 body 3: base mass {m_b:.3f} kg, "
                          f"inertia eigenvalues {eig}")
     return {"base_mass_kg": m_b, "base_ixx": I_b[0, 0], "base_iyy": I_b[1, 1], "base_izz": I_b[2, 2],
