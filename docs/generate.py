@@ -63,8 +63,9 @@ STUDIES = [
     ("stability", "single_arm_case_I", ["config/single_arm_case_I.yaml"]),
 ] + [
     # each run's error estimate and bound against the converged reference, 8 perturbed starts per
-    # case, seed 1: other starts than the ensemble studies' (seed 0), whose spreads the bound uses
-    ("estimate", name, [f"config/{name}.yaml", "--members", "8", "--seed", "1"])
+    # case (`spotsim study estimate`'s default seed: not the ensemble studies', whose spreads the
+    # bound uses)
+    ("estimate", name, [f"config/{name}.yaml", "--members", "8"])
     for name in ("single_arm_case_I", "single_arm_case_II", "single_arm_case_III", "dual_arm_sequential")
 ]
 #: The ensemble accuracy studies: 32 members (seed 0) per setting, 2 workers, against symplectic
@@ -358,12 +359,13 @@ def ensembles_command() -> None:
 SPREADS = ROOT / "src" / "spotsim" / "studies" / "typical_spread.json"
 
 
-def spreads_command() -> None:
-    """Each ensemble-studied config's typical spread over starts (`studies.estimate.study_spread`),
-    from its ensemble accuracy study in docs/results/: the members at the config's own setting
-    and at the reference, pooled; keyed by the config's `scenario.fingerprint`."""
+def typical_spreads_from_results() -> dict:
+    """SPREADS' content: each ensemble-studied config's typical spread over starts
+    (`studies.estimate.study_spread`), from its ensemble accuracy study in docs/results/: the
+    members at the config's own setting and at the reference, pooled; keyed by the config's
+    `scenario.fingerprint`, which must be the config's as the study ran it."""
     import spotsim
-    from spotsim.scenario import fingerprint
+    from spotsim.scenario import fingerprint, from_dict
     from spotsim.studies.accuracy import parse_setting, setting_of
     from spotsim.studies.accuracy_ensemble import slug
     from spotsim.studies.estimate import study_spread
@@ -377,15 +379,25 @@ def spreads_command() -> None:
         out = RESULTS / kind / name
         dt = scenario.simulation.dt_s
         own, ref = (setting_of(scenario).label(dt), reference.label(dt))
-        rows = [[{k: None if v == "" else v for k, v in row.items()}
-                 for row in read_csv(out / "members" / f"{slug(label)}.csv")] for label in (own, ref)]
+        rows = [[blanks_none(row) for row in read_csv(out / "members" / f"{slug(label)}.csv")] for label in (own, ref)]
         study = studies[str(out.relative_to(ROOT))]
+        ran = from_dict(yaml.safe_load(git("show", f"{study['commit']}:{args[0]}")), args[0])
+        if fingerprint(ran) != fingerprint(scenario):
+            raise SystemExit(f"{args[0]} has changed since its study ran at {study['commit']}: run `{GENERATE} "
+                             f"ensembles`")
         about = (f"the ensemble accuracy study's {len(rows[0])} starts (seed {seed}) at {own} and at the converged "
                  f"{ref}, pooled ({study['out']}, commit {study['commit']})")
         scenarios[fingerprint(scenario)] = study_spread(scenario, *rows, about)
-        print(f"  {name}: {about}")
-    write_json(SPREADS, {"about": "written by `python docs/generate.py spreads`; read by "
-                                  "spotsim.studies.estimate.typical_spread", "scenarios": scenarios})
+    return {"about": "written by `python docs/generate.py spreads`; read by spotsim.studies.estimate.typical_spread",
+            "scenarios": scenarios}
+
+
+def spreads_command() -> None:
+    """Write SPREADS (`typical_spreads_from_results`)."""
+    spreads = typical_spreads_from_results()
+    write_json(SPREADS, spreads)
+    for entry in spreads["scenarios"].values():
+        print(f"  {entry['scenario']}: {entry['about']}")
 
 
 def drives_command(only: tuple[str, ...] = tuple(DRIVES)) -> None:
@@ -464,6 +476,11 @@ def _value(text: str):
         return float(text)
     except ValueError:
         return text
+
+
+def blanks_none(row: dict) -> dict:
+    """A CSV row with its empty cells None (a quantity a member did not reach)."""
+    return {k: None if v == "" else v for k, v in row.items()}
 
 
 def read_csv(path: Path) -> list[dict]:
@@ -1003,9 +1020,8 @@ def estimate_table(r: Results) -> str:
     from spotsim.studies.estimate import validation_table
 
     def row(x: dict) -> dict:  # estimate.csv's row as `validate` made it
-        missing = lambda v: None if v == "" else v  # noqa: E731
-        return {**x, "grasp": int(x["grasp"]), "estimate": missing(x["estimate"]), "error": missing(x["error"]),
-                "bound": missing(x["bound"]), "within": x["within"] == "True",
+        x = blanks_none(x)
+        return {**x, "grasp": int(x["grasp"]), "within": x["within"] == "True",
                 "within_uncertainty": x["within_uncertainty"] == "True",
                 "within_bound": {"True": True, "False": False}.get(x["within_bound"])}
 
@@ -1022,7 +1038,7 @@ def estimate_table(r: Results) -> str:
                          num(q["median_bound"]) if q["median_bound"] is not None else "–",
                          num(q["median_error"]), f"{q['within']} of {q['members']}",
                          f"{q['within_uncertainty']} of {q['members']}",
-                         f"{q['within_bound']} of {q['members']}" if q["within_bound"] is not None else "–"])
+                         f"{q['within_bound']} of {q['bounded']}" if q["within_bound"] is not None else "–"])
     if not rows:
         return f"No error-estimate study in docs/results/estimate/: run `{GENERATE} runs`."
     return table(["case", "quantity", "median estimate", "median bound", "median true error",
@@ -1033,7 +1049,7 @@ def spreads_table(r: Results) -> str:
     """The typical spreads over starts that single runs of the studied configs report
     (SPREADS, `spotsim.studies.estimate.typical_spread`): per quantity its median [p10, p90],
     smallest and largest value and chance range."""
-    from spotsim.studies.estimate import QUANTITIES
+    from spotsim.studies.estimate import QUANTITIES, chance_range
 
     if not SPREADS.exists():
         return f"No typical spreads: run `{GENERATE} spreads`."
@@ -1048,7 +1064,7 @@ def spreads_table(r: Results) -> str:
                     continue
                 rows.append([label + (f", {key.replace('_', ' ')}" if key != "grasp" else ""), ESTIMATE_QUANTITIES[q],
                              f"{num(st['median'])} [{num(st['p10'])}, {num(st['p90'])}]",
-                             f"{num(st['min'])} – {num(st['max'])}", num(st["max"] - st["min"]), str(st["count"])])
+                             f"{num(st['min'])} – {num(st['max'])}", num(chance_range(st)), str(st["count"])])
     return table(["case", "quantity", "median [p10, p90]", "smallest – largest", "chance range", "runs"], rows)
 
 

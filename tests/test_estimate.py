@@ -8,14 +8,20 @@ import pytest
 import spotsim
 from spotsim.cli import main
 from spotsim.studies.accuracy import parse_setting
+from spotsim.studies import ensemble as ensemble_module
+from spotsim.studies import estimate as estimate_module
 from spotsim.studies.estimate import (
+    MIN_SPREAD_COUNT,
     QUANTITIES,
+    VALIDATION_SEED,
     companion,
     error_estimate,
     quantities,
     study_spread,
     typical_spread,
     typical_spreads,
+    validate,
+    validation_table,
 )
 
 from conftest import ROOT
@@ -65,8 +71,8 @@ def test_estimate_is_the_difference_to_the_companion():
     assert set(quantities(run)[1]) == set(QUANTITIES)
 
 
-def stats(low, high):
-    return {"median": (low + high) / 2, "p10": low, "p90": high, "min": low, "max": high, "count": 8}
+def stats(low, high, count=MIN_SPREAD_COUNT):
+    return {"median": (low + high) / 2, "p10": low, "p90": high, "min": low, "max": high, "count": count}
 
 
 def test_the_bound_adds_the_chance_range_over_starts_to_the_uncertainty():
@@ -86,6 +92,42 @@ def test_the_bound_adds_the_chance_range_over_starts_to_the_uncertainty():
     assert all(q["bound"] is None for q in second.values())
     alone = error_estimate(run, other)
     assert alone["spread"]["source"] is None and alone["grasps"][0]["peak_force_norm_N"]["bound"] is None
+    few = {"source": "ensemble", "about": "test",
+           "grasps": {"grasp_1": {"peak_force_norm_N": stats(45.0, 55.0, MIN_SPREAD_COUNT - 1)}}}
+    assert error_estimate(run, other, few)["grasps"][0]["peak_force_norm_N"]["bound"] is None  # too few runs
+
+
+class FakeMember:
+    def __init__(self, index, force):
+        self.index, self.summary = index, summary(grasp(0.1, force, 2.0))
+
+
+def test_validation_runs_perturbed_starts_of_its_own_seed_and_counts_the_bound(case_I, monkeypatch):
+    """`validate` asks each ensemble for n + 1 members of its seed and drops member 0 (the
+    unperturbed start, which every seed shares), and counts a true error within the bound
+    (uncertainty + chance range) of the scenario's typical spread."""
+    calls = []
+    forces = {"run": 50.0, "companion": 51.0, "reference": 60.0}  # estimate 1, uncertainty 3, error 10
+
+    def fake_ensemble(scenario, n, seed, workers, progress):
+        integrator = scenario.simulation.integrator
+        kind = ("reference" if integrator.method != "adaptive_euler" else
+                "companion" if integrator.velocity_tol_m_s != case_I.simulation.integrator.velocity_tol_m_s else "run")
+        calls.append((kind, n, seed))
+        return type("E", (), {"members": [FakeMember(i, forces[kind]) for i in range(n)]})()
+
+    monkeypatch.setattr(ensemble_module, "ensemble", fake_ensemble)
+    spread = {"source": "study", "about": "test", "grasps": {"grasp": {"peak_force_norm_N": stats(45.0, 53.0)}}}
+    monkeypatch.setattr(estimate_module, "typical_spread", lambda s: spread)
+    rows = validate(case_I, parse_setting("symplectic_euler:20").apply(case_I), 3, seed=5)
+    assert sorted(calls) == [("companion", 4, 5), ("reference", 4, 5), ("run", 4, 5)]
+    force = [r for r in rows if r["quantity"] == "peak_force_norm_N"]
+    assert [r["member"] for r in force] == [1, 2, 3]
+    assert all(r["bound"] == 3.0 + 8.0 and r["error"] == 10.0 and r["within_bound"] for r in force)
+    assert not any(r["within_uncertainty"] for r in force)
+    table = {q["quantity"]: q for q in validation_table(rows)}
+    assert (table["peak_force_norm_N"]["within_bound"], table["peak_force_norm_N"]["bounded"]) == (3, 3)
+    assert table["peak_torque_norm_Nm"]["within_bound"] is None  # the spread lacks it: no bound
 
 
 def test_a_study_spread_pools_the_run_setting_and_the_reference(case_I):
@@ -116,6 +158,12 @@ def test_each_studied_config_finds_its_typical_spread(name):
         for column in ("residual_norm_mm", "peak_force_norm_N", "peak_torque_norm_Nm"):
             assert by[column]["count"] == 64 and by[column]["min"] <= by[column]["p10"] <= by[column]["max"]
     assert name in {s["scenario"] for s in typical_spreads().values()}
+    dual = len(spread["grasps"]) == 2
+    run = summary(*[grasp(0.01, 100.0, 5.0, centroid=[0.5, 0.0, 0.0] if dual else None)] * (2 if dual else 1))
+    for entry in error_estimate(run, run, spread)["grasps"]:  # every estimated quantity gets its bound
+        assert set(entry) == set(QUANTITIES) if dual else set(entry) == set(QUANTITIES) - {
+            "robot_centroid_displacement_norm_mm"}
+        assert all(q["bound"] is not None and q["bound"] == q["chance"] > 0 for q in entry.values())
 
 
 def test_no_companion_is_said_not_estimated():
@@ -145,7 +193,7 @@ def test_estimate_study_compares_each_start_with_the_reference(tmp_path, capsys)
                  "--duration", "1.5", "--quiet", "--out", str(out)])
     assert code == 0
     rows = list(csv.DictReader((out / "estimate.csv").open()))
-    assert {r["member"] for r in rows} == {"1", "2"}  # perturbed starts only: member 0 is in the study
+    assert {r["member"] for r in rows} == {"1", "2"}  # perturbed starts only: member 0 is every seed's
     for r in rows:
         if r["error"]:
             error, estimate = float(r["error"]), float(r["estimate"])
@@ -155,3 +203,18 @@ def test_estimate_study_compares_each_start_with_the_reference(tmp_path, capsys)
         assert r["bound"] == r["within_bound"] == ""  # a shortened run is not the studied scenario
     text = capsys.readouterr().out
     assert "error within the estimate for" in text and "no bound" in text
+
+
+def test_a_run_takes_the_studys_spread_where_there_is_one_else_its_ensembles(case_I, monkeypatch):
+    """`estimate` gives a studied scenario the study's spread (64 runs, validated), another
+    scenario its ensemble's, and a lone run of another scenario none."""
+    import spotsim.sim.run as run_module
+
+    monkeypatch.setattr(run_module, "simulate", lambda s, source: type("R", (), {"summary": summary(grasp(0.1))})())
+    ens = type("E", (), {"members": [None] * 20, "seed": 0,
+                         "statistics": {"grasp": {"peak_force_norm_N": stats(40.0, 50.0, 20)}}})()
+    other = spotsim.replace(case_I, end_effector={"closing_speed_m_s": 0.02})
+    assert estimate_module.estimate(case_I, summary(grasp(0.1)), ensemble=ens)["spread"]["source"] == "study"
+    mine = estimate_module.estimate(other, summary(grasp(0.1)), ensemble=ens)
+    assert mine["spread"]["source"] == "ensemble" and mine["grasps"][0]["peak_force_norm_N"]["chance"] == 10.0
+    assert estimate_module.estimate(other, summary(grasp(0.1)))["spread"]["source"] is None

@@ -377,9 +377,10 @@ def grasp_key(g: int, n_grasps: int) -> str:
 
 def headline_statistics(rows: list[dict], n_grasps: int, columns=None) -> dict:
     """Per grasp (`grasp_key`), the `statistics` of each HEADLINE quantity in `columns`
-    (default: the first row's) over members-table rows (`member_row`, or members.csv's rows
-    read back) of members that ran."""
+    (default: the first row's) over the members that ran among members-table rows
+    (`member_row`, or members.csv's rows read back)."""
     columns = rows[0] if columns is None and rows else columns or ()
+    rows = [r for r in rows if r["status"] not in NOT_RUN]
     out = {}
     for g in range(n_grasps):
         p = grasp_prefix(g, n_grasps)
@@ -398,7 +399,7 @@ def summarise(e: EnsembleResult) -> dict:
     for m in e.members:
         statuses[m.status] = statuses.get(m.status, 0) + 1
     ran = [r for r in rows if r["status"] not in NOT_RUN]
-    stats, classes = headline_statistics(ran, n_grasps, columns=rows[0]), {}
+    stats, classes = headline_statistics(rows, n_grasps), {}
     for g in range(n_grasps):
         p = grasp_prefix(g, n_grasps)
         key = grasp_key(g, n_grasps)

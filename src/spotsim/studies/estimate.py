@@ -37,7 +37,7 @@ from importlib import resources
 from typing import NamedTuple
 
 from ..scenario import fingerprint, modules_of
-from .ensemble import NOT_RUN, grasp_key, headline_statistics
+from .ensemble import grasp_key, headline_statistics
 from .runs import step_scaled
 
 
@@ -55,8 +55,11 @@ QUANTITIES = {
 }
 #: The studied scenarios' typical spreads over starts, by `scenario.fingerprint` (package data).
 TYPICAL_SPREAD = "typical_spread.json"
-#: What a spread reports of each quantity (`ensemble.statistics`).
-SPREAD_KEYS = ("median", "p10", "p90", "min", "max", "count")
+#: The fewest runs whose range is taken as a quantity's chance range: fewer give no bound.
+MIN_SPREAD_COUNT = 16
+#: The seed of `spotsim study estimate`'s starts: not the ensemble accuracy studies' (0), whose
+#: spreads the bound uses, nor the one that confirmed the default tolerance (1).
+VALIDATION_SEED = 2
 #: Roache's factor of safety for a grid convergence index from two grids.
 GCI_SAFETY = 3.0
 METHOD = ("estimate: Richardson, first order: |Q(run) - Q(companion)|, the companion's steps twice as long "
@@ -104,11 +107,11 @@ def error_estimate(summary: dict, companion_summary: dict | None, spread: dict |
             estimate = None if value is None or other is None else abs(value - other)
             uncertainty = None if estimate is None else GCI_SAFETY * estimate
             st = spreads.get(QUANTITIES[name].column)
-            chance = st["max"] - st["min"] if st and st["count"] else None
+            chance = chance_range(st)
             entry[name] = {"value": value, "companion": other, "estimate": estimate,
                            "estimate_rel": None if estimate is None or not value else estimate / abs(value),
                            "uncertainty": uncertainty, "distribution": QUANTITIES[name].distribution,
-                           "spread": {k: st[k] for k in SPREAD_KEYS} if chance is not None else None,
+                           "spread": dict(st) if chance is not None else None,
                            "chance": chance,
                            "bound": None if uncertainty is None or chance is None else uncertainty + chance}
         grasps.append(entry)
@@ -124,18 +127,25 @@ def error_estimate(summary: dict, companion_summary: dict | None, spread: dict |
                      "start alike: the run lies within the bound of the converged run from its own start")}
 
 
+def chance_range(stats: dict | None) -> float | None:
+    """A quantity's chance range over starts, largest minus smallest, from its `statistics`
+    over at least MIN_SPREAD_COUNT runs (else None: too few to say)."""
+    return stats["max"] - stats["min"] if stats and stats["count"] >= MIN_SPREAD_COUNT else None
+
+
 def ensemble_spread(e) -> dict:
-    """The spread over an ensemble's own members (`ensemble.EnsembleResult`)."""
-    return {"source": "ensemble", "about": f"this ensemble's {len(e.members)} members (seed {e.seed})",
+    """The spread over an ensemble's own members (`ensemble.EnsembleResult`): its run setting
+    only, each quantity over the members whose grasp completed."""
+    return {"source": "ensemble", "about": f"this ensemble's {len(e.members)} members (seed {e.seed}), those "
+                                           f"whose grasp completed (the bound needs {MIN_SPREAD_COUNT})",
             "grasps": e.statistics}
 
 
 def study_spread(scenario, run_rows: list[dict], reference_rows: list[dict], about: str) -> dict:
     """A studied scenario's typical spread: the statistics over its members (members-table
     rows) at its own setting and at the converged reference, pooled."""
-    rows = [r for r in run_rows + reference_rows if r["status"] not in NOT_RUN]
     columns = {q.column for q in QUANTITIES.values()}
-    stats = headline_statistics(rows, len(modules_of(scenario)))
+    stats = headline_statistics(run_rows + reference_rows, len(modules_of(scenario)))
     return {"source": "study", "about": about, "scenario": scenario.name,
             "grasps": {g: {c: st for c, st in by.items() if c in columns} for g, by in stats.items()}}
 
@@ -150,20 +160,21 @@ def typical_spread(scenario) -> dict | None:
     return typical_spreads().get(fingerprint(scenario))
 
 
-def estimate(scenario, summary: dict, source: str = "<scenario>", spread: dict | None = None) -> dict:
+def estimate(scenario, summary: dict, source: str = "<scenario>", ensemble=None) -> dict:
     """Run the companion of `scenario`, whose run gave `summary`, and return the error
-    estimate entry for that summary, with `spread` (default: the study's, `typical_spread`)."""
+    estimate entry for that summary. Its spread: the study's (`typical_spread`) where the
+    scenario was studied, else that of the `ensemble` the run belongs to, if any."""
     from ..sim.run import simulate
 
     s = companion(scenario)
-    return error_estimate(summary, None if s is None else simulate(s, source=source).summary,
-                          spread or typical_spread(scenario))
+    spread = typical_spread(scenario) or (ensemble_spread(ensemble) if ensemble is not None else None)
+    return error_estimate(summary, None if s is None else simulate(s, source=source).summary, spread)
 
 
 # ---------------------------------------------------------------------------- validation
 
 
-def validate(scenario, reference, n: int = 8, *, seed: int = 1, workers: int | None = None,
+def validate(scenario, reference, n: int = 8, *, seed: int = VALIDATION_SEED, workers: int | None = None,
              progress: bool = False) -> list[dict]:
     """Check the estimate against a converged reference from n perturbed starts (members 1..n
     of `ensemble`'s, seeded; member 0, the unperturbed start, is every seed's, so it is among
@@ -212,7 +223,7 @@ def validation_table(rows: list[dict]) -> list[dict]:
         if not group:
             continue
         bounded = [r for r in group if r["within_bound"] is not None]
-        out.append({"grasp": key[0], "quantity": key[1], "members": len(group),
+        out.append({"grasp": key[0], "quantity": key[1], "members": len(group), "bounded": len(bounded),
                     "within": sum(r["within"] for r in group),
                     "within_uncertainty": sum(r["within_uncertainty"] for r in group),
                     "within_bound": sum(r["within_bound"] for r in bounded) if bounded else None,
