@@ -825,7 +825,8 @@ def spot_amplitudes_table(r: Results) -> str:
     lines = []
     if growing and len(offsets) > 1:
         ratios = sorted(growing.values())
-        lines.append(f"From {num(offsets[0], 2)} to {num(offsets[-1], 2)} mm of offset (×{num(offsets[-1] / offsets[0])}), "
+        ratio = num(offsets[-1] / offsets[0])
+        lines.append(f"From {num(offsets[0], 2)} to {num(offsets[-1], 2)} mm of offset (×{ratio}), "
                      f"{'every' if not others else len(growing)} amplitude{'' if not others else 's'} of the table "
                      f"grow{'s' if not others else ''} with it, by ×{num(ratios[0])} to ×{num(ratios[-1])}.")
     lines += [f"Not monotonic in the offset: {x}." for x in others]
