@@ -5,8 +5,9 @@
 Table 5 lists body 4's moments of inertia along its axes, not its products, so they are read
 here as moments along the FDR base's axes (as principal moments no placement can give them:
 `tests/test_robot.py`). The FDR (body 3) stays fitted to Table 5 with its base's inertia
-physical (positive, triangle inequality). Free: each UR3's mount point on the base (the arms
-keep Table 6's angles and their mounting orientation), the base's centroid, and, in the second
+physical: positive, and at least as thick as a uniform box BASE_MIN_SIDE_M thick. Free: each
+UR3's mount point on the base (the arms keep Table 6's angles and their mounting
+orientation), the base's centroid, and, in the second
 search, TM-1's centroid within TM-1MOVE (m) per base axis of its shipped place (150 mm behind its
 groove frame). Printed: the composite's moments at the shipped geometry, then for each search
 the closest it gets (SLSQP from STARTS starts, least squared relative residual) and the
@@ -52,6 +53,8 @@ from spotsim.build.robot import (
 ARMS = ("ur3", "ur5", "ur10")
 
 WELDED = {"tm1_joint_type": "fixed", "tm1_parent": "ee1_grasp"}
+#: The base's thinnest side, as a uniform box, m: its inertia must be at least that thick.
+BASE_MIN_SIDE_M = 0.2
 
 
 def base_link(arm: str = ARM) -> tuple[float, np.ndarray]:
@@ -85,13 +88,13 @@ def arm_parts(args: dict) -> dict[str, tuple[float, np.ndarray, np.ndarray]]:
     return parts
 
 
-def groove(args: dict) -> np.ndarray:
-    """Where EE-1 holds TM-1's groove (the ee1_grasp frame), in the base frame, m."""
+def groove(args: dict) -> pin.SE3:
+    """Where EE-1 holds TM-1's groove (the ee1_grasp frame), in the base frame."""
     model = pin.buildModelFromXML(assets.compile_xacro(DUAL_ARM_XACRO, {**MASSLESS_BASE, **args}))
     data = model.createData()
     pin.framesForwardKinematics(model, data, arms_at(model))
     to_base = data.oMi[model.getJointId("fdr_free_flyer")].inverse()
-    return (to_base * data.oMf[model.getFrameId("ee1_grasp")]).translation.copy()
+    return to_base * data.oMf[model.getFrameId("ee1_grasp")]
 
 
 def uniform_reach(m: float, inertia: np.ndarray) -> float:
@@ -139,9 +142,26 @@ class Geometry:
         I4 = self.T3 + parallel_axis(M3, c3 - c4) + I1 + parallel_axis(m1, c1 - c4)
         return np.diag(I4) / self.T4 - 1, np.linalg.eigvalsh(I_b), float(np.linalg.norm(c1 - c3))
 
+    def base_margins(self, x) -> np.ndarray:
+        """The base's inertia eigenvalues and its triangle-inequality slack less that of a uniform
+        box whose thinnest side is BASE_MIN_SIDE_M (m_b t^2 / 6): all >= 0 for a base at least
+        that thick (a slack of 0 is a flat plate)."""
+        e = self.evaluate(x)[1]
+        m_b = TABLE5[3].mass - sum(m for m, _, _ in self.arms.values()) - 2 * self.base_link[0]
+        return np.r_[e, e.sum() - 2 * e.max() - m_b * BASE_MIN_SIDE_M ** 2 / 6]
+
     def tm1_from_groove(self, x) -> float:
         """TM-1's centroid's distance from its groove (which moves with arm 1's mount), m."""
-        return float(np.linalg.norm(self.tm1[1] + x[9:12] - self.groove))
+        return float(np.linalg.norm(self.tm1[1] + x[9:12] - self.groove.translation))
+
+    def layout(self, x) -> str:
+        """The geometry x as the XACRO's and the scenario's values, mm: the arm mounts, the base's
+        centroid and TM-1's centroid in its groove frame (`tm1.com_mm`)."""
+        mm = lambda v: "[" + ", ".join(f"{round(1e3 * c):g}" for c in v) + "]"  # noqa: E731
+        tm1 = self.groove.rotation.T @ (self.tm1[1] + x[9:12] - self.groove.translation)
+        mounts = {side: mm(self.mounts[side] + x[k:k + 3]) for side, k in (("arm1_", 0), ("arm2_", 3))}
+        return (f"arm1_mount_mm {mounts['arm1_']}, arm2_mount_mm {mounts['arm2_']}, base_com_mm {mm(x[6:9])}, "
+                f"tm1.com_mm {mm(tm1)}")
 
 
 def arms_own(g: Geometry) -> np.ndarray:
@@ -161,9 +181,7 @@ def arms_own(g: Geometry) -> np.ndarray:
 def closest(g: Geometry, starts: int, tm1_move: float, seed: int = 0):
     """The least squared residual of body 4's moments with a physical base, over `starts`
     SLSQP starts; TM-1's centroid moves at most tm1_move (m) per axis."""
-    def physical(x):
-        e = g.evaluate(x)[1]
-        return np.r_[e, e.sum() - 2 * e.max()]
+    physical = g.base_margins
 
     cons = [{"type": "ineq", "fun": physical}]
     bounds = [(None, None)] * 9 + [(-tm1_move, tm1_move)] * 3
@@ -200,9 +218,7 @@ def nearest_groove(g: Geometry, starts: int, seed: int = 0):
     """The geometry that meets body 4 with a physical base and TM-1's centroid as near its
     groove as any of `starts` SLSQP starts finds (mounts, base centroid and TM-1's centroid
     free), or None."""
-    def physical(x):
-        e = g.evaluate(x)[1]
-        return np.r_[e, e.sum() - 2 * e.max()]
+    physical = g.base_margins
 
     meet = [{"type": "ineq", "fun": physical}, {"type": "eq", "fun": lambda x: g.evaluate(x)[0]}]
     rng = np.random.default_rng(seed)
@@ -257,6 +273,7 @@ def main() -> None:
           "| TM-1 centroid to groove (m) |")
     print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
     searches = (("mounts and base centroid", 0.0), (f"and TM-1's centroid within ±{args.tm1_move} m", args.tm1_move))
+    layouts = []
     for name, move in (*searches, ("and TM-1's centroid free: nearest its groove", None)):
         best = closest(g, args.starts, move) if move is not None else nearest_groove(g, args.starts)
         if best is None:
@@ -268,6 +285,8 @@ def main() -> None:
             name += " (no physical base: the start nearest one)"
         print(f"| {name} | {np.round(100 * r, 1) + 0.0} | {x[0:3]} | {x[3:6]} | {x[6:9]} | {x[9:12]} "
               f"| {np.round(e, 2)} | {D:.3f} | {g.tm1_from_groove(best.x):.3f} |")
+        layouts.append(f"{name}: {g.layout(best.x)}")
+    print("\nAs the geometry's values:\n\n" + "\n".join(f"- {line}" for line in layouts))
 
 
 if __name__ == "__main__":

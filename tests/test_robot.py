@@ -6,7 +6,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from spotsim.build import assets
-from spotsim.build.robot import DUAL_ARM_XACRO, TABLE5, TABLE6, fit_base, locked_robot
+import spotsim
+from spotsim.build.robot import DUAL_ARM_XACRO, LAYOUTS, TABLE5, TABLE6, fit_base, locked_robot
+from spotsim.errors import ScenarioError
+from spotsim.scenario import LAYOUT_TM1_COM_MM
 
 #: The issue's bound on the composite's mass and inertia against Table 5 body 3.
 TABLE5_RTOL = 0.01
@@ -36,6 +39,54 @@ def test_xacro_base_defaults_are_the_fitted_base():
     defaults = assets.xacro_arg_defaults(DUAL_ARM_XACRO)
     for key, value in fitted.items():
         assert defaults[key] == pytest.approx(value, rel=1e-5, abs=1e-6)
+
+
+#: What fixes a layout's base: its arm mounts and centroid; the rest is fitted to them.
+GEOMETRY = ("arm1_mount_mm", "arm2_mount_mm", "base_com_mm")
+
+
+@pytest.mark.parametrize("layout", list(LAYOUTS))
+def test_each_layout_is_table_5_body_3_with_its_fitted_base(layout):
+    """Each layout's base is what fit_base computes for its mounts and centroid (6 digits),
+    and the robot, arms locked at Table 6, is body 3: its mass and principal moments within
+    1 %, products of inertia within 1 % of its smallest moment."""
+    args = LAYOUTS[layout]
+    fitted = fit_base({k: v for k, v in args.items() if k in GEOMETRY})
+    given = {**assets.xacro_arg_defaults(DUAL_ARM_XACRO), **args}
+    for key, value in fitted.items():
+        assert given[key] == pytest.approx(value, rel=1e-5, abs=1e-6)
+    model, j = locked_robot(assets.compile_xacro(DUAL_ARM_XACRO, args))
+    robot, target = model.inertias[j], TABLE5[3]
+    assert robot.mass == pytest.approx(target.mass, rel=TABLE5_RTOL)
+    assert np.diag(robot.inertia) == pytest.approx(target.inertia, rel=TABLE5_RTOL)
+    off = robot.inertia - np.diag(np.diag(robot.inertia))
+    assert np.abs(off).max() <= TABLE5_RTOL * min(target.inertia)
+
+
+def test_the_table5_body4_layout_makes_the_composite_table_5_body_4():
+    """With the table5_body4 layout and TM-1's centroid where it was fitted, TM-1 welded to
+    EE-1 makes the FDR + TM-1 composite Table 5 body 4: mass and moments along the base's
+    axes within 1 %. The compact layout misses them by more than a fifth."""
+    def composite(layout):
+        com = LAYOUT_TM1_COM_MM[layout] or (150.0, 0.0, 0.0)
+        args = {**LAYOUTS[layout], "tm1_joint_type": "fixed", "tm1_parent": "ee1_grasp",
+                **{f"tm1_com_{axis}_mm": c for axis, c in zip("xyz", com, strict=True)}}
+        model, j = locked_robot(assets.compile_xacro(DUAL_ARM_XACRO, args))
+        return model.inertias[j]
+
+    body4, target = composite("table5_body4"), TABLE5[4]
+    assert body4.mass == pytest.approx(target.mass, rel=TABLE5_RTOL)
+    assert np.diag(body4.inertia) == pytest.approx(target.inertia, rel=TABLE5_RTOL)
+    assert np.all(np.diag(composite("compact").inertia) < 0.8 * np.array(target.inertia))
+
+
+def test_the_table5_body4_layout_needs_its_tm1_centroid():
+    """A scenario with robot.layout table5_body4 and TM-1's centroid elsewhere is refused."""
+    config = assets.CONFIG_DIR / "dual_arm_sequential.yaml"
+    with pytest.raises(ScenarioError, match="tm1.com_mm"):
+        spotsim.load_scenario(config, ["robot.layout=table5_body4"])
+    ok = spotsim.load_scenario(config, ["robot.layout=table5_body4", "tm1.com_mm=[124, -198, 249]"])
+    assert ok.robot.layout == "table5_body4"
 
 
 def test_table_6_angles_are_within_the_ur3_limits():

@@ -249,9 +249,22 @@ TABLE6_ARM1 = (0.556, 0.481, 1.41, 2.40e-7, 1.25, 0.555)
 TABLE6_ARM2 = (-0.511, 0.998, 0.479, 4.00e-6, 1.66, -0.511)
 
 
+#: The robot's layouts (`spotsim.build.robot.LAYOUTS`): `compact`, the arms' mounts on a 400 mm
+#: base whose centroid is its centre, fitted to Table 5 body 3 alone; `table5_body4`, the mounts,
+#: the base's centroid and TM-1's centroid fitted so that the FDR and the FDR + TM-1 composite
+#: both match Table 5 (bodies 3 and 4, the latter read as moments along the base's axes). The
+#: latter needs TM-1's centroid here, in its groove frame, mm: 0.341 m from its groove, which
+#: a uniform box with TM-1's mass and inertia cannot reach (benchmarks/table5_composite.py).
+LAYOUT_TM1_COM_MM = {"compact": None, "table5_body4": (124.0, -198.0, 249.0)}
+
+
 @dataclass(frozen=True, kw_only=True)
 class Robot:
     arm_model: str = key("ur3", _choice("ur3"), "6-DOF arms from example-robot-data")
+    layout: str = key("compact", _choice(*LAYOUT_TM1_COM_MM),
+                      "compact (the base fitted to Table 5 body 3; TM-1 compact) or table5_body4 (the mounts and "
+                      "the base's centroid fitted so that the FDR + TM-1 composite is Table 5 body 4 too; needs "
+                      "tm1.com_mm = [124, -198, 249], TM-1's groove on a standoff: docs/validation.md)")
     arm1_joint_angles_rad: tuple[float, float, float, float, float, float] = key(
         TABLE6_ARM1, doc="arm 1 locked at Table 6's joint states")
     arm2_joint_angles_rad: tuple[float, float, float, float, float, float] = key(
@@ -452,6 +465,11 @@ def _inertia_problems(section: str, m: Module, where: str) -> list[str]:
 
 def _cross_checks(s: Scenario, where: str) -> list[str]:
     problems = _budget(s, where)
+    if isinstance(s, DualArmScenario):
+        com = LAYOUT_TM1_COM_MM[s.robot.layout]
+        if com is not None and tuple(s.tm1.com_mm) != com:
+            problems.append(f"{where}: tm1.com_mm = {_fmt(list(s.tm1.com_mm))}: robot.layout = {s.robot.layout} "
+                            f"is fitted with TM-1's centroid at {_fmt(list(com))} mm in its groove frame")
     for section, module in modules_of(s).items():
         problems += _inertia_problems(section, module, where)
     integrator = s.simulation.integrator

@@ -19,6 +19,17 @@ FINGERS = ("ee1_finger_upper", "ee1_finger_lower", "ee2_finger_upper", "ee2_fing
 TABLE6 = {"arm1_": TABLE6_ARM1, "arm2_": TABLE6_ARM2}
 
 
+#: The robot's layouts (scenario `robot.layout`, `scenario.LAYOUT_TM1_COM_MM`) as XACRO
+#: arguments beyond the defaults. table5_body4: the least-change fit of `python
+#: benchmarks/table5_composite.py` with TM-1's centroid within 0.2 m (mm, rounded), and its
+#: base fitted to Table 5 body 3 (`fit_base`, 6 digits); its mounts reach past the default
+#: 400 mm base, which is drawn 500 mm.
+LAYOUTS = {
+    "compact": {},
+    "table5_body4": {"arm1_mount_mm": "-6 213 183", "arm2_mount_mm": "124 -160 218", "base_com_mm": "82 -53 -1",
+                     "base_size_mm": 500, "base_mass_kg": 24.977, "base_ixx": 1.23739, "base_iyy": 2.31562,
+                     "base_izz": 1.71921, "base_ixy": -0.355998, "base_ixz": -0.0399275, "base_iyz": 0.330329},
+}
 #: XACRO arguments that leave the base (nearly) massless: the robot's other parts alone.
 MASSLESS_BASE = {"base_mass_kg": 1e-9, "base_ixx": 1e-12, "base_iyy": 1e-12, "base_izz": 1e-12,
                  "base_ixy": 0, "base_ixz": 0, "base_iyz": 0}
@@ -67,23 +78,27 @@ def composite(inertia: pin.Inertia) -> tuple[float, np.ndarray, np.ndarray]:
 
 
 def fit_base(args: dict | None = None, arm: str = ARM, physical: bool = True) -> dict[str, float]:
-    """The base mass and inertia (about the base origin, base axes) that give the locked robot
+    """The base mass and inertia (about its centroid, base axes) that give the locked robot
     Table 5 body 3's mass and inertia about its centroid (products of inertia zero).
 
-    The base's centroid is its frame's origin. arm: the arms' model (the XACRO's arm_model).
-    Returns the XACRO arguments base_mass_kg and base_i**; raises ValueError if no physical
-    base can do it (unless physical is False: then the base returned may be unphysical).
+    The base's centroid is the XACRO's base_com_mm (in `args`, else its default, the base
+    frame's origin). arm: the arms' model (the XACRO's arm_model). Returns the XACRO arguments
+    base_mass_kg and base_i**; raises ValueError if no physical base can do it (unless physical
+    is False: then the base returned may be unphysical).
     """
     for prefix in TABLE6:
         assets.prefixed_arm(arm, prefix)
-    probe = {**(args or {}), "arm_model": arm, **MASSLESS_BASE}
+    args = args or {}
+    com = args.get("base_com_mm", assets.xacro_arg_defaults(DUAL_ARM_XACRO)["base_com_mm"])
+    c_b = 1e-3 * np.array([float(x) for x in str(com).split()])
+    probe = {**args, "arm_model": arm, **MASSLESS_BASE}
     model, j = locked_robot(assets.compile_xacro(DUAL_ARM_XACRO, probe))
     m_r, c_r, I_r = composite(model.inertias[j])
     target = TABLE5[3]
     m_b = target.mass - m_r
-    c = m_r * c_r / target.mass  # the robot's centroid, with the base's at the origin
+    c = (m_r * c_r + m_b * c_b) / target.mass  # the robot's centroid
 
-    I_b = np.diag(target.inertia) - I_r - parallel_axis(m_r, c_r - c) - parallel_axis(m_b, -c)
+    I_b = np.diag(target.inertia) - I_r - parallel_axis(m_r, c_r - c) - parallel_axis(m_b, c_b - c)
     eig = np.linalg.eigvalsh(I_b)
     if physical and (m_b <= 0 or eig.min() <= 0 or 2 * eig.max() > eig.sum()):
         raise ValueError(f"no physical base gives Table 5 body 3: base mass {m_b:.3f} kg, "

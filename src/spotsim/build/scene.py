@@ -71,9 +71,10 @@ def scene_spec(s, welded: dict | None = None) -> SceneSpec:
         return SceneSpec(assets.URDF_DIR / "single_arm_scene.urdf.xacro", args, locked, checked,
                          (("EE", "ee_"),), (("TM", "tm_", s.module, 0),), ((0, 0),))
     if isinstance(s, DualArmScenario):
-        from .robot import ARM_JOINTS
+        from .robot import ARM_JOINTS, LAYOUTS
 
-        args = {**geometry_args(s.geometry), **module_args("tm1_", s.tm1), **module_args("tm2_", s.tm2)}
+        args = {**geometry_args(s.geometry), **module_args("tm1_", s.tm1), **module_args("tm2_", s.tm2),
+                **LAYOUTS[s.robot.layout]}
         for k, (xyz, rpy) in welded.items():
             prefix = ("tm1_", "tm2_")[k]
             args.update({f"{prefix}joint_type": "fixed", f"{prefix}parent": f"ee{k + 1}_grasp",
