@@ -24,7 +24,7 @@ mounts; the parts reproduce the shipped composite's moments (the first line).
 --arm puts another Universal Robots model from example-robot-data (ur5, ur10) in place of
 the UR3 (the XACRO's arm_model), the base refitted to Table 5 body 3 with what mass is left;
 where none is left the searches are not run, and where no start finds a physical base the row
-gives the start that comes nearest one (the largest of its base's constraint violations).
+says so.
 """
 
 from __future__ import annotations
@@ -180,27 +180,23 @@ def arms_own(g: Geometry) -> np.ndarray:
 
 def closest(g: Geometry, starts: int, tm1_move: float, seed: int = 0):
     """The least squared residual of body 4's moments with a physical base, over `starts`
-    SLSQP starts; TM-1's centroid moves at most tm1_move (m) per axis."""
+    SLSQP starts (None if none finds one); TM-1's centroid moves at most tm1_move (m) per
+    axis."""
     physical = g.base_margins
 
     cons = [{"type": "ineq", "fun": physical}]
     bounds = [(None, None)] * 9 + [(-tm1_move, tm1_move)] * 3
     rng = np.random.default_rng(seed)
-    found, unphysical = [], []
+    found = []
     for k in range(starts):
         x0 = np.zeros(12) if k == 0 else np.r_[rng.normal(0, 0.5, 9), rng.uniform(-tm1_move, tm1_move, 3)]
         res = minimize(lambda x: (lambda r: r @ r)(g.evaluate(x)[0]), x0, constraints=cons, bounds=bounds,
                        method="SLSQP", options={"maxiter": 1000, "ftol": 1e-12})
         if np.all(physical(res.x) >= -1e-9):
             found.append(res)
-        else:
-            unphysical.append(res)
-    if not found:  # the start nearest a physical base
-        nearest = min(unphysical, key=lambda r: -physical(r.x).min())
-        nearest.physical = False
-        return nearest
+    if not found:
+        return None
     best = min(found, key=lambda r: r.fun)
-    best.physical = True
     # where body 4 is met: the least change of the shipped geometry that meets it, from every
     # start that met it
     meet = cons + [{"type": "eq", "fun": lambda x: g.evaluate(x)[0]}]
@@ -208,10 +204,7 @@ def closest(g: Geometry, starts: int, tm1_move: float, seed: int = 0):
                       options={"maxiter": 1000}) for r in found if r.fun < 1e-10]
     least = [r for r in least if r.success and np.all(physical(r.x) >= -1e-6)
              and np.abs(g.evaluate(r.x)[0]).max() < 1e-6]
-    if least:
-        best = min(least, key=lambda r: r.fun)
-        best.physical = True
-    return best
+    return min(least, key=lambda r: r.fun) if least else best
 
 
 def nearest_groove(g: Geometry, starts: int, seed: int = 0):
@@ -229,11 +222,7 @@ def nearest_groove(g: Geometry, starts: int, seed: int = 0):
                      options={"maxiter": 2000})
         if r.success and np.abs(g.evaluate(r.x)[0]).max() < 1e-6 and physical(r.x).min() >= -1e-6:
             found.append(r)
-    if found:
-        best = min(found, key=lambda r: r.fun)
-        best.physical = True
-        return best
-    return None
+    return min(found, key=lambda r: r.fun) if found else None
 
 
 def main() -> None:
@@ -277,16 +266,16 @@ def main() -> None:
     for name, move in (*searches, ("and TM-1's centroid free: nearest its groove", None)):
         best = closest(g, args.starts, move) if move is not None else nearest_groove(g, args.starts)
         if best is None:
-            print(f"| {name} | none meets body 4 with a physical base | | | | | | | |")
+            print(f"| {name} | no start finds a physical base{'' if move is not None else ' that meets body 4'} "
+                  "| | | | | | | |")
             continue
         r, e, D = g.evaluate(best.x)
         x = np.round(best.x, 3) + 0.0
-        if not best.physical:
-            name += " (no physical base: the start nearest one)"
         print(f"| {name} | {np.round(100 * r, 1) + 0.0} | {x[0:3]} | {x[3:6]} | {x[6:9]} | {x[9:12]} "
               f"| {np.round(e, 2)} | {D:.3f} | {g.tm1_from_groove(best.x):.3f} |")
         layouts.append(f"{name}: {g.layout(best.x)}")
-    print("\nAs the geometry's values:\n\n" + "\n".join(f"- {line}" for line in layouts))
+    if layouts:
+        print("\nAs the geometry's values:\n\n" + "\n".join(f"- {line}" for line in layouts))
 
 
 if __name__ == "__main__":
