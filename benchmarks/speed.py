@@ -63,9 +63,9 @@ def head_commit() -> str:
 
 def measured_at() -> str:
     """Where a benchmark ran: `spotsim COMMIT on CPU, N cores`, COMMIT marked -dirty when
-    tracked files differ from it."""
-    dirty = subprocess.run(["git", "-C", str(ROOT), "status", "--porcelain", "--untracked-files=no"],
-                           capture_output=True, text=True).stdout.strip()
+    tracked files other than the results (docs/results/) differ from it."""
+    dirty = subprocess.run(["git", "-C", str(ROOT), "status", "--porcelain", "--untracked-files=no", "--", ".",
+                            ":!docs/results"], capture_output=True, text=True).stdout.strip()
     return f"spotsim {head_commit()}{'-dirty' if dirty else ''} on {cpu_name()}, {os.cpu_count()} cores"
 
 
