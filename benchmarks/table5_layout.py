@@ -21,7 +21,7 @@ import numpy as np
 import spotsim
 from speed import measured_at
 from spotsim.build import assets
-from spotsim.build.robot import DUAL_ARM_XACRO, LAYOUTS, TABLE5, TABLE6, locked_robot
+from spotsim.build.robot import LAYOUTS, TABLE5, TABLE6, fdr_inertia
 from spotsim.scenario import LAYOUT_TM1_COM_MM
 from spotsim.studies.ensemble import ensemble
 
@@ -39,14 +39,6 @@ def laid_out(scenario, layout: str):
     """The scenario with the robot in `layout` (and TM-1's centroid where the layout needs it)."""
     com = LAYOUT_TM1_COM_MM[layout]
     return spotsim.replace(scenario, robot={"layout": layout}, **({"tm1": {"com_mm": list(com)}} if com else {}))
-
-
-def composite_moments(layout: str, com_mm) -> np.ndarray:
-    """The FDR + TM-1 composite's moments along the base's axes (TM-1 welded at Table 6), kg m^2."""
-    args = {**LAYOUTS[layout], "tm1_joint_type": "fixed", "tm1_parent": "ee1_grasp",
-            **{f"tm1_com_{axis}_mm": c for axis, c in zip("xyz", com_mm, strict=True)}}
-    model, j = locked_robot(assets.compile_xacro(DUAL_ARM_XACRO, args))
-    return np.diag(model.inertias[j].inertia)
 
 
 def spread(st: dict, digits: int = 3) -> str:
@@ -69,7 +61,7 @@ def main() -> None:
     print("| --- | --- | --- | --- |")
     for layout in LAYOUTS:
         com = tm1_com(layout, dual)
-        I = composite_moments(layout, com)
+        I = np.diag(fdr_inertia(laid_out(dual, layout), with_tm1=True).inertia)
         print(f"| {layout} | {list(com)} | {np.round(I, 3)} | {np.round(100 * (I / TABLE5[4].inertia - 1), 1) + 0.0} |")
 
     print(f"\nDual-arm grasp, ensembles of {args.members} (seed 0): median [p10, p90]; member 0's displacement; "

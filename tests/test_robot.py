@@ -5,9 +5,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from spotsim.build import assets
 import spotsim
-from spotsim.build.robot import DUAL_ARM_XACRO, LAYOUTS, TABLE5, TABLE6, fit_base, locked_robot
+from spotsim.build import assets
+from spotsim.build.robot import DUAL_ARM_XACRO, LAYOUTS, TABLE5, TABLE6, fdr_inertia, fit_base, locked_robot
 from spotsim.errors import ScenarioError
 from spotsim.scenario import LAYOUT_TM1_COM_MM
 
@@ -33,30 +33,31 @@ def test_robot_with_locked_arms_is_table_5_body_3(robot):
     assert np.diag(robot.inertia) == pytest.approx(target.inertia, rel=TABLE5_RTOL)
 
 
-def test_xacro_base_defaults_are_the_fitted_base():
-    """The base mass and inertia written in the XACRO are what fit_base computes (6 digits)."""
-    fitted = fit_base()
-    defaults = assets.xacro_arg_defaults(DUAL_ARM_XACRO)
-    for key, value in fitted.items():
-        assert defaults[key] == pytest.approx(value, rel=1e-5, abs=1e-6)
-
-
 #: What fixes a layout's base: its arm mounts and centroid; the rest is fitted to them.
 GEOMETRY = ("arm1_mount_mm", "arm2_mount_mm", "base_com_mm")
+#: The config of each layout: the robot in it, TM-1's centroid where the layout puts it.
+LAYOUT_CONFIGS = {"compact": "dual_arm_sequential.yaml", "table5_body4": "dual_arm_table5_body4.yaml"}
+
+
+def test_every_layout_has_its_xacro_arguments_and_its_config():
+    """The scenario's layouts (`robot.layout`) are the build's, each with a shipped config."""
+    assert set(LAYOUTS) == set(LAYOUT_TM1_COM_MM) == set(LAYOUT_CONFIGS)
 
 
 @pytest.mark.parametrize("layout", list(LAYOUTS))
 def test_each_layout_is_table_5_body_3_with_its_fitted_base(layout):
-    """Each layout's base is what fit_base computes for its mounts and centroid (6 digits),
-    and the robot, arms locked at Table 6, is body 3: its mass and principal moments within
-    1 %, products of inertia within 1 % of its smallest moment."""
+    """Each layout's base (the XACRO's defaults for `compact`) is what fit_base computes for its
+    mounts and centroid (6 digits), and its config's robot, built as a scenario builds it with
+    the arms at Table 6, is body 3: mass and principal moments within 1 %, products of inertia
+    within 1 % of its smallest moment."""
     args = LAYOUTS[layout]
     fitted = fit_base({k: v for k, v in args.items() if k in GEOMETRY})
     given = {**assets.xacro_arg_defaults(DUAL_ARM_XACRO), **args}
     for key, value in fitted.items():
         assert given[key] == pytest.approx(value, rel=1e-5, abs=1e-6)
-    model, j = locked_robot(assets.compile_xacro(DUAL_ARM_XACRO, args))
-    robot, target = model.inertias[j], TABLE5[3]
+    scenario = spotsim.load_scenario(assets.CONFIG_DIR / LAYOUT_CONFIGS[layout])
+    assert scenario.robot.layout == layout
+    robot, target = fdr_inertia(scenario), TABLE5[3]
     assert robot.mass == pytest.approx(target.mass, rel=TABLE5_RTOL)
     assert np.diag(robot.inertia) == pytest.approx(target.inertia, rel=TABLE5_RTOL)
     off = robot.inertia - np.diag(np.diag(robot.inertia))
@@ -64,15 +65,11 @@ def test_each_layout_is_table_5_body_3_with_its_fitted_base(layout):
 
 
 def test_the_table5_body4_layout_makes_the_composite_table_5_body_4():
-    """With the table5_body4 layout and TM-1's centroid where it was fitted, TM-1 welded to
-    EE-1 makes the FDR + TM-1 composite Table 5 body 4: mass and moments along the base's
-    axes within 1 %. The compact layout misses them by more than a fifth."""
+    """In config/dual_arm_table5_body4.yaml, TM-1 welded to EE-1 makes the FDR + TM-1 composite
+    Table 5 body 4: mass and moments along the base's axes within 1 %. The compact layout's
+    config misses them by more than a fifth."""
     def composite(layout):
-        com = LAYOUT_TM1_COM_MM[layout] or (150.0, 0.0, 0.0)
-        args = {**LAYOUTS[layout], "tm1_joint_type": "fixed", "tm1_parent": "ee1_grasp",
-                **{f"tm1_com_{axis}_mm": c for axis, c in zip("xyz", com, strict=True)}}
-        model, j = locked_robot(assets.compile_xacro(DUAL_ARM_XACRO, args))
-        return model.inertias[j]
+        return fdr_inertia(spotsim.load_scenario(assets.CONFIG_DIR / LAYOUT_CONFIGS[layout]), with_tm1=True)
 
     body4, target = composite("table5_body4"), TABLE5[4]
     assert body4.mass == pytest.approx(target.mass, rel=TABLE5_RTOL)
@@ -85,8 +82,9 @@ def test_the_table5_body4_layout_needs_its_tm1_centroid():
     config = assets.CONFIG_DIR / "dual_arm_sequential.yaml"
     with pytest.raises(ScenarioError, match="tm1.com_mm"):
         spotsim.load_scenario(config, ["robot.layout=table5_body4"])
-    ok = spotsim.load_scenario(config, ["robot.layout=table5_body4", "tm1.com_mm=[124, -198, 249]"])
-    assert ok.robot.layout == "table5_body4"
+    com = ",".join(f"{c:g}" for c in LAYOUT_TM1_COM_MM["table5_body4"])
+    assert spotsim.load_scenario(config, ["robot.layout=table5_body4", f"tm1.com_mm=[{com}]"]).robot.layout == \
+        "table5_body4"
 
 
 def test_table_6_angles_are_within_the_ur3_limits():

@@ -263,8 +263,9 @@ class Robot:
     arm_model: str = key("ur3", _choice("ur3"), "6-DOF arms from example-robot-data")
     layout: str = key("compact", _choice(*LAYOUT_TM1_COM_MM),
                       "compact (the base fitted to Table 5 body 3; TM-1 compact) or table5_body4 (the mounts and "
-                      "the base's centroid fitted so that the FDR + TM-1 composite is Table 5 body 4 too; needs "
-                      "tm1.com_mm = [124, -198, 249], TM-1's groove on a standoff: docs/validation.md)")
+                      "the base's centroid fitted so that, at Table 6's angles, the FDR + TM-1 composite is Table 5 "
+                      "body 4 too; needs tm1.com_mm = "
+                      f"{list(LAYOUT_TM1_COM_MM['table5_body4'])}, TM-1's groove on a standoff: docs/validation.md)")
     arm1_joint_angles_rad: tuple[float, float, float, float, float, float] = key(
         TABLE6_ARM1, doc="arm 1 locked at Table 6's joint states")
     arm2_joint_angles_rad: tuple[float, float, float, float, float, float] = key(
