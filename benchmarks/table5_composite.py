@@ -124,16 +124,21 @@ class Geometry:
         self.groove = groove(args)
         self.T3 = np.diag(TABLE5[3].inertia)
         self.T4 = np.array(TABLE5[4].inertia)
+        #: what Table 5 body 3 leaves for the base, kg
+        self.base_mass = TABLE5[3].mass - sum(m + self.base_link[0] for m, _, _ in self.arms.values())
 
     def evaluate(self, x):
+        """Body 4's moments relative to Table 5's, the base's inertia eigenvalues and TM-1's
+        distance from the FDR's centroid for the geometry x. The base is fitted to body 3 as
+        `robot.fit_base` fits it, in closed form over the parts, so that the searches need not
+        recompile the XACRO at every evaluation."""
         d = {"arm1_": x[0:3], "arm2_": x[3:6]}
         c_b, move = x[6:9], x[9:12]
         parts = []
         for side, (m, c, I) in self.arms.items():
             parts.append((m, c + d[side], I))
             parts.append((self.base_link[0], self.mounts[side] + d[side], self.base_link[1]))
-        M3 = TABLE5[3].mass
-        m_b = M3 - sum(p[0] for p in parts)
+        M3, m_b = TABLE5[3].mass, self.base_mass
         c3 = (m_b * c_b + sum(p[0] * p[1] for p in parts)) / M3
         I_b = self.T3 - sum(p[2] + parallel_axis(p[0], p[1] - c3) for p in parts) - parallel_axis(m_b, c_b - c3)
         m1, c1, I1 = self.tm1
@@ -147,14 +152,13 @@ class Geometry:
         box whose thinnest side is BASE_MIN_SIDE_M (m_b t^2 / 6): all >= 0 for a base at least
         that thick (a slack of 0 is a flat plate)."""
         e = self.evaluate(x)[1]
-        m_b = TABLE5[3].mass - sum(m for m, _, _ in self.arms.values()) - 2 * self.base_link[0]
-        return np.r_[e, e.sum() - 2 * e.max() - m_b * BASE_MIN_SIDE_M ** 2 / 6]
+        return np.r_[e, e.sum() - 2 * e.max() - self.base_mass * BASE_MIN_SIDE_M ** 2 / 6]
 
     def tm1_from_groove(self, x) -> float:
         """TM-1's centroid's distance from its groove (which moves with arm 1's mount), m."""
         return float(np.linalg.norm(self.tm1[1] + x[9:12] - self.groove.translation))
 
-    def layout(self, x) -> str:
+    def as_values(self, x) -> str:
         """The geometry x as the XACRO's and the scenario's values, mm: the arm mounts, the base's
         centroid and TM-1's centroid in its groove frame (`tm1.com_mm`)."""
         mm = lambda v: "[" + ", ".join(f"{round(1e3 * c):g}" for c in v) + "]"  # noqa: E731
@@ -236,7 +240,7 @@ def main() -> None:
     g = Geometry(args.arm)
     print(f"Measured by `python benchmarks/table5_composite.py{'' if args.arm == ARM else ' --arm ' + args.arm}` "
           f"at {measured_at()}: {args.starts} SLSQP starts per search\n")
-    m_b = TABLE5[3].mass - sum(g.base_link[0] + m for m, _, _ in g.arms.values())
+    m_b = g.base_mass
     shipped = "(the XACRO robot not built: no base mass)"
     if m_b > 0:  # the shipped XACRO's base is fitted to the UR3; other arms get theirs (physical or not)
         base = {} if args.arm == ARM else fit_base(arm=args.arm, physical=False)
@@ -273,7 +277,7 @@ def main() -> None:
         x = np.round(best.x, 3) + 0.0
         print(f"| {name} | {np.round(100 * r, 1) + 0.0} | {x[0:3]} | {x[3:6]} | {x[6:9]} | {x[9:12]} "
               f"| {np.round(e, 2)} | {D:.3f} | {g.tm1_from_groove(best.x):.3f} |")
-        layouts.append(f"{name}: {g.layout(best.x)}")
+        layouts.append(f"{name}: {g.as_values(best.x)}")
     if layouts:
         print("\nAs the geometry's values:\n\n" + "\n".join(f"- {line}" for line in layouts))
 

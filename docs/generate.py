@@ -1050,12 +1050,10 @@ def spreads_table(r: Results) -> str:
     """The typical spreads over starts that single runs of the studied configs report
     (SPREADS, `spotsim.studies.estimate.typical_spread`): per quantity its median [p10, p90],
     smallest and largest value and chance range."""
-    from spotsim.studies.estimate import QUANTITIES, chance_range
+    from spotsim.studies.estimate import QUANTITIES, chance_range, typical_spreads
 
-    if not SPREADS.exists():
-        return f"No typical spreads: run `{GENERATE} spreads`."
     rows = []
-    for entry in json.loads(SPREADS.read_text())["scenarios"].values():
+    for entry in typical_spreads().values():
         name = entry["scenario"]
         label = PAPER_CASES[name]["label"] if name in PAPER_CASES else "dual arm"
         for key, by in entry["grasps"].items():

@@ -7,9 +7,9 @@ import pytest
 
 import spotsim
 from spotsim.cli import main
-from spotsim.studies.accuracy import parse_setting
 from spotsim.studies import ensemble as ensemble_module
 from spotsim.studies import estimate as estimate_module
+from spotsim.studies.accuracy import parse_setting
 from spotsim.studies.estimate import (
     MIN_SPREAD_COUNT,
     QUANTITIES,

@@ -33,6 +33,8 @@ def test_robot_with_locked_arms_is_table_5_body_3(robot):
     assert np.diag(robot.inertia) == pytest.approx(target.inertia, rel=TABLE5_RTOL)
 
 
+#: The base's mass and inertia are written to 6 significant digits (the XACRO's defaults, LAYOUTS).
+SIX_DIGITS = {"rel": 1e-5, "abs": 1e-6}
 #: What fixes a layout's base: its arm mounts and centroid; the rest is fitted to them.
 GEOMETRY = ("arm1_mount_mm", "arm2_mount_mm", "base_com_mm")
 #: The config of each layout: the robot in it, TM-1's centroid where the layout puts it.
@@ -54,7 +56,7 @@ def test_each_layout_is_table_5_body_3_with_its_fitted_base(layout):
     fitted = fit_base({k: v for k, v in args.items() if k in GEOMETRY})
     given = {**assets.xacro_arg_defaults(DUAL_ARM_XACRO), **args}
     for key, value in fitted.items():
-        assert given[key] == pytest.approx(value, rel=1e-5, abs=1e-6)
+        assert given[key] == pytest.approx(value, **SIX_DIGITS)
     scenario = spotsim.load_scenario(assets.CONFIG_DIR / LAYOUT_CONFIGS[layout])
     assert scenario.robot.layout == layout
     robot, target = fdr_inertia(scenario), TABLE5[3]

@@ -575,7 +575,7 @@ def estimate_lines(entry: dict) -> str:
         for name, q in grasp.items():
             label, unit = names[name]
             if q["estimate"] is not None:
-                bound = "" if q.get("bound") is None else f", chance {q['chance']:.3g}, bound {q['bound']:.3g}"
+                bound = "" if q["bound"] is None else f", chance {q['chance']:.3g}, bound {q['bound']:.3g}"
                 cells.append(f"{label} ~{q['estimate']:.3g} (+-{q['uncertainty']:.3g}{bound}) {unit}")
         lines.append(f"    grasp {g + 1}: " + ("; ".join(cells) or "not estimated (incomplete)"))
     return "\n".join(lines)

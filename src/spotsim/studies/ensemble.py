@@ -375,11 +375,11 @@ def grasp_key(g: int, n_grasps: int) -> str:
     return f"grasp_{g + 1}" if n_grasps > 1 else "grasp"
 
 
-def headline_statistics(rows: list[dict], n_grasps: int, columns=None) -> dict:
-    """Per grasp (`grasp_key`), the `statistics` of each HEADLINE quantity in `columns`
-    (default: the first row's) over the members that ran among members-table rows
-    (`member_row`, or members.csv's rows read back)."""
-    columns = rows[0] if columns is None and rows else columns or ()
+def headline_statistics(rows: list[dict], n_grasps: int) -> dict:
+    """Per grasp (`grasp_key`), the `statistics` of each HEADLINE quantity in the first row's
+    columns over the members that ran among members-table rows (`member_row`, or members.csv's
+    rows read back)."""
+    columns = rows[0] if rows else ()
     rows = [r for r in rows if r["status"] not in NOT_RUN]
     out = {}
     for g in range(n_grasps):

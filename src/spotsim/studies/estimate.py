@@ -20,13 +20,14 @@ residual offset is a distribution over microscopic start perturbations (model.md
 its peak force partly so. That share of a run's error is chance, the difference between two
 draws from the distribution over starts, which no companion run can measure. Each quantity's
 `spread` over starts says how large it can be, and its `chance` range (largest minus smallest
-over those starts) bounds it: the `bound` is the uncertainty plus the chance range. The spread
-comes from the run's own ensemble (`spotsim run --ensemble N`, whose member 0 is estimated),
-or, for a single run of a scenario that the ensemble accuracy study ran, from that study: its
-members at the run's own setting and at the converged reference, pooled (TYPICAL_SPREAD,
-written by `python docs/generate.py spreads`). A scenario nobody studied has no spread and no
-bound; its ensemble measures them. `spotsim study estimate` counts how often the true error
-lies within the estimate, the uncertainty and the bound.
+over those starts) bounds it: the `bound` is the uncertainty plus the chance range. For a
+scenario that the ensemble accuracy study ran, the spread is that study's: its members at the
+run's own setting and at the converged reference, pooled (TYPICAL_SPREAD, written by `python
+docs/generate.py spreads`). For another scenario run as an ensemble (`spotsim run --ensemble
+N`, whose member 0 is estimated), it is the ensemble's own. A range needs MIN_SPREAD_COUNT
+runs: a lone run of an unstudied scenario, or a smaller ensemble, has no bound. `spotsim
+study estimate` counts how often the true error lies within the estimate, the uncertainty and
+the bound.
 """
 
 from __future__ import annotations
