@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 import spotsim
-from spotsim.sim.run import Stepper
+from spotsim.run import Stepper
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIGS = sorted((ROOT / "config").glob("*.yaml"))

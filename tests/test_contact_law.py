@@ -7,7 +7,7 @@ import pytest
 from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 
-from spotsim.build.model import contact_law
+from spotsim.assemble.model import contact_law
 from spotsim.contact.detection import SIDE_CAP, contact_point, cutoff_distance, force_direction, penetration
 from spotsim.contact.friction import SLIPPING, STICKING, BristleParams, bristle
 from spotsim.contact.normal import damping_factor, hertz_stiffness, indentation, normal_force, onset_rate
@@ -215,7 +215,7 @@ def test_normal_force_is_hertz_when_still():
 
 
 def law_of(**contact):
-    """The compiled law's constants (`build.model.contact_law`) of a `contact:` block with these keys."""
+    """The compiled law's constants (`assemble.model.contact_law`) of a `contact:` block with these keys."""
     return contact_law(SimpleNamespace(contact=Contact(**contact), friction=Friction()))
 
 

@@ -1,5 +1,5 @@
-"""The finger drive: the actuator's law (self-locking, force-limited, continuous in the load),
-a finger closing on a rigid stop, and what a whole run's drive does."""
+"""The finger drive: the kinematic drive's law (self-locking, force-limited, continuous in the
+load), a finger closing on a rigid stop, and what a whole run's drive does."""
 
 import numpy as np
 import pytest
@@ -8,8 +8,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import spotsim
-from spotsim.build.model import drive_params
-from spotsim.sim.drive import actuator_speed
+from spotsim.assemble.model import drives
+from spotsim.sim.actuation import kinematic_speed
 
 CASE_I = ROOT / "config" / "single_arm_case_I.yaml"
 #: Round-off of the law's arithmetic: relative, and absolute on speeds (m/s; the law's speeds
@@ -26,11 +26,20 @@ HELD_ROWS = 500
 #: law's last period may press a little past it. The stop's reaction is held to 1 %.
 STOP_TOLERANCE = 0.01
 
-PARAMS = drive_params(spotsim.load_scenario(CASE_I).end_effector)
+#: Case I's drive, one end-effector's row
+DRIVES = drives(spotsim.load_scenario(CASE_I).end_effector, 1)
+F_G, V_C, V_0 = DRIVES.grasp_load[0], DRIVES.closing_speed[0], DRIVES.no_load_speed[0]
+
+
+def drive_speed(load, stiffness, damping, speed, h):
+    """The kinematic drive's speed for Case I's drive (`actuation.kinematic_speed`), m/s."""
+    return kinematic_speed(DRIVES, 0, load, stiffness, damping, speed, h)
+
+
 loads = st.floats(0.0, 1e4)
 slopes = st.floats(0.0, 1e8)
 dampings = st.floats(0.0, 1e4)
-speeds = st.floats(0.0, PARAMS.closing_speed)
+speeds = st.floats(0.0, V_C)
 steps = st.floats(1e-7, 1e-2)
 
 
@@ -41,41 +50,41 @@ def end_load(load, stiffness, damping, speed, h, v):
 
 @settings(max_examples=300, deadline=None)
 @given(loads, slopes, dampings, speeds, steps)
-def test_actuator_never_opens_never_exceeds_its_speed_and_presses_at_most_the_grasp_load(load, k, c, speed, h):
+def test_kinematic_drive_never_opens_never_exceeds_its_speed_and_presses_at_most_the_grasp_load(load, k, c, speed, h):
     """Self-locking: the speed is never negative (the fingers never open), whatever the load;
     the speed loop caps it at the closing speed; and while it closes, the load the period
     ends at is below the grasp load (the motor pushes no harder than its current limit)."""
-    v = actuator_speed(PARAMS, load, k, c, speed, h)
-    assert 0.0 <= v <= PARAMS.closing_speed
+    v = drive_speed(load, k, c, speed, h)
+    assert 0.0 <= v <= V_C
     if v > 0.0:
-        assert end_load(load, k, c, speed, h, v) < PARAMS.grasp_load * (1 + ROUND_OFF)
+        assert end_load(load, k, c, speed, h, v) < F_G * (1 + ROUND_OFF)
 
 
 @settings(max_examples=300, deadline=None)
 @given(loads, slopes, dampings, speeds, steps)
-def test_actuator_holds_its_torque_speed_line_at_the_end_of_the_period(load, k, c, speed, h):
+def test_kinematic_drive_holds_its_torque_speed_line_at_the_end_of_the_period(load, k, c, speed, h):
     """Between the stop and the speed limit the speed is the torque-speed line's at the load
     the period ends at (backward Euler): v = v0 (1 - F_end / F_g)."""
-    v = actuator_speed(PARAMS, load, k, c, speed, h)
-    if 0.0 < v < PARAMS.closing_speed:
-        line = PARAMS.no_load_speed * (1.0 - end_load(load, k, c, speed, h, v) / PARAMS.grasp_load)
+    v = drive_speed(load, k, c, speed, h)
+    if 0.0 < v < V_C:
+        line = V_0 * (1.0 - end_load(load, k, c, speed, h, v) / F_G)
         assert v == pytest.approx(line, rel=LINE_TOLERANCE, abs=SPEED_ROUND_OFF)
 
 
 @settings(max_examples=300, deadline=None)
 @given(loads, loads, slopes, dampings, speeds, steps)
-def test_actuator_speed_is_continuous_in_the_load(a, b, k, c, speed, h):
+def test_kinematic_drive_speed_is_continuous_in_the_load(a, b, k, c, speed, h):
     """No jump: two loads give speeds no further apart than the torque-speed line's slope
     v0 / F_g times their difference (the slopes only flatten it)."""
-    va, vb = (actuator_speed(PARAMS, x, k, c, speed, h) for x in (a, b))
-    assert abs(va - vb) <= PARAMS.no_load_speed / PARAMS.grasp_load * abs(a - b) * (1 + ROUND_OFF) + SPEED_ROUND_OFF
+    va, vb = (drive_speed(x, k, c, speed, h) for x in (a, b))
+    assert abs(va - vb) <= V_0 / F_G * abs(a - b) * (1 + ROUND_OFF) + SPEED_ROUND_OFF
 
 
-def test_actuator_closes_at_full_speed_until_the_slowdown_and_stops_at_the_grasp_load():
+def test_kinematic_drive_closes_at_full_speed_until_the_slowdown_and_stops_at_the_grasp_load():
     """Without slopes the law is the motor's line capped by the speed limit: full speed up to
     half the grasp load, linear down to zero at it, zero beyond."""
-    F_g, v_c = PARAMS.grasp_load, PARAMS.closing_speed
-    speed = lambda F: actuator_speed(PARAMS, F, 0.0, 0.0, 0.0, 1e-4)
+    F_g, v_c = F_G, V_C
+    speed = lambda F: drive_speed(F, 0.0, 0.0, 0.0, 1e-4)
     assert speed(0.0) == speed(0.5 * F_g) == v_c
     assert speed(0.75 * F_g) == pytest.approx(0.5 * v_c)
     assert speed(F_g) == speed(2 * F_g) == speed(1e6) == 0.0
@@ -101,23 +110,23 @@ def test_finger_on_a_rigid_stop_reaches_the_grasp_load_and_holds_it(rigid_stop):
     touch = rigid_stop.grasp["contact_onset_s"]
     held = ts["t"] >= touch + 0.2
     assert held.sum() >= HELD_ROWS
-    np.testing.assert_allclose(ts["finger_load_N"][held].mean(axis=1), PARAMS.grasp_load, rtol=STOP_TOLERANCE)
+    np.testing.assert_allclose(ts["finger_load_N"][held].mean(axis=1), F_G, rtol=STOP_TOLERANCE)
     at_rest_mm_s = rigid_stop.scenario.completion.max_contact_speed_m_s * 1e3  # the contact speed limit
     assert np.all(ts["drive_speed_mm_s"][held] <= at_rest_mm_s)
     assert np.all(np.diff(ts["finger_opening_mm"], axis=0) <= 0.0)
 
 
 def test_a_run_never_opens_the_fingers_and_its_drive_never_jumps_to_full_speed(case_I):
-    """Case I with the actuator: the recorded openings never grow, the speed is never
+    """Case I with the kinematic drive: the recorded openings never grow, the speed is never
     negative nor above the closing speed, and the drive never stops dead and resumes at
     full speed as the relay does."""
     r = spotsim.simulate(case_I)
     assert r.status == "completed"
     speed = r.timeseries["drive_speed_mm_s"]
-    assert np.all(speed >= 0.0) and np.all(speed <= PARAMS.closing_speed * 1e3 * (1 + ROUND_OFF))
+    assert np.all(speed >= 0.0) and np.all(speed <= V_C * 1e3 * (1 + ROUND_OFF))
     assert np.all(np.diff(r.timeseries["finger_opening_mm"], axis=0) <= 0.0)
     g = r.summary["grasps"][0]
-    assert g["drive_largest_speed_step_mm_s"] < PARAMS.closing_speed * 1e3
+    assert g["drive_largest_speed_step_mm_s"] < V_C * 1e3
     relay = spotsim.simulate(spotsim.replace(case_I, end_effector={"drive": "relay"}))
-    assert relay.summary["grasps"][0]["drive_largest_speed_step_mm_s"] == pytest.approx(PARAMS.closing_speed * 1e3)
+    assert relay.summary["grasps"][0]["drive_largest_speed_step_mm_s"] == pytest.approx(V_C * 1e3)
     assert relay.summary["grasps"][0]["drive_resumes"] > g["drive_resumes"]

@@ -16,7 +16,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from spotsim.build.model import contact_law
+from spotsim.assemble.model import contact_law
 from spotsim.contact.detection import contact_point, force_direction, penetration
 from spotsim.contact.friction import bristle
 from spotsim.contact.normal import hertz_potential, indentation, normal_force, onset_rate
@@ -36,7 +36,7 @@ STEP = 1e-5  # s
 
 
 def law(normal_direction, restitution=1.0, friction=False):
-    """The law's constants (`build.model.contact_law`) for Table 1's aluminium and radii, c_r,
+    """The law's constants (`assemble.model.contact_law`) for Table 1's aluminium and radii, c_r,
     and Table 2's friction, or none (mu = 0: the bristle lies saturated at zero)."""
     mu = {} if friction else {"mu_k": 0.0, "mu_s": 0.0}
     contact = Contact(restitution=restitution, normal_direction=normal_direction, sphere_radius_finger_mm=R1 * 1e3,

@@ -9,7 +9,7 @@ import pytest
 from conftest import CASE_I, ROOT
 
 import spotsim
-from spotsim.build.model import with_start
+from spotsim.assemble.model import with_start
 from spotsim.cli import ensemble_exit, main
 from spotsim.studies import ensemble as ens
 from spotsim.studies.ensemble import EnsembleResult, Member, Start, member_scenario, perturbed_starts, run_member
@@ -102,7 +102,7 @@ def test_the_same_seed_gives_the_same_results_serial_or_in_a_pool(case_I, model_
 def test_a_failing_member_is_counted_and_the_others_run(case_I, model_I, monkeypatch):
     """A member whose run raises is reported as `exception` with the error; the pool's other
     members run to their own ends."""
-    import spotsim.sim.run as run
+    import spotsim.run as run
 
     real, bad = run.simulate, perturbed_starts(case_I, 4, seed=0)[2]
 

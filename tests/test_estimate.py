@@ -208,7 +208,7 @@ def test_estimate_study_compares_each_start_with_the_reference(tmp_path, capsys)
 def test_a_run_takes_the_studys_spread_where_there_is_one_else_its_ensembles(case_I, monkeypatch):
     """`estimate` gives a studied scenario the study's spread (64 runs, validated), another
     scenario its ensemble's, and a lone run of another scenario none."""
-    import spotsim.sim.run as run_module
+    import spotsim.run as run_module
 
     monkeypatch.setattr(run_module, "simulate", lambda s, source: type("R", (), {"summary": summary(grasp(0.1))})())
     ens = type("E", (), {"members": [None] * 20, "seed": 0,

@@ -9,9 +9,9 @@ import pytest
 from conftest import CASE_I, ROOT
 
 import spotsim
-from spotsim.build.assets import URDF_DIR, compile_xacro
-from spotsim.build.faces import contact_faces, sphere_layer
-from spotsim.build.scene import geometry_args
+from spotsim.assemble.assets import URDF_DIR, compile_xacro
+from spotsim.assemble.faces import contact_faces, sphere_layer
+from spotsim.assemble.scene import geometry_args
 from spotsim.scenario import Contact, Geometry
 
 EXAMPLES = sorted((ROOT / "examples").glob("*.py"))

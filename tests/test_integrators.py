@@ -1,4 +1,4 @@
-"""The integrators advance free bodies' centroids in the world frame, at their orders."""
+"""The integrators advance the floating branches' centroids in the world frame, at their orders."""
 
 import numpy as np
 import pinocchio as pin
@@ -7,15 +7,15 @@ from scipy.integrate import solve_ivp
 
 import spotsim
 from spotsim.contact.detection import penetration
+from spotsim.contact.forces import Memory, no_contacts
 from spotsim.contact.friction import BristleParams, bristle
 from spotsim.contact.normal import hertz_stiffness, indentation, normal_force
-from spotsim.sim.bodies import bodies_momentum, centroid_acceleration, centroid_state, free_bodies, kinematics
-from spotsim.contact.forces import Memory, no_contacts
-from spotsim.sim.dynamics import accelerations
+from spotsim.run import Stepper
+from spotsim.sim.actuation import current_speed
+from spotsim.sim.dynamics import accelerations, velocity_jump
 from spotsim.sim.forces import forces
-from spotsim.sim.integrators import SWITCH_WINDOW, _centroid_accelerations, euler_error, switch_fraction, tableau
-from spotsim.sim.run import Stepper
-from spotsim.sim.weld import world_momentum
+from spotsim.sim.tree import kinematics
+from spotsim.sim.integrators import SWITCH_WINDOW, error_rates, euler_error, switch_fraction, tableau
 
 #: Round-off on O(1) numbers over a few thousand steps.
 ROUND_OFF = 1e-12
@@ -44,31 +44,39 @@ def tumble(case_I, method, h, **integrator):
     return np.concatenate([stepper.data.q, stepper.data.v])
 
 
+def module_centroid(model, q, v):
+    """The module's centroid (world) and its velocity, by Pinocchio."""
+    pm, j = model.pin_model, model.module_joint
+    pd = pm.createData()
+    pin.forwardKinematics(pm, pd, q, v)
+    c = pm.inertias[j].lever
+    M, twist = pd.oMi[j], pd.v[j]
+    return M.act(c), M.rotation @ (twist.linear + np.cross(twist.angular, c))
+
+
 def test_force_free_tumbling_body_keeps_its_momentum_and_straight_path(case_I):
     """With no force, a tumbling body's centroid moves on a straight line at constant velocity
     (symplectic Euler, 2000 steps)."""
     model, stepper = tumbling(case_I, "symplectic_euler")
-    bodies = model.sim.bodies
-    b = list(bodies.joint).index(model.module_joint)
-    p0, vG0, _, _ = centroid_state(bodies, b, stepper.data.q, stepper.data.v)
+    p0, vG0 = module_centroid(model, stepper.data.q, stepper.data.v)
     h = 1e-5
     for _ in range(2000):
         stepper.step(h)
-    p, vG, _, _ = centroid_state(bodies, b, stepper.data.q, stepper.data.v)
-    assert np.linalg.norm(np.subtract(vG, vG0)) <= ROUND_OFF
-    assert np.linalg.norm(np.subtract(p, np.add(p0, 2000 * h * np.array(vG0)))) <= ROUND_OFF
+    p, vG = module_centroid(model, stepper.data.q, stepper.data.v)
+    assert np.linalg.norm(vG - vG0) <= ROUND_OFF
+    assert np.linalg.norm(p - (p0 + 2000 * h * vG0)) <= ROUND_OFF
 
 
 def test_centroid_acceleration_is_force_over_mass(model_I):
-    """The compiled accelerations, turned into the centroid's world acceleration, are F / m."""
+    """The compiled accelerations, turned into the centroid's world acceleration (Pinocchio's
+    classical acceleration of the centroid), are F / m: what the integrators move it by."""
     from spotsim.sim.data import make_data
-    from spotsim.sim.dynamics import accelerations
 
     data = make_data(model_I)
     m, j = model_I.pin_model, model_I.module_joint
-    bodies = model_I.sim.bodies
-    b = list(bodies.joint).index(j)
+    pd = m.createData()
     rng = np.random.default_rng(5)
+    mass, c = m.inertias[j].mass, m.inertias[j].lever
     for _ in range(20):
         q = pin.randomConfiguration(m, -np.ones(m.nq), np.ones(m.nq))
         v = rng.normal(size=m.nv)
@@ -77,11 +85,11 @@ def test_centroid_acceleration_is_force_over_mass(model_I):
         data.assign(q=q, v=v, loads=data.loads._replace(f_local=f_local))
         kinematics(model_I.sim, data)
         accelerations(model_I.sim, data)
-        iv = m.idx_vs[j]
-        R = data.R_W[j]
-        a_G = centroid_acceleration(R, bodies.lever[b], v[iv:iv + 3], v[iv + 3:iv + 6], data.a[iv:iv + 3],
-                                    data.a[iv + 3:iv + 6])
-        assert np.allclose(a_G, R @ f_local[j, :3] / bodies.mass[b], rtol=0, atol=ROUND_OFF)
+        pin.forwardKinematics(m, pd, q, v, data.a)
+        a, twist = pd.a[j], pd.v[j]
+        a_G = pd.oMi[j].rotation @ (a.linear + np.cross(a.angular, c) + np.cross(twist.angular, twist.linear +
+                                                                                 np.cross(twist.angular, c)))
+        assert np.allclose(a_G, pd.oMi[j].rotation @ f_local[j, :3] / mass, rtol=0, atol=ROUND_OFF)
 
 
 def test_an_unknown_integrator_lists_the_valid_ones():
@@ -105,25 +113,31 @@ def test_tableaus_are_consistent():
             assert e.sum() == pytest.approx(0.0, abs=TABLEAU_ROUND_OFF)
 
 
-def test_bodies_momentum_matches_pinocchio():
-    """The compiled momentum of free bodies equals Pinocchio's spatial momentum in world."""
-    model = pin.Model()
-    for k, M in enumerate((pin.SE3.Identity(), pin.SE3(pin.rpy.rpyToMatrix(0.3, -0.2, 1.0), np.ones(3)))):
-        j = model.addJoint(0, pin.JointModelFreeFlyer(), M, f"body{k}")
-        model.appendBodyToJoint(j, pin.Inertia.Random(), pin.SE3.Identity())
-    data = model.createData()
+def test_momenta_match_pinocchio(model_I):
+    """The compiled momenta of the floating branches (a free-flying robot with its fingers and
+    two modules: the dual arm) equal Pinocchio's, summed over their bodies, at random states."""
+    from spotsim.sim.data import make_data
+    from spotsim.sim.tree import current_frames, momenta
+    from conftest import ROOT
+
+    model = spotsim.build_model(spotsim.load_scenario(ROOT / "config" / "dual_arm_sequential.yaml"))
+    pm, pd = model.pin_model, model.pin_model.createData()
+    data = make_data(model)
     rng = np.random.default_rng(7)
-    q = pin.integrate(model, pin.neutral(model), rng.normal(size=model.nv))
-    v = rng.normal(size=model.nv)
-    pin.forwardKinematics(model, data, q, v)
-    h = [world_momentum(data.oMi[k], model.inertias[k], data.v[k]) for k in (1, 2)]
-    P, L, p_max, l_max, c = bodies_momentum(free_bodies(model), np.arange(2), q, v)
-    assert np.allclose(P, h[0].linear + h[1].linear, rtol=0, atol=ROUND_OFF)
-    assert np.allclose(L, h[0].angular + h[1].angular, rtol=0, atol=ROUND_OFF)
-    assert p_max == pytest.approx(max(np.linalg.norm(x.linear) for x in h), abs=ROUND_OFF)
-    masses = [model.inertias[k].mass for k in (1, 2)]
-    centroids = [data.oMi[k].act(model.inertias[k].lever) for k in (1, 2)]
-    assert np.allclose(c, np.average(centroids, axis=0, weights=masses), rtol=0, atol=ROUND_OFF)
+    for _ in range(5):
+        q = pin.randomConfiguration(pm, -np.ones(pm.nq), np.ones(pm.nq))
+        v = rng.normal(size=pm.nv)
+        data.assign(q=q, v=v)
+        current_frames(model.sim, data)
+        P, L, p_max, l_max, c = momenta(model.sim, data.now, model.sim.record.all_branches)
+        pin.forwardKinematics(pm, pd, q, v)
+        h = [pd.oMi[j].act(pm.inertias[j] * pd.v[j]) for j in range(1, pm.njoints)]
+        assert np.allclose(P, sum(x.linear for x in h), rtol=0, atol=ROUND_OFF * max(1.0, np.abs(P).max()))
+        assert np.allclose(L, sum(x.angular for x in h), rtol=0, atol=ROUND_OFF * max(1.0, np.abs(L).max()))
+        assert p_max == pytest.approx(max(np.linalg.norm(x.linear) for x in h), rel=ROUND_OFF)
+        masses = [pm.inertias[j].mass for j in range(1, pm.njoints)]
+        centroids = [pd.oMi[j].act(pm.inertias[j].lever) for j in range(1, pm.njoints)]
+        assert np.allclose(c, np.average(centroids, axis=0, weights=masses), rtol=0, atol=ROUND_OFF)
 
 
 def test_each_integrator_converges_at_its_order_on_a_smooth_free_motion(case_I):
@@ -188,16 +202,17 @@ def test_adaptive_euler_rejects_steps_and_converges_as_its_tolerance_falls(case_
 
 
 def assert_same_end(first, again):
-    """Two Steppers' steps ended bit-identical: state, fingers and every pair memory field."""
+    """Two Steppers' steps ended bit-identical: state (the fingers' included) and every pair
+    memory field."""
     a, b = first.data.view(), again.data.view()
-    for name in ("q", "v", "opening"):
+    for name in ("q", "v"):
         assert np.array_equal(getattr(a, name), getattr(b, name)), name
     for name in a.memory._fields:
         assert np.array_equal(getattr(a.memory, name), getattr(b.memory, name)), name
 
 
 def test_adaptive_euler_rejected_try_leaves_no_trace(recorded_states, model_I):
-    """A step whose first try is rejected ends bit-identical (state, fingers, pair memory) to
+    """A step whose first try is rejected ends bit-identical (state, pair memory) to
     the same step asked for at the length it was accepted at: a rejection restores everything."""
     s = spotsim.replace(model_I.scenario, simulation={"integrator": {"method": "adaptive_euler",
                                                                      "velocity_tol_m_s": 1e-6}})
@@ -236,7 +251,7 @@ def test_switch_fraction_interpolates_each_bristles_slack(model_I):
 
 def test_adaptive_euler_located_switch_leaves_no_trace_and_ends_the_step(recorded_states, model_I):
     """With its bristle switches located, a step whose first try is cut at a switch ends
-    bit-identical (state, fingers, pair memory) to the same step asked for at the length it
+    bit-identical (state, pair memory) to the same step asked for at the length it
     was accepted at, and no switch that matters lies earlier in it than SWITCH_WINDOW from its
     end."""
     s = spotsim.replace(model_I.scenario, simulation={"integrator": {"method": "adaptive_euler",
@@ -342,20 +357,24 @@ FIRST_STEP_S = 2e-6
 #: adaptive_euler's error control off: a velocity tolerance no try reaches (m/s) and an onset
 #: guard no step reaches (m), so that its first try is the step.
 NO_ERROR_CONTROL = {"velocity_tol_m_s": 1e3, "onset_depth_m": 1.0}
-#: The new rates: the recorded one scaled, and closing this much faster (m/s) where it held.
+#: The new speeds: the recorded one scaled, and closing this much faster (m/s) where it held.
 RATE_SCALES, EXTRA_CLOSING_M_S = (0.9, 0.5), 1e-3
 
 
-def with_new_rate(state, scale):
-    """A copy of the recorded state with a new finger rate (RATE_SCALES, EXTRA_CLOSING_M_S),
-    as the drive's decision would set it."""
+def with_new_rate(model, state, scale):
+    """A copy of the recorded state with a new finger speed (RATE_SCALES, EXTRA_CLOSING_M_S),
+    as the drive's reading would set it (an impulse, `dynamics.velocity_jump`)."""
     data = state.copy()
-    data.opening_rate[:] = scale * state.view().opening_rate - (1.0 - scale) * EXTRA_CLOSING_M_S
+    m = model.sim
+    speed = -(scale * current_speed(m, data) + (1.0 - scale) * EXTRA_CLOSING_M_S)
+    joints = m.actuators.joint
+    velocity_jump(m, data, joints, np.full(len(joints), speed))
+    data.assign(jumped=True)
     return data
 
 
 def test_adaptive_euler_start_after_a_new_finger_rate_is_symplectic_eulers(recorded_states, model_I):
-    """When the drive sets a new finger rate, adaptive_euler re-evaluates its start with the
+    """When the drive sets a new finger speed, adaptive_euler re-evaluates its start with the
     bristles bent over the coming step, as symplectic Euler evaluates every start: from a
     state in contact, with a new finger rate (so that adaptive_euler cannot reuse its last
     evaluation), one step of each (error control off) ends bit-identical. Unbent, a sliding
@@ -365,15 +384,15 @@ def test_adaptive_euler_start_after_a_new_finger_rate_is_symplectic_eulers(recor
         "method": method, **NO_ERROR_CONTROL}})) for method in ("symplectic_euler", "adaptive_euler")}
     checked = 0
     for state in recorded_states:
-        if state.view().drive_t - state.view().t <= FIRST_STEP_S:
+        if state.view().sample_t - state.view().t <= FIRST_STEP_S:
             continue
         for scale in RATE_SCALES:
             ends = []
             for model in models.values():
-                stepper = Stepper(model, with_new_rate(state, scale))
+                stepper = Stepper(model, with_new_rate(model, state, scale))
                 assert stepper.step(FIRST_STEP_S) == FIRST_STEP_S
                 v = stepper.data.view()
-                ends.append((v.q.copy(), v.v.copy(), v.opening.copy()))
+                ends.append((v.q.copy(), v.v.copy()))
             for a, b in zip(*ends):
                 assert np.array_equal(a, b)
             checked += 1
@@ -393,7 +412,7 @@ SHARE_PART_MIN = 1e3 * ESTIMATE_BRACKET
 
 
 def test_adaptive_euler_judges_a_try_after_a_new_finger_rate_without_its_held_share(recorded_states, model_I):
-    """The damping that a new finger rate's jump of the normal force lets a saturated bristle
+    """The damping that a new finger speed's jump of the normal force lets a saturated bristle
     hold is a closed-form impulse over the try (`friction.bristle`), not a force the try
     samples: its error estimate leaves it out. From a state in contact, with a new finger rate
     that lets some bristle hold, adaptive_euler accepts the try at once at a velocity tolerance
@@ -403,22 +422,22 @@ def test_adaptive_euler_judges_a_try_after_a_new_finger_rate_without_its_held_sh
     free = spotsim.build_model(spotsim.replace(model_I.scenario, simulation={"integrator": {
         "method": "adaptive_euler", **NO_ERROR_CONTROL}}))
     m, h = free.sim, SHARE_STEP_S
-    n = m.bodies.joint.shape[0]
+    n = m.integrator.lever.shape[0]
 
     def start(data, jump):
-        """The free bodies' centroid accelerations at data's state, evaluated for a try of h,
-        and how many saturated bristles held a share of it."""
+        """The error rates at data's state (`integrators.error_rates`), evaluated for a try of
+        h, and how many saturated bristles held a share of it."""
         shared = forces(m, data, h, jump)
         accelerations(m, data)
         out = np.empty((n, 6))
-        _centroid_accelerations(m, data, out)
+        error_rates(m, data, out)
         return out, shared
 
     def first_try_accepted(state, scale, tol):
         loose = m.integrator
         m.assign(integrator=loose._replace(velocity_tol=tol))  # this test's own model
         try:
-            data = with_new_rate(state, scale)
+            data = with_new_rate(free, state, scale)
             taken = Stepper(free, data).step(h)
         finally:
             m.assign(integrator=loose)
@@ -426,14 +445,14 @@ def test_adaptive_euler_judges_a_try_after_a_new_finger_rate_without_its_held_sh
 
     checked = 0
     for state in recorded_states:
-        if state.view().drive_t - state.view().t <= h:
+        if state.view().sample_t - state.view().t <= h:
             continue
         for scale in RATE_SCALES:
-            stepper = Stepper(free, with_new_rate(state, scale))
+            stepper = Stepper(free, with_new_rate(free, state, scale))
             assert stepper.step(h) == h
             end = np.empty((n, 6))
-            _centroid_accelerations(m, stepper.data, end)
-            probe = with_new_rate(state, scale)
+            error_rates(m, stepper.data, end)
+            probe = with_new_rate(free, state, scale)
             if stepper.broad is not None:
                 stepper.broad.refresh(probe)  # the pairs the step found
             held, shared = start(probe, True)

@@ -4,15 +4,17 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from spotsim.build.scene import check_inertias
+from spotsim.assemble.scene import check_inertias
 from spotsim.errors import ModelError
 
 
-def test_locked_arm_and_driven_fingers_are_reduced_away(model_I):
-    """Only the module's free-flyer remains: the arm is locked and the fingers are driven."""
+def test_locked_arm_is_reduced_away_and_the_fingers_stay_on_their_joints(model_I):
+    """The module's free-flyer and the fingers' prismatic joints remain: the arm is locked."""
     m = model_I.pin_model
-    assert (m.nq, m.nv) == (7, 6)
-    assert list(m.names[1:]) == ["tm_free_flyer"]
+    assert (m.nq, m.nv) == (9, 8)
+    assert sorted(m.names[1:]) == ["ee_finger_lower", "ee_finger_upper", "tm_free_flyer"]
+    assert [m.joints[j].shortname() for j in range(1, m.njoints)] == ["JointModelPZ", "JointModelPZ",
+                                                                       "JointModelFreeFlyer"]
 
 
 def test_fingers_open_along_the_closing_axis(model_I):
@@ -20,7 +22,8 @@ def test_fingers_open_along_the_closing_axis(model_I):
     ee = model_I.end_effectors[0]
     assert ee.joint == 0  # the grasp frame hangs on the fixed base: its placement is in world
     R = ee.placement.rotation
-    axes = {f.name: f.axis_J for f in model_I.fingers}  # parent joint: the fixed world
+    m = model_I.pin_model
+    axes = {f.name: m.jointPlacements[f.joint].rotation @ [0, 0, 1] for f in model_I.fingers}  # their joints' z
     assert np.allclose(axes["ee_finger_upper"], R @ [0, 0, 1], atol=1e-12)
     assert np.allclose(axes["ee_finger_lower"], R @ [0, 0, -1], atol=1e-12)
 

@@ -36,7 +36,7 @@ def test_unpacked_wheel_validates_its_own_scenario_from_any_directory(wheel, tmp
     zipfile.ZipFile(wheel).extractall(site)
     env = {**os.environ, "PYTHONPATH": str(site)}
     env.pop("SPOTSIM_ROOT", None)
-    where = subprocess.run([sys.executable, "-c", "from spotsim.build.assets import CONFIG_DIR, URDF_DIR;"
+    where = subprocess.run([sys.executable, "-c", "from spotsim.assemble.assets import CONFIG_DIR, URDF_DIR;"
                             "print(CONFIG_DIR); print(URDF_DIR)"], cwd=tmp_path, env=env, capture_output=True,
                            text=True, timeout=120)
     assert where.returncode == 0, where.stderr

@@ -6,7 +6,7 @@ import pytest
 from conftest import ROOT
 
 import spotsim
-from spotsim.build.model import grasp_frame, groove_frame
+from spotsim.assemble.model import grasp_frame, groove_frame
 from spotsim.sim.data import make_data
 from spotsim.sim.events import NONFINITE
 from spotsim.sim.record import close_interval, quat_xyzw, rpy, sample

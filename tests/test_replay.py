@@ -143,7 +143,7 @@ def server_commands(zmq_url):
 def test_welded_model_spheres_map_to_the_same_first_model_spheres():
     """After a weld, each remaining sphere keeps its place: mapped by face name to the first
     model, it has the same centre and normal in the same joint's frame."""
-    from spotsim.build.model import build_model
+    from spotsim.assemble.model import build_model
     from spotsim.sim.recorder import SphereIds
 
     s = spotsim.load_scenario(DUAL)
@@ -213,8 +213,8 @@ def check_sphere_colours(run_dir, cmds, frame_t):
     model = run.model
     n_mf = len(snaps["master_faces"])
     seen = 0
-    bodies = [(f.name, model.master, snaps["master"][lo:hi], model.master.finger == i)
-              for i, f in enumerate(model.fingers)]
+    bodies = [(f.name, model.master, snaps["master"][lo:hi], model.master.joint == f.joint)
+              for f in model.fingers]
     bodies += [(m.name, model.slave, snaps["slave"][lo:hi], model.slave.joint == m.joint)
                for m in model.modules]
     for name, layers, idx, on_body in bodies:

@@ -6,8 +6,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import spotsim
-from spotsim.build import assets
-from spotsim.build.robot import DUAL_ARM_XACRO, LAYOUTS, TABLE5, TABLE6, fdr_inertia, fit_base, locked_robot
+from spotsim.assemble import assets
+from spotsim.assemble.robot import DUAL_ARM_XACRO, LAYOUTS, TABLE5, TABLE6, fit_base, locked_robot
+from spotsim.assemble.scene import fdr_inertia
 from spotsim.errors import ScenarioError
 from spotsim.scenario import LAYOUT_TM1_COM_MM
 

@@ -175,7 +175,7 @@ def test_converged_runs_keep_within_the_energy_the_drives_put_in(case_I):
 
 def test_interrupted_run_keeps_what_it_recorded(case_I, tmp_path, monkeypatch):
     """Ctrl-C ends the run as interrupted; its summary says so and is not a completed one."""
-    import spotsim.sim.run as run
+    import spotsim.run as run
 
     real = run.run_intervals
 

@@ -9,7 +9,8 @@ from conftest import CASE_I, CONFIGS
 
 import spotsim
 from spotsim.cli import main
-from spotsim.scenario import Geometry, from_dict, to_dict, xacro_defaults_agree
+from spotsim.assemble.scene import xacro_defaults_agree
+from spotsim.scenario import Geometry, from_dict, to_dict
 
 
 @pytest.mark.parametrize("path", CONFIGS, ids=lambda p: p.name)

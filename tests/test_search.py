@@ -6,7 +6,7 @@ import pinocchio as pin
 from spotsim.contact.forces import pair_forces
 from spotsim.contact.search import grid_search, literal_search
 from spotsim.contact.wrenches import body_wrenches
-from spotsim.sim.bodies import kinematics
+from spotsim.sim.tree import kinematics
 from spotsim.sim.broadphase import BroadPhase
 from spotsim.sim.data import make_data
 
@@ -26,7 +26,7 @@ def contacts_by(model, state, search):
     if search == "literal":
         candidates = literal_search(model.sim, data)
     else:
-        candidates = grid_search(model.sim, data, BroadPhase(model).near(data.q, data.opening))
+        candidates = grid_search(model.sim, data, BroadPhase(model).near(data.q))
     data.assign(candidates=candidates)
     pair_forces(model.sim, data, 1e-4, False)
     return data
@@ -48,14 +48,14 @@ def test_culled_search_finds_exactly_the_all_pairs_contacts(model_I, recorded_st
 def test_broad_phase_culls_far_face_pairs(model_I, recorded_states):
     """Coal keeps only face pairs within the security margin: far fewer than all 16."""
     data = recorded_states[-1]
-    kept = BroadPhase(model_I).near(data.q, data.opening)
+    kept = BroadPhase(model_I).near(data.q)
     assert 0 < len(kept) < len(model_I.sim.faces.master_start)
 
 
 def test_broad_phase_keeps_nothing_while_the_fingers_are_open(model_I):
     """At the start the fingers are 9 mm from the groove: coal culls every face pair."""
     data = make_data(model_I)
-    assert len(BroadPhase(model_I).near(data.q, data.opening)) == 0
+    assert len(BroadPhase(model_I).near(data.q)) == 0
 
 
 def test_action_equals_reaction_about_any_point(model_I, recorded_states):
@@ -85,7 +85,7 @@ def test_a_finger_beside_its_groove_lands_on_the_adapter_and_both_searches_agree
     it pass through the adapter. On states with tip-land pairs, the culled search finds exactly
     the all-pairs search's."""
     import spotsim
-    from spotsim.sim.run import Stepper
+    from spotsim.run import Stepper
     from spotsim.studies.sweep import NOT_CAPTURED, verdict
 
     s = spotsim.replace(case_I, module={"initial_offset_mm": (0.0, 12.0, 0.0)},

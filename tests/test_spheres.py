@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from spotsim.build.faces import face_basis, sphere_layer
+from spotsim.assemble.faces import face_basis, sphere_layer
 from spotsim.errors import ModelError
 
 #: Geometry here is exact up to double round-off on millimetre numbers.
@@ -55,7 +55,7 @@ def test_shipped_faces_have_unit_normals_pointing_at_their_partner(model_I):
     assert np.allclose(np.linalg.norm(M.normal_J, axis=1), 1) and np.allclose(np.linalg.norm(S.normal_J, axis=1), 1)
     # each finger face has a groove face whose normal is exactly opposite once seated
     from spotsim.contact.search import world_spheres
-    from spotsim.sim.bodies import kinematics
+    from spotsim.sim.tree import kinematics
     from spotsim.sim.data import make_data
 
     data = make_data(model_I)

@@ -126,7 +126,7 @@ def test_an_exception_out_of_simulate_is_a_failed_row_not_a_crash(case_I, tmp_pa
     """An exception out of simulate (what the simulator must never raise) becomes the case's
     row, verdict FAILED with the exception and where it was raised; the study goes on to the
     next case, and its command exits 1."""
-    import spotsim.sim.run as run
+    import spotsim.run as run
 
     def broken(*args, **kwargs):
         raise RuntimeError("broken on purpose")

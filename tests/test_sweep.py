@@ -16,7 +16,7 @@ from conftest import CASE_I
 
 from spotsim import ScenarioError, SpotsimError, load_scenario
 from spotsim.cli import main
-from spotsim.sim.run import WALL_LIMIT
+from spotsim.run import WALL_LIMIT
 from spotsim.studies import sweep as sw
 
 #: Three short Case I points, x_a offset -1, 0 and 1 mm (each ~0.2 s and its companion).
@@ -124,7 +124,7 @@ def test_a_foreign_points_file_is_refused_and_left_as_it_is(tmp_path, capsys):
 
 
 def test_a_point_that_raises_is_recorded_with_its_status(monkeypatch):
-    import spotsim.sim.run as run
+    import spotsim.run as run
 
     def broken(*args, **kwargs):
         raise RuntimeError("a bug")
@@ -340,7 +340,7 @@ def test_near_the_boundary_the_capture_fraction_is_counted_over_perturbed_starts
 
 def test_a_worker_reuses_a_model_across_starts_and_a_compiled_scene_across_contact_parameters():
     """Models from the worker's caches are those built from scratch."""
-    from spotsim.build.model import build_model
+    from spotsim.assemble.model import build_model
 
     sw._MODELS.clear()
     sw._SCENES.clear()

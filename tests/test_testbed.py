@@ -9,12 +9,12 @@ import pytest
 from conftest import ROOT
 
 import spotsim
-from spotsim.build.robot import TABLE6, grasp_axes, level_arms
+from spotsim.assemble.robot import TABLE6, grasp_axes, level_arms
 from spotsim.cli import main
 from spotsim.measures import BODIES, read_markers
-from spotsim.sim.bodies import centroid_acceleration, kinematics, twist
 from spotsim.sim.data import make_data
 from spotsim.sim.dynamics import accelerations, table_load
+from spotsim.sim.tree import kinematics
 
 TESTBED = sorted((ROOT / "config").glob("spot_testbed_*.yaml"))
 THREE_MM = ROOT / "config" / "spot_testbed_3mm.yaml"
@@ -98,12 +98,15 @@ def test_a_planar_body_moves_as_m_and_Izz_say_and_an_out_of_plane_wrench_moves_n
     model = spotsim.build_model(spotsim.load_scenario(THREE_MM))
     sim, data = model.sim, make_data(model)
     kinematics(sim, data)
-    b = list(sim.bodies.joint).index(model.modules[1].joint)
-    j, m, c = sim.bodies.joint[b], sim.bodies.mass[b], sim.bodies.lever[b]
+    j = model.modules[1].joint
+    b = list(sim.branches.joint).index(j)
+    pm = model.pin_model
+    m, c = pm.inertias[j].mass, pm.inertias[j].lever
     R, p_O = data.R_W[j].copy(), data.p_W[j].copy()
     n = sim.table_normal
     p_G = p_O + R @ c
-    I_nn = n @ R @ sim.bodies.inertia_G[b] @ R.T @ n
+    I_nn = n @ R @ pm.inertias[j].inertia @ R.T @ n
+    pd = pm.createData()
     in_plane, across = np.array([3.0, 0.0, -4.0]), np.array([1.5, 0.0, 2.0])
     assert abs(in_plane @ n) == 0 and abs(across @ n) == 0
 
@@ -111,19 +114,26 @@ def test_a_planar_body_moves_as_m_and_Izz_say_and_an_out_of_plane_wrench_moves_n
         f_local = np.zeros_like(data.loads.f_local)
         f_local[j, :3] = R.T @ F_W
         f_local[j, 3:] = R.T @ (tau_G_W + np.cross(p_G - p_O, F_W))
-        data.assign(loads=data.loads._replace(f_local=f_local))
+        force_W = np.zeros_like(data.loads.force_W)
+        force_W[j] = F_W
+        torque_O_W = np.zeros_like(data.loads.torque_O_W)
+        torque_O_W[j] = tau_G_W + np.cross(p_G, F_W)
+        data.assign(loads=data.loads._replace(f_local=f_local, force_W=force_W, torque_O_W=torque_O_W))
         accelerations(sim, data)
-        a_O, alpha = twist(sim.bodies, b, data.a)
-        v_O, w = twist(sim.bodies, b, data.v)
-        return np.array(centroid_acceleration(R, c, v_O, w, a_O, alpha)), R @ np.array(alpha), f_local
+        # the centroid's classical acceleration (Pinocchio's), in world
+        pin.forwardKinematics(pm, pd, data.q, data.v, data.a)
+        acc, twist = pd.a[j], pd.v[j]
+        a_G = R @ (acc.linear + np.cross(acc.angular, c) + np.cross(twist.angular, twist.linear +
+                                                                      np.cross(twist.angular, c)))
+        return a_G, R @ acc.angular, b
 
     a_G, alpha, _ = accelerate(in_plane, 0.7 * n)
     np.testing.assert_allclose(a_G, in_plane / m, rtol=DYNAMICS_RTOL, atol=DYNAMICS_RTOL)
     np.testing.assert_allclose(alpha, 0.7 / I_nn * n, rtol=DYNAMICS_RTOL, atol=DYNAMICS_RTOL)
-    a_G, alpha, f_local = accelerate(25.0 * n, 0.9 * across)
+    a_G, alpha, b = accelerate(25.0 * n, 0.9 * across)
     np.testing.assert_allclose(a_G, 0.0, atol=DYNAMICS_RTOL)
     np.testing.assert_allclose(alpha, 0.0, atol=DYNAMICS_RTOL)
-    force, moment = table_load(sim.bodies, b, f_local)
+    force, moment = table_load(sim, data, b)
     assert force == pytest.approx(25.0, rel=DYNAMICS_RTOL)
     assert moment == pytest.approx(0.9 * np.linalg.norm(across), rel=DYNAMICS_RTOL)
 

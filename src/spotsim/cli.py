@@ -582,15 +582,15 @@ def estimate_lines(entry: dict) -> str:
 
 
 def _config_path(arg: str | None) -> Path:
-    from .build.assets import CONFIG_DIR
+    from .assemble.assets import CONFIG_DIR
 
     return Path(arg) if arg else CONFIG_DIR / DEFAULT_SCENARIO
 
 
 def _load(path: Path, overrides):
-    from .build.model import build_model
+    from .assemble.model import build_model
     from .scenario import load_scenario
-    from .sim.run import check_start
+    from .run import check_start
 
     scenario = load_scenario(path, overrides)
     model = build_model(scenario, str(path))
@@ -661,7 +661,7 @@ def main(argv=None) -> int:
 
     from .files import prepare
     from .results import SUMMARY, disk_need, write_results
-    from .sim.run import simulate
+    from .run import simulate
 
     if args.replay:  # before the run: a missing meshcat is bad input, found before anything ran
         try:

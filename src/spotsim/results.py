@@ -14,7 +14,7 @@ from . import measures
 from .errors import SpotsimError
 from .files import atomic, atomic_write, prepare, save_figure
 from .scenario import to_yaml
-from .sim.run import RESULTS_FORMAT, Result
+from .run import RESULTS_FORMAT, Result
 
 SUMMARY = "summary.json"
 MARKERS = "markers.csv"  # a dual-arm run's bodies' displacements at a camera's rate (`measures`)

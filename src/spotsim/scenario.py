@@ -21,6 +21,7 @@ import numpy as np
 import yaml
 
 from .errors import ScenarioError
+from .tables import DRIVES, METHODS
 
 # ----------------------------------------------------------------------------- rules
 
@@ -78,9 +79,15 @@ def _substeps(x):
     return None if 1 <= x <= MAX_SUBSTEPS else f"must be in [1, {MAX_SUBSTEPS}]"
 
 
-def _choice(*options):
+def _choice(*options, renamed=None):
+    """A rule: one of `options`; `renamed` maps an earlier name to its new one, for the message."""
+    renamed = renamed or {}
+
     def rule(x):
-        return None if x in options else f"must be one of {', '.join(options)}"
+        if x in options:
+            return None
+        hint = f" ({x} is now {renamed[x]})" if x in renamed else ""
+        return f"must be one of {', '.join(options)}{hint}"
     return rule
 
 
@@ -97,7 +104,7 @@ def key(default=dataclasses.MISSING, rule=None, doc=""):
 
 @dataclass(frozen=True, kw_only=True)
 class Integrator:
-    method: str = key("adaptive_euler", _choice("adaptive_euler", "symplectic_euler", "rk4", "dopri5"),
+    method: str = key("adaptive_euler", _choice(*sorted(METHODS, key=lambda m: m != "adaptive_euler")),
                       "symplectic_euler (the paper's fixed step), adaptive_euler (symplectic Euler, its "
                       "error controlled), rk4 (fixed step), dopri5 (adaptive)")
     rtol: float = key(1e-6, _positive, "dopri5: relative tolerance per state component")
@@ -134,11 +141,12 @@ class EndEffector:
     closing_speed_m_s: float = key(rule=_positive, doc="finger closing speed (Table 3), the drive's speed limit")
     grasp_load_N: float = key(20.0, _positive, "mean finger load at which the drive stalls (not in the paper)")
     start_gap_mm: float = key(9.0, _positive, "finger travel from start to touching a centred groove")
-    drive: str = key("actuator", _choice("actuator", "relay"),
-                     "actuator (a current-limited, self-locking motor: slows down along its torque-speed line "
-                     "and presses at the grasp load) or relay (stops dead at the grasp load, resumes at full "
-                     "speed below resume_fraction of it)")
-    slowdown_fraction: float = key(0.5, _fraction, "actuator: the share of the grasp load above which the fingers "
+    drive: str = key("kinematic", _choice(*DRIVES, renamed={"actuator": "kinematic"}),
+                     "both prescribe the fingers' speed at each controller reading: kinematic (a current-limited, "
+                     "self-locking motor's law: slows down along its torque-speed line and presses at the grasp "
+                     "load) or relay (stops dead at the grasp load, resumes at full speed below resume_fraction "
+                     "of it)")
+    slowdown_fraction: float = key(0.5, _fraction, "kinematic: the share of the grasp load above which the fingers "
                                    "slow down (its no-load speed is the closing speed / (1 - this))")
     resume_fraction: float = key(0.5, _fraction, "relay: a stalled drive resumes closing below this share of the "
                                  "grasp load")
@@ -249,7 +257,7 @@ TABLE6_ARM1 = (0.556, 0.481, 1.41, 2.40e-7, 1.25, 0.555)
 TABLE6_ARM2 = (-0.511, 0.998, 0.479, 4.00e-6, 1.66, -0.511)
 
 
-#: The robot's layouts (`spotsim.build.robot.LAYOUTS`): `compact`, the arms' mounts on a 400 mm
+#: The robot's layouts (`spotsim.assemble.robot.LAYOUTS`): `compact`, the arms' mounts on a 400 mm
 #: base whose centroid is its centre, fitted to Table 5 body 3 alone; `table5_body4`, the mounts,
 #: the base's centroid and TM-1's centroid fitted so that the FDR and the FDR + TM-1 composite
 #: both match Table 5 (bodies 3 and 4, the latter read as moments along the base's axes). The
@@ -758,12 +766,3 @@ def replace(s: Scenario, **changes) -> Scenario:
         else:
             raw[name] = value
     return from_dict(raw, f"<{s.name}>")
-
-
-def xacro_defaults_agree() -> list[str]:
-    """Differences between the scene XACRO's argument defaults and Geometry's defaults."""
-    from .build.assets import URDF_DIR, xacro_arg_defaults
-
-    xacro = xacro_arg_defaults(URDF_DIR / "single_arm_scene.urdf.xacro")
-    return [f"{f.name}: XACRO {xacro.get(f.name)} != scenario {f.default}"
-            for f in dataclasses.fields(Geometry) if xacro.get(f.name) != f.default]

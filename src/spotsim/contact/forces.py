@@ -49,11 +49,17 @@ class Contacts(NamedTuple):
     s: np.ndarray  # (k, 3) bristle deflection after the evaluation, m
     v_minus: np.ndarray  # (k,) onset indentation rate delta_dot_minus, m/s
     slack: np.ndarray  # (k,) the bristle's slack (`friction.bristle`): it holds while positive, m
-    # how the finger's load along its axis grows as the finger closes further (N/m) and
-    # faster (N s/m): the normal force's slopes along g and a holding bristle's k_b and c_b,
-    # each projected twice on the axis (the finger drive's linearisation)
-    axial_stiffness: np.ndarray  # (k,)
-    axial_damping: np.ndarray  # (k,)
+    # the pair's linearisation, for a drive that reads how its load grows as it pushes on: the
+    # normal force F_n g grows by normal_stiffness (N/m) and normal_damping (N s/m) per unit
+    # of the master's advance and speed along g; a holding bristle by tangent_stiffness and
+    # tangent_damping in the tangent plane of n_c (k_b, and c_b over the share of the step it
+    # held; zero for a saturated one, which held none of it)
+    direction_W: np.ndarray  # (k, 3) g, the normal force's direction (`detection.force_direction`)
+    normal_W: np.ndarray  # (k, 3) n_c, the common normal
+    normal_stiffness: np.ndarray  # (k,)
+    normal_damping: np.ndarray  # (k,)
+    tangent_stiffness: np.ndarray  # (k,)
+    tangent_damping: np.ndarray  # (k,)
 
 
 class Memory(NamedTuple):
@@ -68,7 +74,7 @@ class Memory(NamedTuple):
 def no_contacts() -> Contacts:
     ints, vec = lambda: np.zeros(0, dtype=np.int64), lambda: np.zeros((0, 3))
     return Contacts(ints(), ints(), ints(), np.zeros(0), vec(), vec(), vec(), vec(), np.zeros(0), ints(), vec(),
-                    np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0))
+                    np.zeros(0), np.zeros(0), vec(), vec(), np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0))
 
 
 def no_memory() -> Memory:
@@ -106,11 +112,12 @@ def pair_forces(m, d, h, jump):
     """
     k = d.candidates.master.shape[0]
     # the outputs as rows of three blocks: an allocation costs ~25 ns, a step makes dozens
-    ints, scalars, vectors = np.empty((4, k), dtype=np.int64), np.empty((6, k)), np.empty((5, k, 3))
+    ints, scalars, vectors = np.empty((4, k), dtype=np.int64), np.empty((8, k)), np.empty((7, k, 3))
     out_m, out_s, out_key, state_out = ints[0], ints[1], ints[2], ints[3]
-    phi_out, speed_out, v_minus_out, stiff_out, damp_out = scalars[0], scalars[1], scalars[2], scalars[3], scalars[4]
-    slack_out = scalars[5]
+    phi_out, speed_out, v_minus_out, slack_out = scalars[0], scalars[1], scalars[2], scalars[3]
+    k_n_out, c_n_out, k_t_out, c_t_out = scalars[4], scalars[5], scalars[6], scalars[7]
     point_out, c1_out, c2_out, force_out, s_out = vectors[0], vectors[1], vectors[2], vectors[3], vectors[4]
+    g_out, n_out = vectors[5], vectors[6]
     r1, r2 = m.law.r1, m.law.r2
     n_mem = d.memory.key.shape[0]
     pos = 0  # both key lists are sorted: the memory is merged, not searched
@@ -120,22 +127,16 @@ def pair_forces(m, d, h, jump):
     for i in range(k):
         mi, sl = d.candidates.master[i], d.candidates.slave[i]
         j1, j2 = m.master.joint[mi], m.slave.joint[sl]
-        shift = d.opening[m.master.finger[mi]]  # the finger has slid along its axis
-        c1 = add3(mv3(d.R_W[j1], (m.master.centre_J[mi, 0] + shift * m.master.axis_J[mi, 0],
-                                  m.master.centre_J[mi, 1] + shift * m.master.axis_J[mi, 1],
-                                  m.master.centre_J[mi, 2] + shift * m.master.axis_J[mi, 2])), d.p_W[j1])
+        c1 = add3(mv3(d.R_W[j1], m.master.centre_J[mi]), d.p_W[j1])
         c2 = add3(mv3(d.R_W[j2], m.slave.centre_J[sl]), d.p_W[j2])
         n_c, phi, hit, side = penetration(c1, mv3(d.R_W[j1], m.master.normal_J[mi]), r1, c2,
                                           mv3(d.R_W[j2], m.slave.normal_J[sl]), r2)
         if not hit:
             continue
         point = contact_point(c1, c2, r1, r2, n_c, phi)
-        slide = mv3(d.R_W[j1], m.master.axis_J[mi])
-        rate = d.opening_rate[m.master.finger[mi]]
         v_A = _point_velocity(d.vo_W[j1], d.w_W[j1], d.p_W[j1], point)
         v_B = _point_velocity(d.vo_W[j2], d.w_W[j2], d.p_W[j2], point)
-        v_rel = ((slide[0] * rate + v_A[0]) - v_B[0], (slide[1] * rate + v_A[1]) - v_B[1],
-                 (slide[2] * rate + v_A[2]) - v_B[2])
+        v_rel = (v_A[0] - v_B[0], v_A[1] - v_B[1], v_A[2] - v_B[2])
         g = force_direction(c1, c2, n_c, phi, m.law.gradient, side)
         # rate of delta = phi / 2, which is linear: the indentation of phi's rate -(v . g)
         delta_dot = indentation(-(v_rel[0] * g[0] + v_rel[1] * g[1] + v_rel[2] * g[2]))
@@ -155,18 +156,16 @@ def pair_forces(m, d, h, jump):
         for a in range(3):
             point_out[n, a], c1_out[n, a], c2_out[n, a], s_out[n, a] = point[a], c1[a], c2[a], s[a]
             force_out[n, a] = F_n * g[a] + F_f[a]  # Eq. (18): f_i = F_n,i + F_f,i
+            g_out[n, a], n_out[n, a] = g[a], n_c[a]
         speed_out[n] = math.sqrt(v_rel[0] ** 2 + v_rel[1] ** 2 + v_rel[2] ** 2)
-        # the finger closing by dx along its axis indents the pair by (g . axis)^2 dx / 2 along
-        # g, and bends a holding bristle by the axis' share in the tangent plane of n_c (its damping
-        # over the share of the step it held; a saturated one, which held none of it, not at all)
-        normal = 0.5 * (g[0] * slide[0] + g[1] * slide[1] + g[2] * slide[2]) ** 2
-        tangent = 1.0 - (n_c[0] * slide[0] + n_c[1] * slide[1] + n_c[2] * slide[2]) ** 2 if held > 0.0 else 0.0
-        stiff_out[n] = normal * dF_ddelta + (tangent * m.law.bristle.k_b if slack > 0.0 else 0.0)
-        damp_out[n] = normal * dF_drate + tangent * held * m.law.bristle.c_b
+        # advancing by dx along g indents the pair by dx / 2 (delta = phi / 2)
+        k_n_out[n], c_n_out[n] = 0.5 * dF_ddelta, 0.5 * dF_drate
+        k_t_out[n] = m.law.bristle.k_b if held > 0.0 and slack > 0.0 else 0.0
+        c_t_out[n] = held * m.law.bristle.c_b
         if held > 0.0 and slack <= 0.0:
             shared += 1
         n += 1
     d.contacts = Contacts(out_m[:n], out_s[:n], out_key[:n], phi_out[:n], point_out[:n], c1_out[:n], c2_out[:n],
                           force_out[:n], speed_out[:n], state_out[:n], s_out[:n], v_minus_out[:n], slack_out[:n],
-                          stiff_out[:n], damp_out[:n])
+                          g_out[:n], n_out[:n], k_n_out[:n], c_n_out[:n], k_t_out[:n], c_t_out[:n])
     return shared

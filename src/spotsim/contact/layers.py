@@ -1,9 +1,8 @@
 """The sphere layers of a scene, stacked by role, and the face pairs that may touch.
 
 Master spheres lie on the fingers' faces, slave spheres on the grooves' (paper Sec. 3.1.1-3.1.2).
-Each is given in the frame of the joint that carries it; a master sphere is given with its
-finger at opening 0 and slides along the finger's axis by the opening. The spheres of one face
-are contiguous and share its normal.
+Each is given in the frame of the joint that carries its body. The spheres of one face are
+contiguous and share its normal.
 """
 
 from __future__ import annotations
@@ -16,12 +15,10 @@ import numpy as np
 class MasterSpheres(NamedTuple):
     """The finger spheres (set S1), one row each."""
 
-    centre_J: np.ndarray  # (n, 3) centre in its joint's frame, finger at opening 0, m
+    centre_J: np.ndarray  # (n, 3) centre in its joint's frame, m
     normal_J: np.ndarray  # (n, 3) its face's outward normal, same frame
-    joint: np.ndarray  # (n,) the joint carrying it (the body the finger is mounted on)
+    joint: np.ndarray  # (n,) the joint carrying its body
     face: np.ndarray  # (n,) its face, numbered over the master faces
-    finger: np.ndarray  # (n,) its finger
-    axis_J: np.ndarray  # (n, 3) that finger's opening axis, in the joint's frame
 
 
 class SlaveSpheres(NamedTuple):
@@ -48,8 +45,8 @@ class FaceTable(NamedTuple):
     t2_J: np.ndarray
     n_J: np.ndarray
     shape: np.ndarray  # (n, 2) grid size
-    # the mean of the master face's centres (its joint's frame, fingers at opening 0) and the
-    # farthest of them from it, m: `search._moved` bounds every centre's motion from these
+    # the mean of the master face's centres (its joint's frame) and the farthest of them from
+    # it, m: `search._moved` bounds every centre's motion from these
     master_centre_J: np.ndarray  # (n, 3)
     master_radius: np.ndarray  # (n,)
 

@@ -39,7 +39,7 @@ def hertz_potential(phi, K):
 def onset_rate(delta_dot, floor):
     """delta_dot_minus of a pair at its first step in contact: its indentation rate then (m/s,
     > 0 approaching), raised to `floor` (m/s, a floor on the indentation rate, not on the
-    approach speed: see `build.model.contact_law`). Zhang's lambda = factor K / delta_dot_minus
+    approach speed: see `assemble.model.contact_law`). Zhang's lambda = factor K / delta_dot_minus
     is singular for pairs that slide into contact at zero normal speed."""
     return max(delta_dot, floor)
 

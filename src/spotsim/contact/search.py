@@ -52,7 +52,7 @@ class PairList(NamedTuple):
 
     master: np.ndarray  # (n,) master sphere of each candidate
     slave: np.ndarray  # (n,) slave sphere
-    centre_J: np.ndarray  # (n, 3) the master sphere's centre, its joint's frame (fingers at opening 0), m
+    centre_J: np.ndarray  # (n, 3) the master sphere's centre, its joint's frame, m
     node: np.ndarray  # (n, 2) the slave sphere's grid node in its face's coordinates, m
     gap: np.ndarray  # (n,) |c1 - c2| - (r1 + r2) at the build, m
     start: np.ndarray  # (n_table,) each face pair's first candidate
@@ -106,7 +106,7 @@ class FaceFrame(NamedTuple):
 
 @njit_inline
 def face_frame(m, d, f, A):
-    """Face pair f's search frame at d's kinematics and finger openings, a FaceFrame: the map
+    """Face pair f's search frame at d's kinematics, a FaceFrame: the map
     A c + off takes a master centre c in its joint's frame to face coordinates (u, v, height
     above the face plane). A: (3, 3), the map's matrix, written in place (left as it was when
     the faces do not face each other)."""
@@ -122,18 +122,13 @@ def face_frame(m, d, f, A):
     nu, nv, nh = dot3(dn, b0) / norm, dot3(dn, b1) / norm, dot3(dn, b2) / norm
     o = mv3(d.R_W[js], m.faces.origin_J[f])
     # a master centre c (its joint's frame) in face coordinates is A c + off: the rows of A are
-    # the face axes in the master's frame, and off holds the master origin and the finger's
-    # opening, which shifts all the face's spheres alike (a face is on one finger)
+    # the face axes in the master's frame, and off holds the master origin
     for k in range(3):
         A[0, k] = d.R_W[jm, 0, k] * b0[0] + d.R_W[jm, 1, k] * b0[1] + d.R_W[jm, 2, k] * b0[2]
         A[1, k] = d.R_W[jm, 0, k] * b1[0] + d.R_W[jm, 1, k] * b1[1] + d.R_W[jm, 2, k] * b1[2]
         A[2, k] = d.R_W[jm, 0, k] * b2[0] + d.R_W[jm, 1, k] * b2[1] + d.R_W[jm, 2, k] * b2[2]
-    x = d.opening[m.master.finger[first]]
-    shift = (x * m.master.axis_J[first, 0], x * m.master.axis_J[first, 1], x * m.master.axis_J[first, 2])
     e = (d.p_W[jm, 0] - o[0] - d.p_W[js, 0], d.p_W[jm, 1] - o[1] - d.p_W[js, 1], d.p_W[jm, 2] - o[2] - d.p_W[js, 2])
-    off = (A[0, 0] * shift[0] + A[0, 1] * shift[1] + A[0, 2] * shift[2] + dot3(e, b0),
-           A[1, 0] * shift[0] + A[1, 1] * shift[1] + A[1, 2] * shift[2] + dot3(e, b1),
-           A[2, 0] * shift[0] + A[2, 1] * shift[1] + A[2, 2] * shift[2] + dot3(e, b2))
+    off = (dot3(e, b0), dot3(e, b1), dot3(e, b2))
     return FaceFrame(True, nu, nv, nh, off, n_W)
 
 
@@ -450,17 +445,15 @@ def _runs(face):
 
 @njit
 def world_spheres(m, d):
-    """The world centres and normals of every master and slave sphere at d's kinematics and
-    finger openings: (|S1|, 3) x 2, (|S2|, 3) x 2, m."""
+    """The world centres and normals of every master and slave sphere at d's kinematics:
+    (|S1|, 3) x 2, (|S2|, 3) x 2, m."""
     M, S = m.master, m.slave
-    R_W, p_W, opening = d.R_W, d.p_W, d.opening
+    R_W, p_W = d.R_W, d.p_W
     C1, N1 = np.empty_like(M.centre_J), np.empty_like(M.normal_J)
     C2, N2 = np.empty_like(S.centre_J), np.empty_like(S.normal_J)
     for i in range(C1.shape[0]):
-        R, p, x = R_W[M.joint[i]], p_W[M.joint[i]], opening[M.finger[i]]
-        c = (M.centre_J[i, 0] + x * M.axis_J[i, 0], M.centre_J[i, 1] + x * M.axis_J[i, 1],
-             M.centre_J[i, 2] + x * M.axis_J[i, 2])
-        C1[i, 0], C1[i, 1], C1[i, 2] = mv3(R, c)
+        R, p = R_W[M.joint[i]], p_W[M.joint[i]]
+        C1[i, 0], C1[i, 1], C1[i, 2] = mv3(R, M.centre_J[i])
         N1[i, 0], N1[i, 1], N1[i, 2] = mv3(R, M.normal_J[i])
         for a in range(3):
             C1[i, a] += p[a]

@@ -1,8 +1,8 @@
 """Stage: one wrench per body from the pair forces (paper Eq. 18-21), and what a step watches.
 
-Each pair's force f_i acts on the finger's body (+f_i) and on the module (-f_i) at one common
-contact point; the sum is one wrench per body, expressed for the dynamics in each joint's
-frame. `contact_summary` reduces the wrench on the active grasp's module to what the run
+Each pair's force f_i acts on the master sphere's body (+f_i, a finger) and on the slave's
+(-f_i, a module) at one common contact point; the sum is one wrench per body, expressed for the
+dynamics in each joint's frame. `contact_summary` reduces the wrench on the active grasp's module to what the run
 watches and records.
 """
 
@@ -23,11 +23,8 @@ class Loads(NamedTuple):
     f_local: np.ndarray  # (njoints, 6) each joint's wrench (force, moment about its origin), its own frame
     force_W: np.ndarray  # (njoints, 3) each body's contact force, world, N
     torque_O_W: np.ndarray  # (njoints, 3) its moment about the world origin, N m
-    external_force_W: np.ndarray  # (3,) what fixed bodies (joint 0) exert on the free ones, N
+    external_force_W: np.ndarray  # (3,) what bodies outside the floating branches exert on those inside, N
     external_torque_O_W: np.ndarray  # (3,) its moment about the world origin, N m
-    finger_load: np.ndarray  # (n_fingers,) each finger's load along its opening axis, N (never negative)
-    finger_stiffness: np.ndarray  # (n_fingers,) its growth as the finger closes further, N/m (`Contacts`)
-    finger_damping: np.ndarray  # (n_fingers,) ... and closes faster, N s/m
 
 
 class Summary(NamedTuple):
@@ -41,9 +38,8 @@ class Summary(NamedTuple):
     max_penetration: float  # deepest penetration, m
 
 
-def no_loads(njoints: int, n_fingers: int) -> Loads:
-    return Loads(np.zeros((njoints, 6)), np.zeros((njoints, 3)), np.zeros((njoints, 3)), np.zeros(3), np.zeros(3),
-                 np.zeros(n_fingers), np.zeros(n_fingers), np.zeros(n_fingers))
+def no_loads(njoints: int) -> Loads:
+    return Loads(np.zeros((njoints, 6)), np.zeros((njoints, 3)), np.zeros((njoints, 3)), np.zeros(3), np.zeros(3))
 
 
 def no_summary() -> Summary:
@@ -51,10 +47,10 @@ def no_summary() -> Summary:
 
 
 @njit_inline
-def _add_wrench(F, T, ext_f, ext_t, j, partner, p, o, sign, f):
+def _add_wrench(F, T, ext_f, ext_t, j, external, p, o, sign, f):
     """Add sign f (3-tuple), acting at p (3-tuple, world), to body j's force F[j] and moment
-    T[j] about its origin o (3-tuple), and to the external wrench when the partner body is
-    fixed."""
+    T[j] about its origin o (3-tuple), and to the external wrench when `external` (the partner
+    body does not float, and j does)."""
     r0, r1, r2 = p[0] - o[0], p[1] - o[1], p[2] - o[2]
     F[j, 0] += sign * f[0]
     F[j, 1] += sign * f[1]
@@ -62,8 +58,7 @@ def _add_wrench(F, T, ext_f, ext_t, j, partner, p, o, sign, f):
     T[j, 0] += sign * (r1 * f[2] - r2 * f[1])
     T[j, 1] += sign * (r2 * f[0] - r0 * f[2])
     T[j, 2] += sign * (r0 * f[1] - r1 * f[0])
-    # what a fixed body exerts on a free one is external; between free bodies internal
-    if partner == 0 and j != 0:
+    if external:
         ext_f[0] += sign * f[0]
         ext_f[1] += sign * f[1]
         ext_f[2] += sign * f[2]
@@ -74,45 +69,35 @@ def _add_wrench(F, T, ext_f, ext_t, j, partner, p, o, sign, f):
 
 @njit
 def body_wrenches(m, d):
-    """Stage: d.loads, one wrench per body from d.contacts (Eq. 18-21), +f_i on the finger's
-    body, -f_i on the module's, at the common contact point (or, with m.law.common_point
-    False, each at its own sphere's centre: the negative control); and each finger's load."""
+    """Stage: d.loads, one wrench per body from d.contacts (Eq. 18-21), +f_i on the master
+    sphere's body, -f_i on the slave's, at the common contact point (or, with m.law.common_point
+    False, each at its own sphere's centre: the negative control). What a body outside the
+    floating branches exerts on one inside is the external wrench (`tree.Tree.free`)."""
     njoints = d.R_W.shape[0]
     # F, T (moment about each joint's origin, world axes), T_O and the external wrench as
     # blocks of one array (njoints + 1 rows: at least the external wrench's two): an
     # allocation costs ~25 ns, a step makes dozens
     block = np.zeros((4, njoints + 1, 3))
     F, T, T_O, ext_f, ext_t = block[0][:njoints], block[1][:njoints], block[2][:njoints], block[3][0], block[3][1]
-    n_f = m.fingers.parent_joint.shape[0]
-    finger = np.zeros((3, n_f))
-    load, stiffness, damping = finger[0], finger[1], finger[2]
     common_point = m.law.common_point
     # the pair loop reads its arrays through locals: read through the structures inside it,
     # it takes twice as long (measured with 37 pairs: 1.69 us against 0.75 us a call)
     R_W, p_W = d.R_W, d.p_W
     c = d.contacts
     master, slave, force_W, point_W, c1_W, c2_W = c.master, c.slave, c.force_W, c.point_W, c.c1_W, c.c2_W
-    axial_stiffness, axial_damping = c.axial_stiffness, c.axial_damping
-    master_joint, slave_joint, master_finger = m.master.joint, m.slave.joint, m.master.finger
-    finger_joint, finger_axis = m.fingers.parent_joint, m.fingers.axis_J
+    master_joint, slave_joint, free = m.master.joint, m.slave.joint, m.tree.free
     for i in range(master.shape[0]):
-        mi = master[i]
-        j1, j2 = master_joint[mi], slave_joint[slave[i]]
+        j1, j2 = master_joint[master[i]], slave_joint[slave[i]]
         f = (force_W[i, 0], force_W[i, 1], force_W[i, 2])
         if common_point:
             p1 = p2 = (point_W[i, 0], point_W[i, 1], point_W[i, 2])
         else:
             p1 = (c1_W[i, 0], c1_W[i, 1], c1_W[i, 2])
             p2 = (c2_W[i, 0], c2_W[i, 1], c2_W[i, 2])
-        _add_wrench(F, T, ext_f, ext_t, j1, j2, p1, (p_W[j1, 0], p_W[j1, 1], p_W[j1, 2]), 1.0, f)
-        _add_wrench(F, T, ext_f, ext_t, j2, j1, p2, (p_W[j2, 0], p_W[j2, 1], p_W[j2, 2]), -1.0, f)
-        fg = master_finger[mi]
-        j = finger_joint[fg]
-        stiffness[fg] += axial_stiffness[i]
-        damping[fg] += axial_damping[i]
-        for a in range(3):
-            load[fg] += f[a] * (R_W[j, a, 0] * finger_axis[fg, 0] + R_W[j, a, 1] * finger_axis[fg, 1]
-                                + R_W[j, a, 2] * finger_axis[fg, 2])
+        _add_wrench(F, T, ext_f, ext_t, j1, free[j1] and not free[j2], p1, (p_W[j1, 0], p_W[j1, 1], p_W[j1, 2]),
+                    1.0, f)
+        _add_wrench(F, T, ext_f, ext_t, j2, free[j2] and not free[j1], p2, (p_W[j2, 0], p_W[j2, 1], p_W[j2, 2]),
+                    -1.0, f)
     local = np.empty((njoints, 6))
     for j in range(njoints):
         for a in range(3):
@@ -121,9 +106,7 @@ def body_wrenches(m, d):
         T_O[j, 0] = T[j, 0] + p_W[j, 1] * F[j, 2] - p_W[j, 2] * F[j, 1]
         T_O[j, 1] = T[j, 1] + p_W[j, 2] * F[j, 0] - p_W[j, 0] * F[j, 2]
         T_O[j, 2] = T[j, 2] + p_W[j, 0] * F[j, 1] - p_W[j, 1] * F[j, 0]
-    for k in range(load.shape[0]):
-        load[k] = max(load[k], 0.0)
-    d.loads = Loads(local, F, T_O, ext_f, ext_t, load, stiffness, damping)
+    d.loads = Loads(local, F, T_O, ext_f, ext_t)
 
 
 @njit_inline

@@ -26,7 +26,7 @@ class Run:
 
 def load_run(result_dir: str | Path) -> Run:
     """Read a results directory (raises SpotsimError with what is missing or wrong)."""
-    from ..build.model import build_model
+    from ..assemble.model import build_model
     from ..results import REPLAY, read_arrays, read_results
     from ..scenario import load_scenario
 

@@ -9,7 +9,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..contact.friction import NONE, SLIPPING, STICKING
-from ..sim.data import PHASE_NAMES as PHASE_KEYS
+from ..tables import PHASE_NAMES as PHASE_KEYS
 from .run import Kinematics, Run, display_frames, recorded_state
 from .three import Clip, ObjectTree, colour, matrix_of, moves, new_uuid, node
 
@@ -188,12 +188,12 @@ def build(run: Run, rate_hz: float = 100.0, spheres: bool = True, force_mm_per_N
 
 
 def _body_of_faces(model):
-    """Group the first model's faces by the body their spheres ride: each finger (moved by its
-    opening) and each module. Returns [(name, kind, index, master faces, slave faces)]."""
+    """Group the first model's faces by the body their spheres ride: each finger (on its joint)
+    and each module. Returns [(name, kind, index, master faces, slave faces)]."""
     bodies = []
     n_master_faces = int(model.master.face.max()) + 1 if len(model.master.face) else 0
     for i, f in enumerate(model.fingers):
-        faces = np.unique(model.master.face[model.master.finger == i])
+        faces = np.unique(model.master.face[model.master.joint == f.joint])
         bodies.append((f.name, "finger", i, faces, np.zeros(0, int)))
     for k, mod in enumerate(model.modules):
         faces = np.unique(model.slave.face[model.slave.joint == mod.joint])
@@ -201,12 +201,9 @@ def _body_of_faces(model):
     return bodies, n_master_faces
 
 
-def _body_frame(model, kind, i, oMi, opening) -> pin.SE3:
-    """World pose of the frame the spheres of a finger or a module are given in."""
-    if kind == "finger":
-        f = model.fingers[i]
-        return oMi[f.parent_joint] * pin.SE3(np.eye(3), f.axis_J * opening[i])
-    return oMi[model.modules[i].joint]
+def _body_frame(model, kind, i, oMi) -> pin.SE3:
+    """World pose of the frame the spheres of a finger or a module are given in: its joint's."""
+    return oMi[model.fingers[i].joint if kind == "finger" else model.modules[i].joint]
 
 
 def _contact_bodies(run, frames, keys, states, datas, spheres, commands) -> list[Clip]:
@@ -235,7 +232,7 @@ def _contact_bodies(run, frames, keys, states, datas, spheres, commands) -> list
             g = tree.add("geometries", {"type": "BoxGeometry", "width": size[0], "height": size[1], "depth": size[2]})
             children.append(node("Mesh", f"plate{f}", g, plate_mat, matrix=matrix_of(M)))
         clip = Clip(f"{ROOT}/contact/{name}")
-        clip.pose("", [_body_frame(model, kind, i, oMi, s[2]) for oMi, s in zip(datas, states)], keys)
+        clip.pose("", [_body_frame(model, kind, i, oMi) for oMi in datas], keys)
         if spheres and snaps is not None:
             snap = frames.snapshot
             for f in [*mfaces, *sfaces]:
@@ -271,7 +268,7 @@ def _pair_clouds(model, snaps, snap, kind, i, tree, focal):
     clouds: dict[bytes, tuple[dict, np.ndarray]] = {}
     order = []
     if kind == "finger":
-        layers, r, idx_key, on_body = model.master, model.law.r1, "master", model.master.finger == i
+        layers, r, idx_key, on_body = model.master, model.law.r1, "master", model.master.joint == model.fingers[i].joint
     else:
         layers, r, idx_key = model.slave, model.law.r2, "slave"
         on_body = layers.joint == model.modules[i].joint

@@ -7,14 +7,14 @@ import math
 
 from ..jit import njit
 from ..linalg import cross, mv
-from .drive import current_speed
+from .actuation import current_speed
 from .dynamics import table_load
 
 
 @njit
 def raise_peaks(m, d):
     """Raise the active grasp's peaks to include the last step's contact wrench and pairs, and
-    on the air-bearing table what the free bodies' contact wrenches press into it."""
+    on the air-bearing table what the floating branches' contact wrenches press into it."""
     g = d.active
     f, tau = d.summary.force_A, d.summary.torque_A
     for a in range(3):
@@ -23,17 +23,19 @@ def raise_peaks(m, d):
     d.peak_force_norm[g] = max(d.peak_force_norm[g], math.sqrt(f[0] ** 2 + f[1] ** 2 + f[2] ** 2))
     d.peak_torque_norm[g] = max(d.peak_torque_norm[g], math.sqrt(tau[0] ** 2 + tau[1] ** 2 + tau[2] ** 2))
     d.peak_pairs[g] = max(d.peak_pairs[g], d.contacts.key.shape[0])
-    for b in m.bodies.planar_rows:
-        force, moment = table_load(m.bodies, b, d.loads.f_local)
-        d.peak_table_force[g] = max(d.peak_table_force[g], force)
-        d.peak_table_moment[g] = max(d.peak_table_moment[g], moment)
+    for b in range(m.branches.joint.shape[0]):
+        if m.branches.planar[b]:
+            force, moment = table_load(m, d, b)
+            d.peak_table_force[g] = max(d.peak_table_force[g], force)
+            d.peak_table_moment[g] = max(d.peak_table_moment[g], moment)
 
 
 @njit
 def bookkeeping(m, d, h):
     """Stage: count the step of h (s), raise the peaks, add the drives' work and the external
-    impulse: the fixed bodies' contact forces (a fixed base; between free bodies every contact
-    force is internal) and gravity, at the poses of the step's last force evaluation."""
+    impulse: the contact forces from bodies that do not float (a fixed base and the fingers on
+    it; between floating branches every contact force is internal) and gravity, at the poses
+    of the step's last force evaluation."""
     if current_speed(m, d) != 0.0:
         d.held = False
     n = d.contacts.key.shape[0]
@@ -42,13 +44,13 @@ def bookkeeping(m, d, h):
     d.drive_work += h * d.drive_power
     if n:
         raise_peaks(m, d)
-    if m.limits.fixed_contact:
+    if m.limits.external_contact:
         for i in range(3):
             d.impulse_W[i] += h * d.external_force_W[i]
             d.impulse_moment_O_W[i] += h * d.external_torque_O_W[i]
     if m.gravity_W[0] != 0.0 or m.gravity_W[1] != 0.0 or m.gravity_W[2] != 0.0:
-        for b in range(m.bodies.joint.shape[0]):
-            j = m.bodies.joint[b]
-            r_G = d.p_W[j] + mv(d.R_W[j], m.bodies.lever[b])
-            d.impulse_W[:] += h * m.bodies.mass[b] * m.gravity_W
-            d.impulse_moment_O_W[:] += h * cross(r_G, m.bodies.mass[b] * m.gravity_W)
+        for j in range(1, m.tree.parent.shape[0]):
+            if m.tree.free[j]:
+                r_G = d.p_W[j] + mv(d.R_W[j], m.tree.lever[j])
+                d.impulse_W[:] += h * m.tree.mass[j] * m.gravity_W
+                d.impulse_moment_O_W[:] += h * cross(r_G, m.tree.mass[j] * m.gravity_W)

@@ -30,19 +30,13 @@ class BroadPhase:
             req.security_margin = model.sim.limits.margin
         self.manager = pin.BroadPhaseManager_DynamicAABBTreeCollisionManager(m, model.geom_model, self.geom_data)
 
-    def near(self, q: np.ndarray, opening: np.ndarray) -> np.ndarray:
+    def near(self, q: np.ndarray) -> np.ndarray:
         """Indices into the model's face pairs (`SimModel.faces`) of those whose patches lie
-        within the security margin at configuration q, the fingers at their openings (m).
-        Raises StateOverflow when coal rejects the state."""
+        within the security margin at configuration q. Raises StateOverflow when coal rejects
+        the state."""
         model, gd = self.model, self.geom_data
         pin.forwardKinematics(model.pin_model, self.pin_data, q)
         pin.updateGeometryPlacements(model.pin_model, self.pin_data, model.geom_model, gd)
-        for g, k in model.finger_geoms:  # finger patches slide along their axes by the opening
-            f = model.fingers[k]
-            M = gd.oMg[g]
-            R = self.pin_data.oMi[f.parent_joint].rotation
-            M.translation = M.translation + R @ f.axis_J * opening[k]
-            gd.oMg[g] = M
         try:
             self.manager.update(False)
             pin.computeCollisions(self.manager, False)
@@ -55,6 +49,6 @@ class BroadPhase:
     def refresh(self, data) -> np.ndarray:
         """Run it anew at data's state: its face pairs start a fresh skin (the search's pair
         list checks itself against the face pairs it was built for). Returns them."""
-        near = self.near(data.q, data.opening)
+        near = self.near(data.q)
         set_near(data, near)
         return near

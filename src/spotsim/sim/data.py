@@ -23,18 +23,16 @@ from ..contact.forces import Contacts, Memory, no_contacts, no_memory
 from ..contact.search import Candidates, PairList, empty_pair_list, no_candidates
 from ..contact.wrenches import Loads, Summary, no_loads, no_summary
 from ..structs import StructProxy, StructType, new_struct, register, view
-from .drive import start_drive
+from ..tables import APPROACH, COMPLETE, PHASE_NAMES, SELF_CENTRING  # noqa: F401 (read from here by the stages)
+from .actuation import start_drive
+from .dynamics import Articulation, new_articulation
+from .integrators import state_size
+from .tree import Frames, new_frames
 
 #: Record rows the row buffer holds: the compiled loop returns to Python after at most this
 #: many (each return updates the progress bar and lets Ctrl-C in); 250 rows are 0.25 s
 #: simulated at the default record interval.
 ROWS_PER_CALL = 250
-#: The grasp phases, in order.
-APPROACH, SELF_CENTRING, COMPLETE = 0, 1, 2
-PHASE_NAMES = ("approach", "self_centring", "complete")
-#: Numbers per free body in a Runge-Kutta state: centroid (world), quaternion, centroid
-#: velocity (world), angular velocity (body).
-RK_STATE = 13
 
 
 class Snapshots(NamedTuple):
@@ -53,16 +51,18 @@ class DataFields(NamedTuple):
 
     # the state
     t: float  # s
-    q: np.ndarray  # (nq,) configuration (free-flyers: xyz, quaternion xyzw)
+    q: np.ndarray  # (nq,) configuration over the tree's joints (`tree`: free-flyers xyz, quaternion xyzw)
     v: np.ndarray  # (nv,) velocity (free-flyers: v_O, omega in the body frame)
     a: np.ndarray  # (nv,) acceleration at the last force evaluation
-    opening: np.ndarray  # (n_f,) each finger's opening, m
-    opening_rate: np.ndarray  # (n_f,) its rate during the coming step, m/s
-    # the kinematics of the last force evaluation, rows by joint (fixed bodies: identity)
+    tau: np.ndarray  # (nv,) the actuators' joint forces (`actuation`), N or N m
+    load: np.ndarray  # (n_a,) each actuated joint's contact load at the last evaluation, N (`actuation`)
+    # the kinematics of the last force evaluation, rows by joint (the universe: identity)
     R_W: np.ndarray  # (njoints, 3, 3)
     p_W: np.ndarray  # (njoints, 3) m
     w_W: np.ndarray  # (njoints, 3) angular velocity, world, rad/s
     vo_W: np.ndarray  # (njoints, 3) the joint origin's velocity, world, m/s
+    now: Frames  # scratch: the kinematics at the state as it is (`tree.current_frames`, the integrators' centroids)
+    work: Articulation  # scratch of the articulated-body algorithm (`dynamics`)
     # the broad phase (coal, refreshed from Python) and the search
     near: np.ndarray  # (k,) the face pairs coal kept within its margin
     travel: float  # bound on any two spheres' relative motion since coal's last run, m
@@ -73,12 +73,13 @@ class DataFields(NamedTuple):
     memory: Memory  # what the pairs carry into the next evaluation (the last committed one)
     loads: Loads
     summary: Summary
-    external_force_W: np.ndarray  # (3,) fixed bodies' force on the free ones, mean over the last step, N
+    external_force_W: np.ndarray  # (3,) the external force on the floating branches, mean over the last step, N
     external_torque_O_W: np.ndarray  # (3,) its moment about the world origin, N m
     # the grasps: the active one's drive and phase, and each one's record
     active: int  # the grasp under way
     stalled: np.ndarray  # (n_ee,) the relay: each end-effector's drive holds at the grasp load
-    drive_t: float  # when the active drive's controller next reads the load and sets the speed, s
+    sample_t: float  # when the active drive's controller next reads the load and sets the speed, s
+    jumped: bool  # a controller changed a prescribed speed since the last force evaluation
     drive_stopped: np.ndarray  # (n_g,) each grasp's drive has stopped since it last closed at over half speed
     drive_resumes: np.ndarray  # (n_g,) ... the times it closed again at over half its closing speed after it stopped
     drive_jump: np.ndarray  # (n_g,) ... its largest change of speed from one reading to the next, m/s
@@ -97,7 +98,7 @@ class DataFields(NamedTuple):
     peak_table_force: np.ndarray
     peak_table_moment: np.ndarray
     # the run's bookkeeping
-    impulse_W: np.ndarray  # (3,) external impulse on the free bodies (fixed contacts, gravity), N s
+    impulse_W: np.ndarray  # (3,) external impulse on the floating branches (contacts from outside, gravity), N s
     impulse_moment_O_W: np.ndarray  # (3,) its moment about the world origin, N m s
     drive_power: float  # the finger drives' power during the last step (a bound), W
     drive_work: float  # the work they did since the start (a bound), J
@@ -111,7 +112,7 @@ class DataFields(NamedTuple):
     energy_start: float  # mechanical energy at the start, J
     energy_now: float  # ... at the last record, J
     energy_passive: float  # ... when the current passive phase began, J (nan: not in one)
-    momentum_start: np.ndarray  # (3,) the free bodies' linear momentum at the start, kg m/s
+    momentum_start: np.ndarray  # (3,) the floating branches' linear momentum at the start, kg m/s
     angular_momentum_start: np.ndarray  # (3,) their angular momentum about the world origin
     momentum_max: float  # the largest single body's linear momentum, kg m/s
     angular_momentum_max: float  # ... angular momentum, kg m^2/s
@@ -127,14 +128,12 @@ class DataFields(NamedTuple):
     h_next: float  # the step an adaptive integrator tries next, s (0: none yet)
     fsal: bool  # the last committed evaluation can be the next step's first stage
     fsal_t: float  # ... at this time,
-    fsal_rate: np.ndarray  # (n_f,) ... with these finger rates (under every integrator, the last evaluation's):
-    fsal_dy: np.ndarray  # (13 n_bodies,) its state derivative
+    fsal_dy: np.ndarray  # (`integrators.state_size`,) its state derivative
     fsal_external: np.ndarray  # (6,) its external wrench (force, moment about the origin)
     # the record rows and replay snapshots of one call of the loop
     rows: np.ndarray  # (ROWS_PER_CALL, width)
     n_rows: int
     row_index: int  # the run's index of the next row
-    last_open: np.ndarray  # (n_f of the first model,) each finger's last opening, m
     snapshots: Snapshots
     n_snapshots: int
     n_snapshot_pairs: int
@@ -159,29 +158,34 @@ register(DataType, DataFields, Data)
 def _copied(x):
     if isinstance(x, np.ndarray):
         return x.copy()
+    if isinstance(x, StructProxy):
+        return new_struct(_copied(view(x)))
     if isinstance(x, tuple) and hasattr(x, "_fields"):
         return type(x)(*(_copied(v) for v in x))
     return x
 
 
 def make_data(model, rows: int = ROWS_PER_CALL) -> Data:
-    """The Data of a run's start on `model` (a `build.model.Model`): at rest in q0, the fingers
-    at their start openings and the first grasp's closing, no contact, every grasp still to come."""
+    """The Data of a run's start on `model` (an `assemble.model.Model`): at rest in q0 (the
+    fingers at their start openings), the first grasp's drive closing, no contact, every grasp
+    still to come."""
     sim = model.sim
-    nj, n_f = model.pin_model.njoints, len(model.fingers)
+    nj, nv = model.pin_model.njoints, model.pin_model.nv
     n_g, n_ee, n_mod = len(model.grasps), len(model.end_effectors), len(model.modules)
     nan = lambda n: np.full(n, np.nan)
     snap_cap = rows // sim.record.replay_every + 1
     ints = lambda n: np.zeros(n, dtype=np.int64)
+    frames = new_frames(nj)
     f = DataFields(
-        t=0.0, q=model.q0.copy(), v=model.v0.copy(), a=np.zeros(model.pin_model.nv),
-        opening=np.array([f.opening_start for f in model.fingers], dtype=float).reshape(n_f),
-        opening_rate=np.zeros(n_f),
-        R_W=np.tile(np.eye(3), (nj, 1, 1)), p_W=np.zeros((nj, 3)), w_W=np.zeros((nj, 3)), vo_W=np.zeros((nj, 3)),
+        t=0.0, q=model.q0.copy(), v=model.v0.copy(), a=np.zeros(nv), tau=np.zeros(nv),
+        load=np.zeros(len(sim.actuators.joint)),
+        R_W=frames.R_W, p_W=frames.p_W, w_W=frames.w_W, vo_W=frames.vo_W, now=new_frames(nj),
+        work=new_articulation(nj, nv),
         near=ints(0), travel=math.inf, pair_list=empty_pair_list(len(sim.faces.master_start)),
-        candidates=no_candidates(), contacts=no_contacts(), memory=no_memory(), loads=no_loads(nj, n_f),
+        candidates=no_candidates(), contacts=no_contacts(), memory=no_memory(), loads=no_loads(nj),
         summary=no_summary(), external_force_W=np.zeros(3), external_torque_O_W=np.zeros(3),
-        active=0, stalled=np.zeros(n_ee, dtype=np.bool_), drive_t=0.0, drive_stopped=np.zeros(n_g, dtype=np.bool_),
+        active=0, stalled=np.zeros(n_ee, dtype=np.bool_), sample_t=0.0, jumped=False,
+        drive_stopped=np.zeros(n_g, dtype=np.bool_),
         drive_resumes=ints(n_g), drive_jump=np.zeros(n_g), phase=ints(n_g), held_since=math.nan,
         t_start=np.r_[0.0, nan(n_g - 1)], t_contact=nan(n_g), t_complete=nan(n_g),
         peak_force=np.zeros((n_g, 3)), peak_torque=np.zeros((n_g, 3)), peak_force_norm=np.zeros(n_g),
@@ -193,10 +197,9 @@ def make_data(model, rows: int = ROWS_PER_CALL) -> Data:
         angular_momentum_start=np.zeros(3), momentum_max=0.0, angular_momentum_max=0.0, momentum_drift=0.0,
         angular_momentum_drift=0.0,
         left=0, h=sim.h, t_end=0.0, flight=False, held=False,
-        h_next=0.0, fsal=False, fsal_t=0.0, fsal_rate=np.zeros(n_f),
-        fsal_dy=np.zeros(RK_STATE * len(sim.bodies.joint)), fsal_external=np.zeros(6),
+        h_next=0.0, fsal=False, fsal_t=0.0,
+        fsal_dy=np.zeros(state_size(sim.tree, sim.branches)), fsal_external=np.zeros(6),
         rows=np.zeros((rows, sim.record.width)), n_rows=0, row_index=0,
-        last_open=np.array([f.opening_start for f in model.fingers], dtype=float).reshape(n_f),
         snapshots=Snapshots(ints(snap_cap), ints(snap_cap), np.zeros((snap_cap, n_mod, 3)), ints(64), ints(64),
                             ints(64)),
         n_snapshots=0, n_snapshot_pairs=0)

@@ -1,9 +1,9 @@
-"""One force evaluation: the contact stages of the paper's Fig. 5, in order.
+"""One force evaluation: the contact stages of the paper's Fig. 5, in order, and the actuators.
 
-kinematics -> sphere pairs -> pair forces -> wrenches (-> what the step watches). Every
-integrator evaluates the forces through `forces` (`sim.integrators`); at a state whose pairs
-were just found, with only the finger rates changed, through its last stages alone
-(`contact_forces`): the pairs depend on the poses alone.
+kinematics -> sphere pairs -> pair forces -> wrenches (-> what the step watches) -> actuators.
+Every integrator evaluates the forces through `forces` (`sim.integrators`); at a state whose
+pairs were just found, with only velocities changed (a controller's impulse), through its last
+stages alone (`contact_forces`): the pairs depend on the poses alone.
 """
 
 from __future__ import annotations
@@ -12,14 +12,15 @@ from ..contact.forces import pair_forces
 from ..contact.search import find_pairs
 from ..contact.wrenches import body_wrenches, contact_summary
 from ..jit import njit
-from .bodies import kinematics
+from .actuation import actuation
+from .tree import kinematics
 
 
 @njit
 def forces(m, d, h, jump):
-    """The contact wrenches at d's state (q, v, the finger openings and rates), the bristles
-    bent over h (s) from d.memory, which is left as it is. `jump`: the finger rates changed
-    since the memory's evaluation (a controller tick), and h is the step to come
+    """The contact wrenches and the actuators' joint forces at d's state (q, v), the bristles
+    bent over h (s) from d.memory, which is left as it is. `jump`: a controller changed the
+    prescribed joints' speeds since the memory's evaluation, and h is the step to come
     (`friction.bristle`). Returns how many saturated pairs held a share of h (`pair_forces`)."""
     kinematics(m, d)  # Eq. (1): the bodies' poses and velocities
     find_pairs(m, d)  # Eq. (6)-(10): culled, or the paper's literal all-pairs search
@@ -28,9 +29,10 @@ def forces(m, d, h, jump):
 
 @njit
 def contact_forces(m, d, h, jump):
-    """`forces`' stages after the search: the wrenches of d.candidates at d's kinematics and
-    finger rates, the bristles bent over h (s) from d.memory (`forces`); returns `forces`'."""
+    """`forces`' stages after the search: the wrenches of d.candidates at d's kinematics, the
+    bristles bent over h (s) from d.memory (`forces`), and the actuators; returns `forces`'."""
     shared = pair_forces(m, d, h, jump)  # Eq. (11)-(17), per pair
     body_wrenches(m, d)  # Eq. (18)-(21), one wrench per body
     contact_summary(m, d)  # the active module's wrench in O_a, the fastest and deepest pair
+    actuation(m, d)  # the actuated joints' loads and forces
     return shared

@@ -1,10 +1,10 @@
-"""Time integrators, compiled: each advances d by one step through the same stages.
+"""Time integrators, compiled: each advances d by one step over (q, v) through the same stages.
 
 An integrator is one function `f(m, d, h) -> h_taken` that evaluates the forces
 (`sim.forces`) and the accelerations (`sim.dynamics.accelerations`) where its scheme needs
 them, commits the pair memory of the state it ends at, updates (q, v), and sets the step's
-mean external wrench on the free bodies (for the momentum balance). `integrate` dispatches on
-the model's method; a new integrator is one more such function and its code.
+mean external wrench on the floating branches (for the momentum balance). `integrate`
+dispatches on the model's method; a new integrator is one more such function and its code.
 
 - `symplectic_euler`: the paper's explicit fixed step.
 - `adaptive_euler`: symplectic Euler with its error controlled by an embedded estimate
@@ -12,13 +12,15 @@ the model's method; a new integrator is one more such function and its code.
   optionally, its steps cut where a bristle's damping switches on or off.
 - `rk4`, `dopri5`: explicit Runge-Kutta, fixed and error-controlled.
 
-Free bodies hang on free-flyer or planar joints, whose velocity Pinocchio keeps in the body
-frame. The integrators advance each free body's centroid in the world frame instead (a planar
-body's stays in its plane: its accelerations have no other component, and `set_centroid_state`
-keeps its in-plane coordinates): contact forces come
-in equal and opposite pairs, so the sum of m_i a_G,i is zero to round-off and the total linear
-momentum, and the system's centroid velocity, stay exact. A body-frame twist update does not
-keep them: its error grows with (omega h)^2.
+Revolute and prismatic joints advance their coordinates as `pin.integrate` does (q + h v). A
+floating root (a free-flyer or a planar joint on the universe) turns by the exponential of
+its angular velocity, as `pin.integrate` turns it, but it carries its whole branch (a robot
+and its fingers, a module), and the integrators advance that branch's centroid in the world
+frame instead of the root's origin (`place_branch`; a planar branch's stays in its plane):
+contact forces come in equal and opposite pairs and the joints' forces are internal, so the
+sum of the branches' momentum rates is zero to round-off and the total linear momentum, and
+the system's centroid velocity, stay exact. `pin.integrate`'s body-frame twist does not keep
+them: its error grows with (omega h)^2.
 """
 
 from __future__ import annotations
@@ -29,36 +31,23 @@ import numpy as np
 
 from ..contact.forces import commit_memory
 from ..jit import njit, njit_inline
-from ..linalg import axpy3, put3, quat_times_exp4
-from .bodies import (
-    body_rotation,
-    centroid_acceleration,
-    centroid_state,
-    centroid_of,
-    free_origin3,
-    free_quat,
-    free_twist,
-    joint_quat,
-    kinematics,
-    planar_origin3,
-    planar_quat,
-    planar_twist,
-    set_centroid_state,
-    set_free_state,
-    set_planar_state,
-    travel_rate,
-    twist,
-)
-from .data import RK_STATE
+from ..linalg import add3, axpy3, cross3, mm9, mm33, mv3, mv9, put3, put9, quat_times_exp4, sub3
+from ..tables import ADAPTIVE, ADAPTIVE_EULER, METHODS, PRISMATIC, SYMPLECTIC_EULER  # noqa: F401 (the tables' home)
+from .actuation import sample_controllers
 from .dynamics import accelerations
 from .forces import contact_forces, forces
+from .tree import (
+    _EYE,
+    branch_centroid,
+    joint_motion,
+    joint_quat,
+    joint_twist,
+    kinematics,
+    put_root,
+    root_rotation9,
+    travel_rate,
+)
 
-#: The integrators, by their scenario names; a Model names its own by its index here.
-METHODS = ("symplectic_euler", "rk4", "dopri5", "adaptive_euler")
-SYMPLECTIC_EULER = METHODS.index("symplectic_euler")
-ADAPTIVE_EULER = METHODS.index("adaptive_euler")
-#: The error-controlled methods.
-ADAPTIVE = ("dopri5", "adaptive_euler")
 #: An adaptive step grows at most, and shrinks at least, by these factors per try; its error
 #: ratio r scales it by SAFETY r^(-1/p) in between, p the order of its local error estimate
 #: (Hairer, Norsett and Wanner, II.4): 5 for dopri5, 2 for adaptive_euler.
@@ -66,10 +55,19 @@ GROW_MAX, SHRINK_MIN, SAFETY = 5.0, 0.2, 0.9
 #: adaptive_euler with its bristle switches located (`switch_fraction`): a try in which a
 #: bristle saturates or lets go earlier than SWITCH_WINDOW of the step from its end is tried
 #: again to end just past the switch, if the switch's damping impulse c_b |v| h (1 - theta)
-#: would move the lightest free body by more than SWITCH_SHARE of the velocity tolerance
+#: would move the lightest floating branch by more than SWITCH_SHARE of the velocity tolerance
 #: (a switch misplaced within a step always errs the same way, so its share is kept small);
 #: a switch within SWITCH_FLOOR (s) of the step's start is taken as at its start.
 SWITCH_WINDOW, SWITCH_SHARE, SWITCH_FLOOR = 0.1, 0.1, 1e-8
+#: Numbers per floating root in a Runge-Kutta state: its branch's centroid (world), the root's
+#: quaternion, the centroid's velocity (world), the root's angular velocity (its frame); and
+#: per revolute or prismatic joint: its coordinate and its speed.
+ROOT_STATE, JOINT_STATE = 13, 2
+
+
+def state_size(tree, branches) -> int:
+    """The length of a Runge-Kutta state of a tree (`pack`)."""
+    return ROOT_STATE * int(np.sum(branches.floating)) + JOINT_STATE * len(tree.internal)
 
 
 @njit_inline
@@ -84,59 +82,188 @@ def integrate(m, d, h):
     return runge_kutta(m, d, h)
 
 
+# ------------------------------------------------------------------------------- branches
+
+
+@njit_inline
+def branch_force(m, d, b):
+    """The force on floating branch b's bodies (world, N, a 3-tuple): its contact forces and
+    gravity (on the air-bearing table, gravity's part in its plane)."""
+    br = m.branches
+    g, M = br.gravity_W[b], br.mass[b]
+    F0, F1, F2 = M * g[0], M * g[1], M * g[2]
+    for i in range(br.first[b], br.stop[b]):
+        j = br.members[i]
+        F0 += d.loads.force_W[j, 0]
+        F1 += d.loads.force_W[j, 1]
+        F2 += d.loads.force_W[j, 2]
+    return F0, F1, F2
+
+
+@njit_inline
+def _root_spin(t, j, v):
+    """A floating root's angular velocity, its frame (a planar joint's about its z)."""
+    return joint_twist(t, j, v)[1]
+
+
+@njit_inline
+def branch_offset(m, d, b):
+    """Floating branch b's centroid relative to its root's origin, and the velocity its
+    internal joints give it, both in the root's frame (3-tuples), at (d.q, d.v): the centroid
+    is at p + R c and moves at v_O + omega x (R c) + R u, for the root at p, turned by R,
+    moving at v_O and turning at omega (world). Uses d.now for the poses relative to the root."""
+    t, br = m.tree, m.branches
+    j0 = br.joint[b]
+    q, v = d.q, d.v
+    rel_R, rel_p, rel_w, rel_v = d.now.R_W, d.now.p_W, d.now.w_W, d.now.vo_W
+    mass = t.mass[j0]
+    c0, c1, c2 = mass * t.lever[j0, 0], mass * t.lever[j0, 1], mass * t.lever[j0, 2]
+    u0 = u1 = u2 = 0.0
+    for i in range(br.first[b] + 1, br.stop[b]):
+        j = br.members[i]
+        par = t.parent[j]
+        R_P = t.R_P[j]
+        if t.kind[j] == PRISMATIC:  # no turn
+            x, xd = q[t.idx_q[j]], v[t.idx_v[j]]
+            a = t.axis[j]
+            shift = add3(mv3(R_P, (x * a[0], x * a[1], x * a[2])), t.p_P[j])
+            R_loc = mm33(_EYE, R_P)
+            vJ, wJ = mv3(R_P, (xd * a[0], xd * a[1], xd * a[2])), (0.0, 0.0, 0.0)
+        else:
+            RJ, pJ = joint_motion(t, j, q)
+            vJl, wJl = joint_twist(t, j, v)
+            R_loc = mm9(R_P, RJ)
+            shift = add3(mv3(R_P, pJ), t.p_P[j])
+            vJ, wJ = mv9(R_loc, vJl), mv9(R_loc, wJl)
+        if par == j0:  # a child of the root: its pose relative to the root is its own
+            R, p, w, vo = R_loc, shift, wJ, vJ
+        else:
+            R = mm9(rel_R[par], R_loc)
+            p = add3(mv3(rel_R[par], shift), rel_p[par])
+            wp = (rel_w[par, 0], rel_w[par, 1], rel_w[par, 2])
+            w = add3(wp, mv3(rel_R[par], wJ))
+            vo = add3(add3((rel_v[par, 0], rel_v[par, 1], rel_v[par, 2]), cross3(wp, sub3(p, rel_p[par]))),
+                      mv3(rel_R[par], vJ))
+        if not t.leaf[j]:
+            put9(rel_R[j], R)
+            put3(rel_p[j], 0, p)
+            put3(rel_w[j], 0, w)
+            put3(rel_v[j], 0, vo)
+        r = mv9(R, t.lever[j])
+        g, gv = add3(p, r), add3(vo, cross3(w, r))
+        mass = t.mass[j]
+        c0 += mass * g[0]
+        c1 += mass * g[1]
+        c2 += mass * g[2]
+        u0 += mass * gv[0]
+        u1 += mass * gv[1]
+        u2 += mass * gv[2]
+    M = br.mass[b]
+    return (c0 / M, c1 / M, c2 / M), (u0 / M, u1 / M, u2 / M)
+
+
+@njit_inline
+def branch_state(m, d, b):
+    """Floating branch b's centroid (world) and the velocity of it, 3-tuples, at (d.q, d.v)."""
+    t, j = m.tree, m.branches.joint[b]
+    R = root_rotation9(t, j, joint_quat(t, j, d.q))
+    _, pJ = joint_motion(t, j, d.q)
+    vJ, wJ = joint_twist(t, j, d.v)
+    c, u = branch_offset(m, d, b)
+    r = mv9(R, c)
+    return (add3(add3(mv3(t.R_P[j], pJ), t.p_P[j]), r),
+            add3(add3(mv9(R, vJ), cross3(mv9(R, wJ), r)), mv9(R, u)))
+
+
+@njit_inline
+def root_offset(m, d, b, R, w):
+    """Where floating branch b's centroid lies from its root's origin (world, m) and how fast
+    it moves relative to it (m/s), its root turned by R (a 9-tuple) and turning at w (its
+    frame), its other joints as (d.q, d.v) hold them (`branch_offset`): two 3-tuples."""
+    c_rel, u_rel = branch_offset(m, d, b)
+    r = mv9(R, c_rel)
+    return r, add3(cross3(mv9(R, w), r), mv9(R, u_rel))
+
+
+#: A reference state of a floating root's branch that `place_branch` moves from: the root's
+#: origin and its velocity, the branch's centroid and its velocity, and the root's offset
+#: (`root_offset`), all world, 3-tuples each; from nothing (all zero), the placement is absolute.
+NO_REFERENCE = ((0.0, 0.0, 0.0),) * 6
+
+
+@njit_inline
+def place_branch(m, d, b, c, u, quat, w, ref):
+    """Write floating branch b's root at the unit quaternion quat (x, y, z, w) of its joint,
+    turning at w (its frame), and at the origin and velocity that put the branch's centroid at
+    c moving at u (world, 3-tuples), its other joints as (d.q, d.v) hold them: the centroid is
+    affine in the root's origin and the momentum in its velocity, both with coefficient one.
+    The root moves from the reference state ref (`NO_REFERENCE`) by the centroid's change less
+    its offset's, so that a branch at rest stays where it is to the bit."""
+    t = m.tree
+    j = m.branches.joint[b]
+    R = root_rotation9(t, j, quat)
+    r, u0 = root_offset(m, d, b, R, w)
+    p_ref, vo_ref, c_ref, u_ref, r_ref, u0_ref = ref
+    origin = add3(p_ref, sub3(sub3(c, c_ref), sub3(r, r_ref)))
+    vo = add3(vo_ref, sub3(sub3(u, u_ref), sub3(u0, u0_ref)))
+    put_root(t, j, d.q, d.v, R, origin, quat, vo, w)
+
+
 # ------------------------------------------------------------------------- symplectic Euler
 
 
 @njit_inline
-def _euler_body(R, c, origin, quat, v_O, w, a_O, alpha, h):
-    """A body's symplectic Euler step, given its rotation R (3, 3), centroid c (body frame),
-    origin (world), joint quaternion and twist (v_O, w) and the twist's derivative (a_O,
-    alpha): v_G += h a_G and w += h alpha, then x_G += h v_G and R <- R exp(h w), centroid in
-    world, rotation in body. Returns the new (p_G, v_G, quaternion, w)."""
-    p_G, v_G = centroid_of(origin, R, c, v_O, w)
-    a_G = centroid_acceleration(R, c, v_O, w, a_O, alpha)
-    v_G = axpy3(h, a_G, v_G)
-    w = axpy3(h, alpha, w)
-    # a unit quaternion, or the round-off in R compounds from step to step
-    return axpy3(h, v_G, p_G), v_G, quat_times_exp4(quat, h * w[0], h * w[1], h * w[2]), w
+def _advance_joints(m, d, b, h, first):
+    """The revolute and prismatic joints of branch b from its `first` member on: v += h a,
+    then q += h v."""
+    t, br = m.tree, m.branches
+    for i in range(br.first[b] + first, br.stop[b]):
+        j = br.members[i]
+        iv = t.idx_v[j]
+        d.v[iv] += h * d.a[iv]
+        d.q[t.idx_q[j]] += h * d.v[iv]
 
 
-@njit_inline
-def _euler_bodies(m, d, q, v, h):
-    """Every free body's symplectic Euler step of h (s) from (q, v), in place, with the
-    accelerations d.a and rotations d.R_W of the last evaluation (made at (q, v))."""
-    _euler_kind(m, d, m.bodies.free_rows, q, v, h, free_twist, free_origin3, free_quat, set_free_state)
-    _euler_kind(m, d, m.bodies.planar_rows, q, v, h, planar_twist, planar_origin3, planar_quat, set_planar_state)
-
-
-@njit_inline
-def _euler_kind(m, d, rows, q, v, h, twist_of, origin_of, quat_of, set_state):
-    """`_euler_bodies` for the bodies of one joint kind (rows), read and written through that
-    kind's accessors."""
-    for b in rows:
-        v_O, w = twist_of(m.bodies, b, v)
-        a_O, alpha = twist_of(m.bodies, b, d.a)
-        p_G, v_G, quat, w = _euler_body(d.R_W[m.bodies.joint[b]], m.bodies.lever[b], origin_of(m.bodies, b, q),
-                                        quat_of(m.bodies, b, q), v_O, w, a_O, alpha, h)
-        set_state(m.bodies, b, q, v, p_G, v_G, quat, w)
-
-
-@njit_inline
-def rates_changed(d):
-    """Whether the finger rates differ from those of the last evaluation (d.fsal_rate): the
-    drive has decided a new rate since, and the pairs' normal forces may have jumped."""
-    return not np.array_equal(d.fsal_rate, d.opening_rate)
+@njit
+def _euler_update(m, d, h):
+    """Every joint's symplectic Euler step of h (s) from (q, v), in place, with the
+    accelerations d.a of the last evaluation and the kinematics d.R_W ... made at its start:
+    velocities first, then positions with the new velocities. A floating branch's centroid
+    moves on its momentum (v_c += h F / M, x_c += h v_c) and its root turns by exp(h omega)."""
+    t, br = m.tree, m.branches
+    for b in range(br.joint.shape[0]):
+        if not br.floating[b]:
+            _advance_joints(m, d, b, h, 0)
+            continue
+        j = br.joint[b]
+        R0 = (d.R_W[j, 0, 0], d.R_W[j, 0, 1], d.R_W[j, 0, 2], d.R_W[j, 1, 0], d.R_W[j, 1, 1], d.R_W[j, 1, 2],
+              d.R_W[j, 2, 0], d.R_W[j, 2, 1], d.R_W[j, 2, 2])
+        w0 = _root_spin(t, j, d.v)
+        r0, u00 = root_offset(m, d, b, R0, w0)  # before its joints move
+        c0, u0 = branch_centroid(m, d, b)
+        _advance_joints(m, d, b, h, 1)
+        F, M = branch_force(m, d, b), br.mass[b]
+        u = (u0[0] + h * (F[0] / M), u0[1] + h * (F[1] / M), u0[2] + h * (F[2] / M))
+        c = axpy3(h, u, c0)
+        w = axpy3(h, _root_spin(t, j, d.a), w0)
+        # a unit quaternion, or the round-off in R compounds from step to step
+        quat = quat_times_exp4(joint_quat(t, j, d.q), h * w[0], h * w[1], h * w[2])
+        ref = ((d.p_W[j, 0], d.p_W[j, 1], d.p_W[j, 2]), (d.vo_W[j, 0], d.vo_W[j, 1], d.vo_W[j, 2]), c0, u0, r0, u00)
+        place_branch(m, d, b, c, u, quat, w, ref)
 
 
 @njit
 def symplectic_euler(m, d, h):
     """Semi-implicit Euler, the paper's fixed-step explicit scheme: forces and accelerations
-    at the step's start, velocities first, then positions with the new velocities."""
-    forces(m, d, h, rates_changed(d))
-    d.fsal_rate[:] = d.opening_rate
+    at the step's start, velocities first, then positions with the new velocities. Velocity
+    first also for the controllers: those due at the step's end read the start's loads and
+    set the speeds the step's position update uses (`actuation.sample_controllers`)."""
+    forces(m, d, h, d.jumped)
+    d.jumped = False
     commit_memory(d)
     accelerations(m, d)
-    _euler_bodies(m, d, d.q, d.v, h)
+    sample_controllers(m, d, d.t + h, h)
+    _euler_update(m, d, h)
     d.external_force_W[:] = d.loads.external_force_W
     d.external_torque_O_W[:] = d.loads.external_torque_O_W
     d.evaluations += 1
@@ -158,38 +285,35 @@ def onset_step(m, d):
     return m.integrator.onset_depth / rate if rate > 0.0 else math.inf
 
 
-@njit_inline
-def _centroid_accelerations(m, d, out):
-    """Each free body's centroid acceleration (world) and angular acceleration (body) at d's
-    last evaluation, into out (n_bodies, 6)."""
-    _centroid_accelerations_kind(m, d, m.bodies.free_rows, out, free_twist)
-    _centroid_accelerations_kind(m, d, m.bodies.planar_rows, out, planar_twist)
-
-
-@njit_inline
-def _centroid_accelerations_kind(m, d, rows, out, twist_of):
-    """`_centroid_accelerations` for the bodies of one joint kind (rows)."""
-    for b in rows:
-        v_O, w = twist_of(m.bodies, b, d.v)
-        a_O, alpha = twist_of(m.bodies, b, d.a)
-        _put_acceleration(out, b, centroid_acceleration(d.R_W[m.bodies.joint[b]], m.bodies.lever[b], v_O, w, a_O,
-                                                        alpha), alpha)
-
-
-@njit_inline
-def _put_acceleration(out, b, a_G, alpha):
-    """Row b of out (n_bodies, 6): a_G, then alpha."""
-    for x in range(3):
-        out[b, x] = a_G[x]
-        out[b, 3 + x] = alpha[x]
+@njit
+def error_rates(m, d, out):
+    """What the adaptive Euler error compares at d's last evaluation, into out (n_rows, 6):
+    per floating branch its centroid's acceleration (world) and its root's angular
+    acceleration (its frame); per revolute or prismatic joint, its acceleration (column 3)."""
+    t, br = m.tree, m.branches
+    for b in range(br.joint.shape[0]):
+        F, alpha = (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
+        if br.floating[b]:
+            F, M = branch_force(m, d, b), br.mass[b]
+            F = (F[0] / M, F[1] / M, F[2] / M)
+            alpha = _root_spin(t, br.joint[b], d.a)
+        for x in range(3):
+            out[b, x] = F[x]
+            out[b, 3 + x] = alpha[x]
+    nb = br.joint.shape[0]
+    for i in range(t.internal.shape[0]):
+        for x in range(6):
+            out[nb + i, x] = 0.0
+        out[nb + i, 3] = d.a[t.idx_v[t.internal[i]]]
 
 
 @njit
 def euler_error(m, acc0, acc1, h):
-    """The error ratio of a symplectic Euler step of h (s) whose start and end accelerations
-    are acc0 and acc1 (n_bodies, 6; `_centroid_accelerations`): the largest over the free
-    bodies of its velocity error estimate h/2 |a1 - a0| (Euler against Heun's trapezoid) at
-    any of its contact spheres, which lie within its lever of its centroid, over velocity_tol."""
+    """The error ratio of a symplectic Euler step of h (s) whose start and end rates are acc0
+    and acc1 (`error_rates`): the largest over its rows of its velocity error estimate h/2
+    |a1 - a0| (Euler against Heun's trapezoid) at any contact sphere that row moves, which
+    lies within its lever (of a branch's centroid; per unit of a joint's coordinate), over
+    velocity_tol."""
     p = m.integrator
     ratio = 0.0
     for b in range(acc0.shape[0]):
@@ -212,7 +336,7 @@ def switch_fraction(m, before, after, h):
     theta = 1.0
     # the least relative speed (m/s) at which a switch misplaced by the rest of the step moves
     # the lightest body by SWITCH_SHARE of the tolerance
-    speed = SWITCH_SHARE * m.integrator.velocity_tol * np.min(m.bodies.mass) / (m.law.bristle.c_b * h)
+    speed = SWITCH_SHARE * m.integrator.velocity_tol * m.integrator.lightest / (m.law.bristle.c_b * h)
     j, n = 0, after.key.shape[0]
     for i in range(before.key.shape[0]):
         while j < n and after.key[j] < before.key[i]:
@@ -233,12 +357,12 @@ def adaptive_euler(m, d, h):
     evaluates the forces at its end, bending the bristles over h from the memory; h/2 |a_end
     - a_start| (`euler_error`) estimates its error. A kept try commits the memory, and its end
     evaluation is the next step's start: one evaluation a try. A rejected one goes back to
-    the start (state, fingers, contacts) and tries SAFETY r^(-1/2) of h. The fingers move at
-    the drive's rate through the step; a new rate (the drive's decision) re-evaluates the
-    start for each try, the committed bristles bent over it (as symplectic Euler's start
-    bends them over its step; a bristle that the new rate's jump of the normal force lets
-    hold damps for its share of the try, `friction.bristle`: a closed-form impulse, which the
-    error estimate leaves out), so that a rejected try leaves no trace. Its pairs are those
+    the start (state, contacts) and tries SAFETY r^(-1/2) of h. Prescribed joints keep their
+    speed through the step; a new speed (a controller's impulse since the last evaluation)
+    re-evaluates the start for each try, the committed bristles bent over it (as symplectic
+    Euler's start bends them over its step; a bristle that the new speed's jump of the normal
+    force lets hold damps for its share of the try, `friction.bristle`: a closed-form impulse,
+    which the error estimate leaves out), so that a rejected try leaves no trace. Its pairs are those
     the last evaluation found at the same poses (`contact_forces`).
 
     With its bristle switches located (the model's `locate_switches`), a try in which a
@@ -254,18 +378,17 @@ def adaptive_euler(m, d, h):
     # them. A new rate changes the pairs' normal damping at once, and a sliding pair's
     # bristle left at its old limit would hold, adding c_b v_t for a whole step.
     here = d.fsal and d.fsal_t == d.t  # the last evaluation was made at this state
-    changed = rates_changed(d)
+    changed = d.jumped
     fresh = not here or changed
-    n = m.bodies.joint.shape[0]
-    acc = np.empty((2, n, 6))
-    q0, v0, a0, opening0 = d.q.copy(), d.v.copy(), d.a.copy(), d.opening.copy()
+    acc = np.empty((2, p.lever.shape[0], 6))
+    q0, v0, a0 = d.q.copy(), d.v.copy(), d.a.copy()
     start = (d.candidates, d.contacts, d.loads, d.summary)  # put back after a rejection (a fresh start: its pairs)
     external = np.empty(6)
     rejected = False
     h_free = 0.0  # the step the error control alone took, before a switch cut it
     while True:
         if fresh:
-            if here:  # only the finger rates changed: the pairs found at this state stand
+            if here:  # only velocities changed (a controller's impulse): the pairs found at this state stand
                 kinematics(m, d)
                 d.candidates = start[0]
                 shared = contact_forces(m, d, h, changed)
@@ -273,7 +396,7 @@ def adaptive_euler(m, d, h):
                 shared = forces(m, d, h, changed)
             accelerations(m, d)
             d.evaluations += 1
-            _centroid_accelerations(m, d, acc[0])
+            error_rates(m, d, acc[0])
             if shared:
                 # the damping that the new rate's jump lets a saturated bristle hold is its
                 # closed-form impulse over the try (`friction.bristle`), not a force the step
@@ -283,21 +406,19 @@ def adaptive_euler(m, d, h):
                 contact_forces(m, d, h, False)
                 accelerations(m, d)
                 d.evaluations += 1
-                _centroid_accelerations(m, d, acc[0])
+                error_rates(m, d, acc[0])
                 d.contacts, d.loads, d.summary = with_share[:3]
                 d.a[:] = with_share[3]
         elif not rejected:
-            _centroid_accelerations(m, d, acc[0])
+            error_rates(m, d, acc[0])
         if fresh or not rejected:
             external[:3] = d.loads.external_force_W
             external[3:] = d.loads.external_torque_O_W
-        _euler_bodies(m, d, d.q, d.v, h)
-        for i in range(d.opening.shape[0]):
-            d.opening[i] = opening0[i] + h * d.opening_rate[i]
+        _euler_update(m, d, h)
         forces(m, d, h, False)
         accelerations(m, d)
         d.evaluations += 1
-        _centroid_accelerations(m, d, acc[1])
+        error_rates(m, d, acc[1])
         ratio = euler_error(m, acc[0], acc[1], h)
         theta = switch_fraction(m, d.memory, d.contacts, h) if p.locate_switches else 1.0
         early = theta < 1.0 - SWITCH_WINDOW and theta * h > SWITCH_FLOOR
@@ -307,7 +428,7 @@ def adaptive_euler(m, d, h):
             # cut at a switch does not hold back the next
             d.h_next = min(p.h_max, max(h * (min(grow, 1.0) if rejected else grow), h_free))
             break
-        d.q[:], d.v[:], d.opening[:] = q0, v0, opening0
+        d.q[:], d.v[:] = q0, v0
         if not fresh:  # a fresh start is evaluated again for the next try
             d.a[:] = a0
             kinematics(m, d)
@@ -327,7 +448,7 @@ def adaptive_euler(m, d, h):
     commit_memory(d)
     d.accepted += 1
     d.fsal, d.fsal_t = True, d.t + h
-    d.fsal_rate[:] = d.opening_rate
+    d.jumped = False
     # the step's impulse is that of the start's forces (the velocity update's)
     d.external_force_W[:] = external[:3]
     d.external_torque_O_W[:] = external[3:]
@@ -335,55 +456,85 @@ def adaptive_euler(m, d, h):
 
 
 # --------------------------------------------------------------------------- Runge-Kutta
-# The free bodies' state for Runge-Kutta methods: per body RK_STATE numbers, the centroid's
-# world position, the joint's unit quaternion (x, y, z, w), the centroid's world velocity and
-# the body angular velocity. Pairwise contact forces keep sum m a_G = 0 at every stage, so a
-# linear combination of stages keeps the total linear momentum to round-off.
+# The Runge-Kutta state y: per floating root ROOT_STATE numbers (its branch's centroid and
+# centroid velocity in the world, the root's unit quaternion and angular velocity), then per
+# revolute or prismatic joint its coordinate and speed. Pairwise contact forces and internal
+# joint forces keep the sum of the branches' momentum rates zero at every stage, so a linear
+# combination of stages keeps the total linear momentum to round-off.
 
 
 @njit
-def pack(bodies, q, v):
-    """The Runge-Kutta state y of the free bodies at (q, v)."""
-    y = np.empty(RK_STATE * bodies.joint.shape[0])
-    for b in range(bodies.joint.shape[0]):
-        p_G, v_G, _, w = centroid_state(bodies, b, q, v)
-        o = RK_STATE * b
-        put3(y, o, p_G)
-        quat = joint_quat(bodies, b, q)
+def pack(m, d):
+    """The Runge-Kutta state y at (d.q, d.v). Uses d.now."""
+    t, br = m.tree, m.branches
+    y = np.empty(d.fsal_dy.shape[0])
+    o = 0
+    for b in range(br.joint.shape[0]):
+        if not br.floating[b]:
+            continue
+        j = br.joint[b]
+        c, u = branch_state(m, d, b)
+        put3(y, o, c)
+        quat = joint_quat(t, j, d.q)
         for i in range(4):
             y[o + 3 + i] = quat[i]
-        put3(y, o + 7, v_G)
-        put3(y, o + 10, w)
+        put3(y, o + 7, u)
+        put3(y, o + 10, _root_spin(t, j, d.v))
+        o += ROOT_STATE
+    for j in t.internal:
+        y[o], y[o + 1] = d.q[t.idx_q[j]], d.v[t.idx_v[j]]
+        o += JOINT_STATE
     return y
 
 
 @njit
-def unpack(bodies, y, q, v):
-    """Write the state y into (q, v), in place; quaternions normalised."""
-    for b in range(bodies.joint.shape[0]):
-        o = RK_STATE * b
-        quat = y[o + 3:o + 7] / np.linalg.norm(y[o + 3:o + 7])
-        set_centroid_state(bodies, b, q, v, y[o:o + 3].copy(), y[o + 7:o + 10].copy(), quat, y[o + 10:o + 13].copy())
+def unpack(m, d, y):
+    """Write the state y into (d.q, d.v), in place; quaternions normalised."""
+    t, br = m.tree, m.branches
+    o = ROOT_STATE * 0
+    n_roots = 0
+    for b in range(br.joint.shape[0]):
+        n_roots += br.floating[b]
+    o = ROOT_STATE * n_roots
+    for j in t.internal:
+        d.q[t.idx_q[j]], d.v[t.idx_v[j]] = y[o], y[o + 1]
+        o += JOINT_STATE
+    o = 0
+    for b in range(br.joint.shape[0]):
+        if not br.floating[b]:
+            continue
+        j = br.joint[b]
+        norm = math.sqrt(y[o + 3] ** 2 + y[o + 4] ** 2 + y[o + 5] ** 2 + y[o + 6] ** 2)
+        quat = (y[o + 3] / norm, y[o + 4] / norm, y[o + 5] / norm, y[o + 6] / norm)
+        place_branch(m, d, b, (y[o], y[o + 1], y[o + 2]), (y[o + 7], y[o + 8], y[o + 9]), quat,
+                     (y[o + 10], y[o + 11], y[o + 12]), NO_REFERENCE)
+        o += ROOT_STATE
 
 
 @njit
-def derivative(bodies, y, q, v, a):
-    """dy/dt at the state y = (q, v) given the accelerations a there."""
+def derivative(m, d, y):
+    """dy/dt at the state y = (d.q, d.v), given the accelerations d.a and the loads there."""
+    t, br = m.tree, m.branches
     dy = np.empty_like(y)
-    for b in range(bodies.joint.shape[0]):
-        o = RK_STATE * b
-        R = body_rotation(bodies, b, q)
-        v_O, w = twist(bodies, b, v)
-        a_O, alpha = twist(bodies, b, a)
+    o = 0
+    for b in range(br.joint.shape[0]):
+        if not br.floating[b]:
+            continue
         x, qy, z, qw = y[o + 3], y[o + 4], y[o + 5], y[o + 6]
+        w0, w1, w2 = y[o + 10], y[o + 11], y[o + 12]
         dy[o:o + 3] = y[o + 7:o + 10]
-        # q' = q (x) (omega, 0) / 2, omega in the body frame
-        dy[o + 3] = 0.5 * (qw * w[0] + qy * w[2] - z * w[1])
-        dy[o + 4] = 0.5 * (qw * w[1] + z * w[0] - x * w[2])
-        dy[o + 5] = 0.5 * (qw * w[2] + x * w[1] - qy * w[0])
-        dy[o + 6] = -0.5 * (x * w[0] + qy * w[1] + z * w[2])
-        put3(dy, o + 7, centroid_acceleration(R, bodies.lever[b], v_O, w, a_O, alpha))
-        put3(dy, o + 10, alpha)
+        # q' = q (x) (omega, 0) / 2, omega in the root's frame
+        dy[o + 3] = 0.5 * (qw * w0 + qy * w2 - z * w1)
+        dy[o + 4] = 0.5 * (qw * w1 + z * w0 - x * w2)
+        dy[o + 5] = 0.5 * (qw * w2 + x * w1 - qy * w0)
+        dy[o + 6] = -0.5 * (x * w0 + qy * w1 + z * w2)
+        F, M = branch_force(m, d, b), br.mass[b]
+        put3(dy, o + 7, (F[0] / M, F[1] / M, F[2] / M))
+        put3(dy, o + 10, _root_spin(t, br.joint[b], d.a))
+        o += ROOT_STATE
+    for j in t.internal:
+        dy[o], dy[o + 1] = y[o + 1], d.a[t.idx_v[j]]
+        o += JOINT_STATE
     return dy
 
 
@@ -398,13 +549,11 @@ def error_norm(err, y0, y1, rtol, atol):
 
 
 @njit
-def _stage(m, d, y, dt, opening0, commit, external):
-    """dy at the state y, dt (s) into the step (the fingers at opening0 + dt times their rates,
-    the bristles bent over dt from the memory); its external wrench goes into external (6,).
-    commit: the memory is then that of this evaluation."""
-    unpack(m.bodies, y, d.q, d.v)
-    for i in range(d.opening.shape[0]):
-        d.opening[i] = opening0[i] + dt * d.opening_rate[i]
+def _stage(m, d, y, dt, commit, external):
+    """dy at the state y, dt (s) into the step (the bristles bent over dt from the memory);
+    its external wrench goes into external (6,). commit: the memory is then that of this
+    evaluation."""
+    unpack(m, d, y)
     forces(m, d, dt, False)
     if commit:
         commit_memory(d)
@@ -412,7 +561,7 @@ def _stage(m, d, y, dt, opening0, commit, external):
     d.evaluations += 1
     external[:3] = d.loads.external_force_W
     external[3:] = d.loads.external_torque_O_W
-    return derivative(m.bodies, y, d.q, d.v, d.a)
+    return derivative(m, d, y)
 
 
 @njit
@@ -439,25 +588,24 @@ def runge_kutta(m, d, h):
     ([reading] a stage at t0 + c h bends each bristle by v_t c h from its start deflection,
     and new pairs take the stage's approach speed). Only the accepted end commits the memory,
     from its state with the whole step (bending by v_t h); that evaluation is also the next
-    step's first stage while the finger rates stay as they were. The fingers move at the
-    drive's rate through the step.
+    step's first stage unless a controller has changed a speed since. Prescribed joints keep
+    their speed through the step.
     """
     p = m.integrator
     s = p.b.shape[0]
-    opening0 = d.opening.copy()
-    y0 = pack(m.bodies, d.q, d.v)
+    y0 = pack(m, d)
     k = np.empty((s, y0.shape[0]))
     external = np.empty((s, 6))
-    if d.fsal and d.fsal_t == d.t and not rates_changed(d):
+    if d.fsal and d.fsal_t == d.t and not d.jumped:
         k[0] = d.fsal_dy
         external[0] = d.fsal_external
     else:
-        k[0] = _stage(m, d, y0, 0.0, opening0, False, external[0])
+        k[0] = _stage(m, d, y0, 0.0, False, external[0])
     if p.adaptive and d.h_next > 0.0:  # its last step's estimate (before any, h as asked)
         h = min(h, d.h_next)
     while True:
         for i in range(1, s):
-            k[i] = _stage(m, d, _combine(y0, h, p.A[i], k, i), p.c[i] * h, opening0, False, external[i])
+            k[i] = _stage(m, d, _combine(y0, h, p.A[i], k, i), p.c[i] * h, False, external[i])
         y1 = _combine(y0, h, p.b, k, s)
         if not p.adaptive:
             break
@@ -478,12 +626,12 @@ def runge_kutta(m, d, h):
         if p.b[i] != 0.0:
             for x in range(6):
                 mean[x] = mean[x] + p.b[i] * external[i, x]
-    # the accepted end: commit the pair memory; this is the next step's first stage
-    # (it leaves d at y1, the fingers at their opening after h)
+    # the accepted end: commit the pair memory; this is the next step's first stage (it
+    # leaves d at y1)
     end = np.empty(6)
-    d.fsal_dy[:] = _stage(m, d, y1, h, opening0, True, end)
+    d.fsal_dy[:] = _stage(m, d, y1, h, True, end)
     d.fsal, d.fsal_t = True, d.t + h
-    d.fsal_rate[:] = d.opening_rate
+    d.jumped = False
     d.fsal_external[:] = end
     d.external_force_W[:] = mean[:3]
     d.external_torque_O_W[:] = mean[3:]

@@ -14,8 +14,8 @@ from typing import NamedTuple
 import numpy as np
 
 from ..jit import njit
-from .data import COMPLETE
-from .drive import current_speed
+from ..tables import COMPLETE
+from .actuation import current_speed, next_event
 from .events import RAN, REFRESH, STOPPED, TOO_DEEP, UNDERFLOW
 from .record import close_interval
 from .step import free_flight, step
@@ -92,8 +92,8 @@ def interval_steps(m, d):
     adaptive = m.integrator.adaptive and not d.flight
     while d.left > 0:
         # an adaptive step: its last estimate (before any, the interval's step), up to the
-        # interval's end and the drive's next reading
-        h = step(m, d, min(d.h_next if d.h_next > 0.0 else d.h, d.t_end - d.t, d.drive_t - d.t)
+        # interval's end and the Model's next event (a controller's reading)
+        h = step(m, d, min(d.h_next if d.h_next > 0.0 else d.h, d.t_end - d.t, next_event(m, d) - d.t)
                  if adaptive else d.h)
         if h == 0.0:
             return UNDERFLOW

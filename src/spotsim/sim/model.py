@@ -2,7 +2,7 @@
 
 A structure of `structs` (a numba structref, passed to compiled code as one pointer) whose
 fields, `ModelFields`, are arrays, numbers and named tuples of them, built once per scene by
-`build.model.build_model` (a weld builds a new one). The stages read it by name (`m.law.K`,
+`assemble.model.build_model` (a weld builds a new one). The stages read it by name (`m.law.K`,
 `m.grasps.ee_joint[g]`), never by position.
 """
 
@@ -16,15 +16,8 @@ from numba.experimental import structref
 from ..contact.forces import ContactLaw
 from ..contact.layers import FaceTable, MasterSpheres, SlaveSpheres
 from ..structs import StructProxy, StructType, new_struct, register
-from .bodies import FreeBodies
-
-
-class Fingers(NamedTuple):
-    """The fingers, one row each: moved by their drive along their prismatic axes."""
-
-    parent_joint: np.ndarray  # (n_f,) the joint of the body the finger is mounted on
-    axis_J: np.ndarray  # (n_f, 3) its opening direction in that joint's frame
-    drive: np.ndarray  # (n_f,) its drive: the end-effector it belongs to
+from .actuation import Actuators, Drives
+from .tree import Branches, Tree
 
 
 class Grasps(NamedTuple):
@@ -36,17 +29,6 @@ class Grasps(NamedTuple):
     R_ee: np.ndarray  # (n_g, 3, 3) its grasp frame O_a's rotation in that joint's frame
     module_joint: np.ndarray  # (n_g,) the module's joint (0 once welded)
     module_lever: np.ndarray  # (n_g, 3) the module's centroid in its joint's frame, m
-
-
-class DriveParams(NamedTuple):
-    """The finger drive (`sim.drive`)."""
-
-    law: int  # `drive.DRIVES`
-    closing_speed: float  # the speed limit, m/s
-    grasp_load: float  # the stall force, N
-    no_load_speed: float  # the actuator's torque-speed line at zero load, m/s
-    resume_fraction: float  # the relay: a stalled drive closes again below this share of the grasp load
-    period: float  # the controller's period: it reads the load and sets the speed this often, s
 
 
 class CompletionParams(NamedTuple):
@@ -64,27 +46,30 @@ class Limits(NamedTuple):
     max_penetration: float  # a pair deeper than this (the smaller sphere radius) has diverged, m
     skin: float  # coal's margin beyond contact reach: the travel allowed before a refresh, m
     margin: float  # coal's security margin: contact reach plus the skin, m
-    fixed_contact: bool  # a fixed body carries contact faces (contact impulses are external)
-    reach_rows: np.ndarray  # (n,) rows of `bodies` carrying contact spheres
-    reach: np.ndarray  # (n,) the farthest of their spheres from their joint's origin, m
+    external_contact: bool  # a body that does not float carries contact faces (contact impulses are external)
 
 
 class RecordFrames(NamedTuple):
     """What a record row reads (`sim.record`): frames, bodies and the energy constants.
 
-    Frames (rows of row, R, p): each module's groove frame, then each end-effector's grasp
-    frame, then the robot's base (its joint frame); `row` is the row in `bodies` of the body
-    each rides on, -1 for a fixed one.
+    Frames (rows of joint, R, p): each module's groove frame, then each end-effector's grasp
+    frame, then the robot's base (its joint frame); `joint` is the joint each rides on (0: the
+    fixed world).
     """
 
-    row: np.ndarray  # (n_frames,)
-    R: np.ndarray  # (n_frames, 3, 3) placement in that body's joint frame
+    joint: np.ndarray  # (n_frames,)
+    R: np.ndarray  # (n_frames, 3, 3) placement in that joint's frame
     p: np.ndarray  # (n_frames, 3)
-    module_row: np.ndarray  # (n_modules,) each module's row in `bodies`, -1 once welded
-    finger_map: np.ndarray  # (n_f,) each finger among the first model's fingers
-    all_rows: np.ndarray  # every free body's row
-    robot_rows: np.ndarray  # the robot's rows (none on a fixed base)
-    system_rows: np.ndarray  # the free bodies the system centroid is taken over
+    module_joint: np.ndarray  # (n_modules,) each module's floating joint, 0 once welded
+    # each finger of the unwelded scene (`Layout.fingers`): the index in q of its joint's
+    # coordinate, its opening (-1: a weld locked it, at `locked_opening`, m), and its actuator
+    # (-1: none, its load is zero)
+    finger_q: np.ndarray  # (n_f,)
+    locked_opening: np.ndarray  # (n_f,)
+    finger_actuator: np.ndarray  # (n_f,)
+    all_branches: np.ndarray  # every floating branch
+    robot_branches: np.ndarray  # the robot's branch (none on a fixed base)
+    system_branches: np.ndarray  # the floating branches the system centroid is taken over
     free_robot: bool
     energy_bound: bool  # the finger drives' work bounds the energy (no gravity doing work)
     width: int  # columns of a row
@@ -107,25 +92,30 @@ class IntegratorParams(NamedTuple):
     velocity_tol: float  # adaptive_euler: a step's error in any contact sphere's velocity, m/s
     onset_depth: float  # adaptive_euler: how far a step may move two spheres closer while pairs may start, m
     locate_switches: bool  # adaptive_euler: a step ends where a bristle saturates or lets go
-    lever: np.ndarray  # (n_bodies,) each free body's farthest contact sphere from its centroid, m
+    # (n_branches + n_internal,) adaptive_euler's lever of each error row (`integrators.error_rates`):
+    # a floating branch's farthest contact sphere from its centroid, m; a joint's motion of the
+    # spheres it carries per unit of its coordinate (`tree.Tree.reach`)
+    lever: np.ndarray
+    lightest: float  # the lightest floating branch's mass, kg (adaptive_euler's switch threshold)
 
 
 class ModelFields(NamedTuple):
     """The fields of the compiled Model of a scene."""
 
-    bodies: FreeBodies
+    tree: Tree
+    branches: Branches
     gravity_W: np.ndarray  # (3,) m/s^2
-    # (3,) the air-bearing table's unit normal in world, which every free body's planar joint
-    # turns about; zero in space (`build.table`)
+    # (3,) the air-bearing table's unit normal in world, which every floating root's planar
+    # joint turns about; zero in space (`assemble.table`)
     table_normal: np.ndarray
     master: MasterSpheres
     slave: SlaveSpheres
     faces: FaceTable
     law: ContactLaw
     literal: bool  # the paper's all-pairs search instead of the culled one
-    fingers: Fingers
+    actuators: Actuators
+    drives: Drives
     grasps: Grasps
-    drive: DriveParams
     completion: CompletionParams
     limits: Limits
     record: RecordFrames

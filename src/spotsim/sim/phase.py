@@ -15,8 +15,8 @@ import math
 
 from ..contact.wrenches import net_force
 from ..jit import njit
-from .data import APPROACH, COMPLETE, SELF_CENTRING
-from .drive import current_speed
+from ..tables import APPROACH, COMPLETE, SELF_CENTRING
+from .actuation import current_speed
 
 #: The hold is complete within this of hold_s, s: the steps' times carry round-off.
 HOLD_ROUND_OFF_S = 1e-12

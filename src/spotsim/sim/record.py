@@ -4,8 +4,8 @@
 non-finite state, energy growth), one row of the time series (`sample`), the momentum balance,
 and the replay's contact snapshot when one is due. A row is one float vector laid out by
 `Layout`; the run stacks the rows and splits them into named time series at the end. Frames
-are computed from q directly: every body is free (a free-flyer child of the world) or fixed, so
-a frame is a body's pose times a constant placement.
+are those of the state as it is (`tree.current_frames`, into d.now): a frame is its joint's
+pose times a constant placement.
 """
 
 from __future__ import annotations
@@ -18,18 +18,11 @@ from ..contact.friction import SLIPPING, STICKING
 from ..contact.search import grow
 from ..jit import njit, njit_inline
 from ..linalg import add3, dot3, mm_into, mtv3, mv3, sub3
-from .bodies import (
-    bodies_centroid3,
-    bodies_momentum,
-    body_origin3,
-    body_rotation_into,
-    kinetic_energy,
-    twist,
-)
+from .actuation import current_speed
 from .data import Snapshots
-from .drive import current_speed
 from .events import ENERGY, ENERGY_WORK, NONFINITE, RAN
 from .stability import ENERGY_FLOOR_J, ENERGY_GROWTH, mechanical_energy
+from .tree import centroid3, current_frames, momenta
 
 #: Contact snapshots per simulated second kept for `spotsim replay`: its highest display rate.
 #: 100 Hz is ten samples of a 10 ms bounce.
@@ -111,16 +104,12 @@ def rpy(R):
 
 
 @njit_inline
-def _frame(m, d, i, R, work):
-    """Frame i of m.record in the world at d.q: its rotation, written into R (3, 3), and its
-    origin (3-tuple). work: (3, 3) scratch."""
-    b = m.record.row[i]
-    if b < 0:
-        R[:] = m.record.R[i]
-        return m.record.p[i, 0], m.record.p[i, 1], m.record.p[i, 2]
-    body_rotation_into(m.bodies, b, d.q, work)
-    mm_into(work, m.record.R[i], R)
-    return add3(body_origin3(m.bodies, b, d.q), mv3(work, m.record.p[i]))
+def _frame(m, d, i, R):
+    """Frame i of m.record in the world at d's state (the kinematics d.now): its rotation,
+    written into R (3, 3), and its origin (3-tuple)."""
+    j = m.record.joint[i]
+    mm_into(d.now.R_W[j], m.record.R[i], R)
+    return add3((d.now.p_W[j, 0], d.now.p_W[j, 1], d.now.p_W[j, 2]), mv3(d.now.R_W[j], m.record.p[i]))
 
 
 @njit_inline
@@ -141,18 +130,18 @@ def _put(row, at, x, scale=1.0):
 
 @njit
 def sample(m, d, row):
-    """Write one row of the time series (`Layout`) into row: the active grasp's module, its
-    offset in the grasp frame, the last step's contact wrench and pairs, the fingers, and for a
-    free-flying robot its centroids and frames. Updates d.last_open."""
+    """Write one row of the time series (`Layout`) into row, from the kinematics d.now of the
+    state: the active grasp's module, its offset in the grasp frame, the last step's contact
+    wrench and pairs, the fingers, and for a free-flying robot its centroids and frames."""
     g = d.active
     ee, k = m.grasps.ee[g], m.grasps.module[g]
     n_pairs = d.contacts.key.shape[0]
-    n_mod = m.record.module_row.shape[0]
-    n_ee = m.record.row.shape[0] - n_mod - 1
-    R = np.empty((4, 3, 3))  # scratch: an allocation costs ~25 ns, a row needs a dozen rotations
-    R_b, R_a, R_ab, work = R[0], R[1], R[2], R[3]
-    p_b = _frame(m, d, k, R_b, work)
-    p_a = _frame(m, d, n_mod + ee, R_a, work)
+    n_mod = m.record.module_joint.shape[0]
+    n_ee = m.record.joint.shape[0] - n_mod - 1
+    R = np.empty((3, 3, 3))  # scratch: an allocation costs ~25 ns, a row needs a dozen rotations
+    R_b, R_a, R_ab = R[0], R[1], R[2]
+    p_b = _frame(m, d, k, R_b)
+    p_a = _frame(m, d, n_mod + ee, R_a)
     row[0] = d.t
     at = 1
     at = _put_pose(row, at, p_b, R_b)
@@ -161,13 +150,11 @@ def sample(m, d, row):
         for j in range(3):
             R_ab[i, j] = R_a[0, i] * R_b[0, j] + R_a[1, i] * R_b[1, j] + R_a[2, i] * R_b[2, j]
     at = _put(row, at, rpy(R_ab), 180.0 / math.pi)
-    # the module's velocity and angular velocity, world
-    b = m.record.module_row[k]
-    if b >= 0:
-        v_O, w = twist(m.bodies, b, d.v)
-        body_rotation_into(m.bodies, b, d.q, work)
-        at = _put(row, at, mv3(work, v_O))
-        at = _put(row, at, mv3(work, w))
+    # the module's velocity (its joint origin's) and angular velocity, world
+    j = m.record.module_joint[k]
+    if j > 0:
+        at = _put(row, at, d.now.vo_W[j])
+        at = _put(row, at, d.now.w_W[j])
     else:
         row[at:at + 6] = 0.0
         at += 6
@@ -176,14 +163,15 @@ def sample(m, d, row):
         row[at + i] = d.summary.force_A[i] if n_pairs else 0.0
         row[at + 3 + i] = d.summary.torque_A[i] if n_pairs else 0.0
     at += 6
-    n_first = d.last_open.shape[0]
-    for i in range(m.record.finger_map.shape[0]):
-        d.last_open[m.record.finger_map[i]] = d.opening[i]
-    at = _put(row, at, d.last_open, 1e3)
-    row[at:at + n_first] = 0.0  # the loads of fingers a weld left out
-    for i in range(m.record.finger_map.shape[0]):
-        row[at + m.record.finger_map[i]] = d.loads.finger_load[i]
-    at += n_first
+    n_f = m.record.finger_q.shape[0]
+    for i in range(n_f):
+        iq = m.record.finger_q[i]
+        row[at + i] = 1e3 * (d.q[iq] if iq >= 0 else m.record.locked_opening[i])
+    at += n_f
+    for i in range(n_f):
+        a = m.record.finger_actuator[i]
+        row[at + i] = d.load[a] if a >= 0 else 0.0  # a finger a weld locked takes no load
+    at += n_f
     n_slip = n_stick = 0
     for i in range(n_pairs):
         n_slip += d.contacts.state[i] == SLIPPING
@@ -192,15 +180,15 @@ def sample(m, d, row):
                         d.summary.max_penetration * 1e6 if n_pairs else 0.0, d.energy_now, d.drive_work,
                         current_speed(m, d) * 1e3))
     if m.record.free_robot:
-        at = _put(row, at, bodies_centroid3(m.bodies, m.record.robot_rows, d.q))
-        p = _frame(m, d, m.record.row.shape[0] - 1, R_b, work)
+        at = _put(row, at, centroid3(m, d.now, m.record.robot_branches))
+        p = _frame(m, d, m.record.joint.shape[0] - 1, R_b)
         at = _put_pose(row, at, p, R_b)
-        at = _put(row, at, bodies_centroid3(m.bodies, m.record.system_rows, d.q))
+        at = _put(row, at, centroid3(m, d.now, m.record.system_branches))
         for i in range(n_mod):
-            p = _frame(m, d, i, R_b, work)
+            p = _frame(m, d, i, R_b)
             at = _put_pose(row, at, p, R_b)
         for i in range(n_ee):
-            p = _frame(m, d, n_mod + i, R_b, work)
+            p = _frame(m, d, n_mod + i, R_b)
             at = _put(row, at, p)
 
 
@@ -219,17 +207,18 @@ def _snapshot(m, d):
     d.snapshots.master[at:at + n] = d.contacts.master
     d.snapshots.slave[at:at + n] = d.contacts.slave
     d.snapshots.state[at:at + n] = d.contacts.state
-    for k in range(m.record.module_row.shape[0]):
-        b = m.record.module_row[k]
+    for k in range(m.record.module_joint.shape[0]):
+        j = m.record.module_joint[k]
         for a in range(3):  # a welded module takes no contact
-            d.snapshots.force_W[i, k, a] = d.loads.force_W[m.bodies.joint[b], a] if b >= 0 else 0.0
+            d.snapshots.force_W[i, k, a] = d.loads.force_W[j, a] if j > 0 else 0.0
     d.n_snapshots = i + 1
     d.n_snapshot_pairs = at + n
 
 
 @njit
 def record_row(m, d):
-    """Write the next row of d.rows from d's state, and its snapshot when one is due."""
+    """Write the next row of d.rows from d's state (its kinematics d.now), and its snapshot
+    when one is due."""
     sample(m, d, d.rows[d.n_rows])
     if d.row_index % m.record.replay_every == 0:
         _snapshot(m, d)
@@ -241,12 +230,14 @@ def record_row(m, d):
 def begin_record(m, d):
     """The record at a run's start: the momentum and energy the balances start from, the
     largest body momenta, and the first row."""
-    P, L, p_max, l_max, _ = bodies_momentum(m.bodies, m.record.all_rows, d.q, d.v)
+    current_frames(m, d)
+    P, L, p_max, l_max, _ = momenta(m, d.now, m.record.all_branches)
     d.energy_passive = np.nan
     d.momentum_max, d.angular_momentum_max = p_max, l_max
     d.momentum_start[:] = P
     d.angular_momentum_start[:] = L
-    d.energy_start = d.energy_now = kinetic_energy(m.bodies, d.q, d.v)  # no pair in contact at the start
+    # no pair in contact at the start
+    d.energy_start = d.energy_now = mechanical_energy(m, d, d.contacts.phi, d.memory.s)
     d.n_rows = d.n_snapshots = d.n_snapshot_pairs = 0
     record_row(m, d)
 
@@ -263,13 +254,14 @@ def close_interval(m, d):
     value at the start plus the work the finger drives have done, plus ENERGY_FLOOR_J: the
     drives are the only source of energy in zero gravity, so more is the integrator's
     (ENERGY_WORK). Both keep the row. Then the row and the momentum balance: the largest drift
-    of the free bodies' momentum from its start less the external impulse, and the largest
-    single-body momenta.
+    of the floating branches' momentum from its start less the external impulse, and the
+    largest single-body momenta.
     """
     if not math.isfinite(np.sum(d.q) + np.sum(d.v)):
         return NONFINITE
     code = RAN
-    E = mechanical_energy(m.bodies, d.q, d.v, d.contacts.phi, d.memory.s, m.law.K, m.law.bristle.k_b)
+    current_frames(m, d)
+    E = mechanical_energy(m, d, d.contacts.phi, d.memory.s)
     d.energy_now = E
     if d.held:
         if math.isnan(d.energy_passive):
@@ -281,7 +273,7 @@ def close_interval(m, d):
     if code == RAN and m.record.energy_bound and E > ENERGY_GROWTH * (d.energy_start + d.drive_work) + ENERGY_FLOOR_J:
         code = ENERGY_WORK
     record_row(m, d)
-    P, L, p_b, l_b, _ = bodies_momentum(m.bodies, m.record.all_rows, d.q, d.v)
+    P, L, p_b, l_b, _ = momenta(m, d.now, m.record.all_branches)
     d.momentum_max, d.angular_momentum_max = max(d.momentum_max, p_b), max(d.angular_momentum_max, l_b)
     dP = (P[0] - d.momentum_start[0] - d.impulse_W[0], P[1] - d.momentum_start[1] - d.impulse_W[1],
           P[2] - d.momentum_start[2] - d.impulse_W[2])

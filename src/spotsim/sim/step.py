@@ -1,7 +1,7 @@
 """One simulation step, the paper's Fig. 5 in order, and the bound on how far it moves things.
 
-    integrate: kinematics -> sphere pairs -> pair forces -> wrenches -> dynamics -> update
-    drive -> grasp phase -> bookkeeping
+    integrate: kinematics -> sphere pairs -> pair forces -> wrenches -> actuators -> dynamics -> update
+    controllers -> grasp phase -> bookkeeping
 
 The integrator evaluates the forces and the dynamics where its scheme needs them
 (`sim.integrators`); the rest runs once per step, after it.
@@ -10,11 +10,12 @@ The integrator evaluates the forces and the dynamics where its scheme needs them
 from __future__ import annotations
 
 from ..jit import njit
-from .bodies import travel_rate
+from ..tables import SYMPLECTIC_EULER
+from .actuation import drive_power, sample_controllers
 from .bookkeeping import bookkeeping
-from .drive import finger_drive, move_fingers
-from .integrators import SYMPLECTIC_EULER, integrate
+from .integrators import integrate
 from .phase import grasp_phase
+from .tree import travel_rate
 
 #: Free flight takes the travel bound at the start of a step times this for the whole step: in
 #: zero gravity and without contact the centroid velocities are constant and the fingers close
@@ -27,12 +28,12 @@ def step(m, d, h):
     """One step of at most h (s): returns the step taken (an adaptive integrator may take
     less), or 0.0 if its step fell below its least size (the run has diverged)."""
     t0 = d.t
-    h = integrate(m, d, h)  # forces (Eq. 1-21) -> accelerations (Eq. 22-23) -> update
+    d.drive_power = drive_power(m, d)  # at the speeds the drives hold through the step
+    h = integrate(m, d, h)  # forces (Eq. 1-21) -> actuators -> accelerations (Eq. 22-23) -> update
     if h == 0.0:
         return 0.0
-    finger_drive(m, d, h)  # when due, the active drive sets its fingers' rate for the coming period
-    if m.integrator.method == SYMPLECTIC_EULER:
-        move_fingers(d, h)  # at the rate just set: its velocity-first update (the others move them in their steps)
+    if m.integrator.method != SYMPLECTIC_EULER:  # symplectic Euler samples them inside, velocity first
+        sample_controllers(m, d, t0 + h, h)  # the due drive sets its fingers' speed for the coming period
     d.t += h
     d.travel += h * travel_rate(m, d)
     grasp_phase(m, d)  # approach -> self-centring -> complete

@@ -377,7 +377,8 @@ def accuracy_study(scenario, settings: list[Setting], reference: Setting, out_di
     if ensemble is not None:
         from .accuracy_ensemble import accuracy_ensemble_study
 
-        return accuracy_ensemble_study(scenario, settings, reference, out_dir, ensemble, seed=seed, workers=workers,
+        return accuracy_ensemble_study(scenario, settings, reference, out_dir, ensemble, default=setting_of(scenario),
+                                       seed=seed, workers=workers,
                                        confirmation_members=confirmation_members, source=source,
                                        progress=progress, plot=plot)
     out = Path(out_dir)
@@ -393,7 +394,7 @@ def accuracy_study(scenario, settings: list[Setting], reference: Setting, out_di
     todo = [s for s in dict.fromkeys(settings) if s not in (reference, confirmation)]
     report = AccuracyReport(scenario.name, dt, reference, Outcome("interrupted", "not run"), confirmation,
                             None, math.nan, "", writer.rows)
-    from ..sim.run import progress_bar
+    from ..run import progress_bar
 
     bar = progress_bar(len(todo) + 3, progress, f"{scenario.name}: accuracy", "run")
 

@@ -304,7 +304,7 @@ def setting_row(setting, role: str, e: EnsembleResult, ref: EnsembleResult, dt_s
     return row
 
 
-def accuracy_ensemble_study(scenario, settings: list, reference, out_dir, n: int, *, seed: int = 0,
+def accuracy_ensemble_study(scenario, settings: list, reference, out_dir, n: int, *, default, seed: int = 0,
                             workers: int | None = None, confirmation_members: int | None = None,
                             source: str = "<study>", progress: bool = False,
                             plot: bool = True) -> EnsembleAccuracyReport:
@@ -312,9 +312,8 @@ def accuracy_ensemble_study(scenario, settings: list, reference, out_dir, n: int
     n, of the same starts) and every setting as an n-member ensemble from the same seeded
     starts; write accuracy_ensemble.csv (a row per setting as it ends), members/<setting>.csv
     (each ensemble's members table), accuracy_ensemble.md and work_precision_ensemble.png into
-    `out_dir`. Ctrl-C stops the study and keeps the rows written (report.interrupted)."""
-    from .accuracy import setting_of
-
+    `out_dir`; `default`: the scenario's own setting (`accuracy.setting_of`). Ctrl-C stops the
+    study and keeps the rows written (report.interrupted)."""
     out = Path(out_dir)
     prepare(out, "accuracy_ensemble.md")
     (out / "members").mkdir(exist_ok=True)
@@ -324,7 +323,6 @@ def accuracy_ensemble_study(scenario, settings: list, reference, out_dir, n: int
     n_grasps, dual = len(modules_of(scenario)), scenario.kind == "dual_arm"
     writer = RowWriter(out / "accuracy_ensemble.csv", columns(n_grasps, dual))
     report = EnsembleAccuracyReport(scenario.name, dt, n, seed, reference, confirmation, k, writer.rows)
-    default = setting_of(scenario)
     todo = [(reference, "reference", n), (confirmation, "confirmation", k)]
     todo += [(s, "default" if s == default else "sweep", n) for s in dict.fromkeys(settings)
              if s not in (reference, confirmation)]

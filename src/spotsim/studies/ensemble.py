@@ -126,7 +126,7 @@ def _init_worker(scenario, source: str, model, ignore_sigint: bool) -> None:
     if ignore_sigint:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
     if model is None:
-        from ..build.model import build_model
+        from ..assemble.model import build_model
 
         model = build_model(scenario, source)
     _WORKER.update(scenario=scenario, source=source, model=model)
@@ -134,10 +134,10 @@ def _init_worker(scenario, source: str, model, ignore_sigint: bool) -> None:
 
 def run_member(index: int, start: Start, model=None, source: str = "<ensemble>") -> Member:
     """Run one member from `start` on the nominal `model` (the worker's when None), with its
-    start swapped in (`build.model.with_start`). Never raises but on the user's Ctrl-C: a
+    start swapped in (`assemble.model.with_start`). Never raises but on the user's Ctrl-C: a
     rejected start or an exception is the member's status."""
-    from ..build.model import with_start
-    from ..sim.run import check_start, simulate
+    from ..assemble.model import with_start
+    from ..run import check_start, simulate
 
     if model is None:  # in a pool worker
         model, source = _WORKER["model"], _WORKER["source"]
@@ -211,7 +211,7 @@ def ensemble(scenario, n: int, *, seed: int = 0, offset_tol_mm: float = OFFSET_T
     """
     import time
 
-    from ..sim.run import progress_bar
+    from ..run import progress_bar
 
     if not (isinstance(n, int | np.integer) and n >= 1):
         raise SpotsimError(f"ensemble size n = {n}: must be an integer >= 1")
@@ -223,7 +223,7 @@ def ensemble(scenario, n: int, *, seed: int = 0, offset_tol_mm: float = OFFSET_T
         raise SpotsimError(f"workers = {workers}: must be >= 1")
     fork = sys.platform.startswith("linux")  # elsewhere the pool spawns: each worker builds its Model
     if model is None:  # here too under spawn: a scenario that cannot be built fails before the pool
-        from ..build.model import build_model
+        from ..assemble.model import build_model
 
         model = build_model(scenario, source)
     elif model.scenario != scenario:
@@ -263,7 +263,7 @@ def _in_pool(scenario, source, model, starts, members, workers, bar, fork: bool)
     """
     if fork:  # load the compiled loop and start check here once, for every worker to inherit
         from ..sim.data import make_data
-        from ..sim.run import compile_loop, initial_contacts
+        from ..run import compile_loop, initial_contacts
 
         compile_loop(model, make_data(model))
         initial_contacts(model)

@@ -165,7 +165,7 @@ def estimate(scenario, summary: dict, source: str = "<scenario>", ensemble=None)
     """Run the companion of `scenario`, whose run gave `summary`, and return the error
     estimate entry for that summary. Its spread: the study's (`typical_spread`) where the
     scenario was studied, else that of the `ensemble` the run belongs to, if any."""
-    from ..sim.run import simulate
+    from ..run import simulate
 
     s = companion(scenario)
     spread = typical_spread(scenario) or (ensemble_spread(ensemble) if ensemble is not None else None)

@@ -18,7 +18,7 @@ import numpy as np
 
 from ..errors import SpotsimError
 from ..scenario import modules_of, replace, to_dict
-from ..sim.run import WALL_LIMIT
+from ..run import WALL_LIMIT
 
 #: What a run ended as, besides the simulator's statuses.
 REJECTED, EXCEPTION = "rejected", "exception"
@@ -106,7 +106,7 @@ def _child(send, scenario, source) -> None:
 
 def _prediction(scenario, source):
     """stability.predict_step of the scenario's model, or None if it cannot be built."""
-    from ..build.model import build_model
+    from ..assemble.model import build_model
     from ..sim.stability import predict_step
 
     try:
@@ -128,8 +128,8 @@ def _caused_by_ctrl_c(e: BaseException) -> bool:
 
 
 def _run_once(scenario, source: str) -> Outcome:
-    from ..build.model import build_model
-    from ..sim.run import check_start, simulate
+    from ..assemble.model import build_model
+    from ..run import check_start, simulate
     from ..sim.stability import predict_step
 
     prediction = None

@@ -72,8 +72,8 @@ def _later(s, dt_s: float) -> dict:
 def clearing_gap(s) -> float | None:
     """The smallest of START_GAPS_MM at which `s`'s fingers and groove do not interpenetrate at
     the start, mm (None if none does)."""
-    from ..build.model import build_model
-    from ..sim.run import initial_contacts
+    from ..assemble.model import build_model
+    from ..run import initial_contacts
 
     for gap in START_GAPS_MM:
         if gap > s.end_effector.start_gap_mm:
@@ -152,7 +152,7 @@ def load_limit(model) -> float:
 
 
 def _at_load_limit(s) -> dict:
-    from ..build.model import build_model
+    from ..assemble.model import build_model
 
     return {"end_effector": {"grasp_load_N": load_limit(build_model(s))}}
 
@@ -340,7 +340,7 @@ def stability_study(scenario, cases: list[Case], out_dir, *, source: str = "<stu
     prepare(out, "stability.md")
     writer = RowWriter(out / "stability.csv", STABILITY_COLUMNS)
     report = StabilityReport(scenario.name, writer.rows)
-    from ..sim.run import progress_bar
+    from ..run import progress_bar
 
     bar = progress_bar(len(cases), progress, f"{scenario.name}: stability", "run")
     try:

@@ -54,7 +54,7 @@ from ..errors import ScenarioError, SpotsimError
 from ..files import atomic_write
 from ..jit import add_sources
 from ..scenario import from_dict, modules_of, parse_yaml, read_yaml, set_value, to_dict, to_yaml
-from ..sim.run import WALL_LIMIT
+from ..run import WALL_LIMIT
 from .ensemble import Member, Start, grasp_prefix, member_row
 
 #: What a point ended as besides the run's own statuses (completed, incomplete, diverged,
@@ -218,7 +218,7 @@ class Point:
 def code_fingerprint() -> str:
     """A hash of the code a point runs: spotsim's modules and the URDF/XACRO files it builds
     its scenes from, by their paths and contents."""
-    from ..build.assets import URDF_DIR
+    from ..assemble.assets import URDF_DIR
 
     package = Path(__file__).resolve().parents[1]
     digest = hashlib.sha256()
@@ -291,7 +291,7 @@ _SCENES: OrderedDict = OrderedDict()
 
 def scene_key(scenario) -> str:
     """A hash of the scenario without the modules' starts: scenarios with equal scene keys
-    share a model (`build.model.with_start`)."""
+    share a model (`assemble.model.with_start`)."""
     raw = to_dict(scenario)
     for k in modules_of(scenario):
         raw[k].pop("initial_offset_mm", None)
@@ -312,8 +312,8 @@ def model_for(scenario, source: str = "<sweep>"):
     the starts differ), else built on the compiled scene of one that shares its XACRO's
     inputs (the geometry and the modules' mass properties: the contact law, friction, drive,
     integrator may differ), else built whole."""
-    from ..build.model import build_model, with_start
-    from ..build.scene import scene_spec
+    from ..assemble.model import build_model, with_start
+    from ..assemble.scene import scene_spec
 
     k = scene_key(scenario)
     nominal = _MODELS.get(k)
@@ -336,7 +336,7 @@ def warm_worker(scenario, source: str = "<sweep>") -> int:
     """Build the scenario's model and load the compiled loop into this worker (once per
     worker, before its first point): the points' wall times are then their runs'."""
     from ..sim.data import make_data
-    from ..sim.run import compile_loop
+    from ..run import compile_loop
 
     model = model_for(scenario, source)
     compile_loop(model, make_data(model))
@@ -350,7 +350,7 @@ def run_point(point: Point, wall_limit_s: float | None = WALL_LIMIT_S, with_esti
     grow_gap: a start whose fingers and groove interpenetrate runs with the start gap that
     clears it (`stability.clearing_gap`, the time the longer travel takes added), recorded as
     `start_gap_mm`."""
-    from ..sim.run import check_start, initial_contacts, simulate
+    from ..run import check_start, initial_contacts, simulate
     from .estimate import companion, error_estimate
     from .stability import clearing_gap, widened
 

@@ -57,20 +57,6 @@ def locked_robot(urdf: str, angles=TABLE6) -> tuple[pin.Model, int]:
     return model, model.getJointId("fdr_free_flyer")
 
 
-def fdr_inertia(s, with_tm1: bool = False) -> pin.Inertia:
-    """The free-flying robot of a dual-arm scenario as one body (Table 5 body 3), or with TM-1
-    welded to EE-1 at the grasp frame (body 4): its scene (`scene.scene_spec`, the robot's
-    layout included) with the arms locked at the scenario's angles."""
-    from .scene import scene_spec
-
-    spec = scene_spec(s, {0: ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))} if with_tm1 else None)
-    for arm, prefix in spec.arms:
-        assets.prefixed_arm(arm, prefix)
-    angles = {"arm1_": s.robot.arm1_joint_angles_rad, "arm2_": s.robot.arm2_joint_angles_rad}
-    model, j = locked_robot(assets.compile_xacro(spec.xacro, spec.args), angles)
-    return model.inertias[j]
-
-
 def arms_at(model: pin.Model, angles=TABLE6) -> np.ndarray:
     """The scene's neutral configuration with the arms' joints at `angles` ({prefix: six
     angles}, rad)."""

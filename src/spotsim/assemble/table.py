@@ -15,8 +15,6 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
-from ..sim.bodies import FREE_FLYER
-
 #: A planar joint's configuration at its start: x, y, cos(theta), sin(theta).
 PLANAR_START = (0.0, 0.0, 1.0, 0.0)
 
@@ -35,14 +33,14 @@ def mount_on_table(model: pin.Model, q0: np.ndarray, joints, normal_W) -> tuple[
     """The model with the free-flyers `joints` (children of the world) on planar joints in
     the planes through their poses at q0, normal to `normal_W`; and its start configuration.
 
-    The other joints are copied as they are. Frames and inertias on a mounted joint are given
-    in its new joint frame (the old one turned by `table_frame`).
+    The other joints are copied as they are. Frames, inertias and child joints on a mounted
+    joint are given in its new joint frame (the old one turned by `table_frame`).
     """
     data = model.createData()
     pin.forwardKinematics(model, data, q0)
     turn = {}  # joint -> A, the new joint frame in the old
     for j in joints:
-        if model.joints[j].shortname() != FREE_FLYER or model.parents[j] != 0:
+        if model.joints[j].shortname() != "JointModelFreeFlyer" or model.parents[j] != 0:
             raise ValueError(f"joint {model.names[j]} is not a free-flyer on the world")
         turn[j] = pin.SE3(table_frame(data.oMi[j].rotation, normal_W), np.zeros(3))
     new = pin.Model()
@@ -53,8 +51,11 @@ def mount_on_table(model: pin.Model, q0: np.ndarray, joints, normal_W) -> tuple[
             jid = new.addJoint(model.parents[j], pin.JointModelPlanar(), data.oMi[j] * turn[j], model.names[j])
             new.appendBodyToJoint(jid, turn[j].actInv(model.inertias[j]), pin.SE3.Identity())
             q.extend(PLANAR_START)
-        else:
-            jid = new.addJoint(model.parents[j], model.joints[j], model.jointPlacements[j], model.names[j])
+        else:  # a joint on a mounted body: its placement in that body's new frame
+            placement = model.jointPlacements[j]
+            if model.parents[j] in turn:
+                placement = turn[model.parents[j]].actInv(placement)
+            jid = new.addJoint(model.parents[j], model.joints[j], placement, model.names[j])
             new.appendBodyToJoint(jid, model.inertias[j], pin.SE3.Identity())
             q.extend(q0[model.idx_qs[j]:model.idx_qs[j] + model.nqs[j]])
     for f in list(model.frames)[1:]:  # the first is the universe, which every model has

@@ -3,11 +3,11 @@ the compiled Model (`sim.model.SimModel`) a run's compiled code reads.
 
 Everything here is fixed for a run (a weld builds a new Model). The arms are self-locked
 during the grasp (paper Sec. 4.1), so their joints are reduced away with
-`pin.buildReducedModel`. The fingers' prismatic joints are reduced away too: their drive
-prescribes their motion, so they carry no dynamic degree of freedom. Their mass joins the body
-they are mounted on, their faces slide along their joint axes by the drive's opening, and
-their contact loads act on that body. The scene keeps one free-flyer per free body: the
-module(s) and, on the free-flying robot, the robot.
+`pin.buildReducedModel`. The fingers stay on their prismatic joints, each a body whose
+coordinate is its opening, moved by its end-effector's drive (`sim.actuation`); a welded
+module's end-effector's fingers are locked where they hold it. The scene keeps a free-flyer
+for each floating body: the module(s) and, on the free-flying robot, the robot, which carries
+its fingers.
 """
 
 from __future__ import annotations
@@ -25,13 +25,10 @@ from ..contact.friction import BristleParams
 from ..contact.layers import FaceTable, MasterSpheres, SlaveSpheres
 from ..contact.normal import damping_factor, hertz_stiffness, indentation
 from ..errors import ModelError, ScenarioError
-from ..sim.bodies import free_bodies
-from ..sim.drive import DRIVES
-from ..sim.integrators import ADAPTIVE, METHODS, tableau
+from ..sim.actuation import Actuators, Drives
+from ..sim.integrators import tableau
 from ..sim.model import (
     CompletionParams,
-    DriveParams,
-    Fingers,
     Grasps,
     IntegratorParams,
     Limits,
@@ -41,6 +38,8 @@ from ..sim.model import (
     sim_model,
 )
 from ..sim.record import REPLAY_RATE_HZ, Layout
+from ..sim.tree import joint_axis, kinematic_tree
+from ..tables import ADAPTIVE, DRIVES, METHODS
 from . import assets
 from .faces import INSET_KINDS, TOUCHING_KINDS, contact_faces, inset, sphere_layer
 from .scene import FINGER_NAMES, SceneSpec, check_inertials, check_inertias, frame, lock_joints, scene_spec, weld_urdf
@@ -49,16 +48,14 @@ from .table import mount_on_table
 
 @dataclass(frozen=True)
 class Finger:
-    """A finger moved by its drive along its prismatic axis, on the body of joint `parent_joint`.
+    """A finger: a body on its prismatic joint `joint`, whose coordinate is the finger's
+    opening (m), moved by its drive (`drive`, the index of its end-effector).
 
-    axis_J: (3,) its opening direction in that joint's frame. drive: index of its drive (its
-    end-effector). opening_touch, opening_start: openings (m) at first touch of a centred
-    groove and at start; the master spheres' centres are given at opening 0.
+    opening_touch, opening_start: openings (m) at first touch of a centred groove and at start.
     """
 
     name: str
-    parent_joint: int
-    axis_J: np.ndarray
+    joint: int
     drive: int
     opening_touch: float
     opening_start: float
@@ -98,12 +95,12 @@ class Model:
     modules: tuple[ModuleBody, ...]
     grasps: tuple[tuple[int, int], ...]  # (end-effector, module) in the order they are grasped
     robot_joint: int  # the free-flying robot's joint, 0 for a fixed base
-    fingers: tuple[Finger, ...]
+    fingers: tuple[Finger, ...]  # the fingers on their joints (a welded end-effector's are locked: not here)
     finger_geoms: tuple[tuple[int, int], ...]  # (geometry object, finger) of each finger patch
     contact_joints: tuple[int, ...]  # joints carrying contact faces
     q0: np.ndarray
     v0: np.ndarray
-    free_joints: tuple[int, ...]
+    free_joints: tuple[int, ...]  # the floating roots
     faces: tuple  # every contact face of the URDF, active or not (`faces.contact_faces`); a weld keeps them
     layout: Layout  # the time series a run of this scene records (fixed by the unwelded scene)
     sim: SimModel
@@ -176,15 +173,18 @@ def scene_fingers(spec: SceneSpec) -> list[str]:
 
 
 def build_model(s, source: str = "<scenario>", welded: dict | None = None, urdf: str | None = None,
-                faces: tuple | None = None) -> Model:
+                faces: tuple | None = None, held: dict | None = None) -> Model:
     """Build the immutable Model of a validated scenario (raises ModelError, ScenarioError).
 
-    welded: modules already grasped and welded (see `scene.scene_spec`). urdf: the scene's
-    compiled URDF (`Model.urdf`, any earlier welds in it), to weld into (`scene.weld_urdf`)
-    instead of compiling the XACRO again; faces: its contact faces (`Model.faces`), which a
-    weld does not change (they are given in their links' frames), instead of parsing them again.
+    welded: modules already grasped and welded, and held: the openings their end-effectors'
+    fingers are locked at (see `scene.scene_spec`). The fingers of an end-effector whose grasp
+    is not under way (the next one's) do not move: they are locked at their start openings
+    too, so that each phase's model carries only the joints that move in it. urdf: the scene's compiled URDF
+    (`Model.urdf`, any earlier welds in it), to weld into (`scene.weld_urdf`) instead of
+    compiling the XACRO again; faces: its contact faces (`Model.faces`), which a weld does not
+    change (they are given in their links' frames), instead of parsing them again.
     """
-    spec = scene_spec(s, welded)
+    spec = scene_spec(s, welded, held)
     if urdf is None:
         for arm, prefix in spec.arms:
             assets.prefixed_arm(arm, prefix)
@@ -219,24 +219,28 @@ def build_model(s, source: str = "<scenario>", welded: dict | None = None, urdf:
     module_prefixes = [modules[k].prefix for k in active]
     faces = tuple(contact_faces(urdf)) if faces is None else faces
     layers = _contact_layers(model, faces, finger_links, module_prefixes, law)
-    movable = [j for j in layers.contact_joints if j and j not in free]
-    if movable:  # the compiled kinematics reads contact bodies' poses from free bodies only
-        raise ModelError(f"contact faces on joints {[model.names[j] for j in movable]}, which are neither "
-                         "fixed nor free-flyers: lock them (reduced away) or make them free")
 
     fingers = []
     for link in finger_links:
-        f = frame(model, link)
+        if link in spec.locked:  # held: its faces ride on the body it is locked to
+            continue
+        j = frame(model, link).parentJoint
+        if model.joints[j].shortname() not in ("JointModelPX", "JointModelPY", "JointModelPZ",
+                                               "JointModelPrismaticUnaligned"):
+            raise ModelError(f"finger {link} is not on a prismatic joint of its own ({model.names[j]})")
         e = next(i for i, (_, prefix) in enumerate(spec.end_effectors) if link.startswith(prefix))
         mod = next(m for (ee, m) in spec.grasps if ee == e)
-        axis_J = f.placement.rotation[:, 2]  # prismatic finger joints open along their local z
-        touch = _opening_at_touch(model, f.parentJoint, axis_J, layers, layers.master_finger == len(fingers),
-                                  end_effectors[e], modules[mod], law)
+        touch = _opening_at_touch(model, j, layers, end_effectors[e], modules[mod], law)
         start = touch + s.end_effector.start_gap_mm * 1e-3
-        fingers.append(Finger(link, f.parentJoint, axis_J, e, touch, start))
+        fingers.append(Finger(link, j, e, touch, start))
+    active_ee = next(e for e, k in spec.grasps if k not in spec.welded_modules)
+    idle = {f.name: f.opening_start for f in fingers if f.drive != active_ee}
+    if idle:  # the next grasp's fingers stay at their start until it begins: locked there
+        return build_model(s, source, welded, urdf=urdf, faces=faces, held={**(held or {}), **idle})
+    q0 = with_openings(model, q0, fingers)
     layout = Layout(scene_fingers(spec), bool(robot_joint), [m.name for m in modules], [e.name for e in end_effectors])
     parts = _Parts(s, model, end_effectors, modules, spec.grasps, robot_joint, tuple(fingers), free, layers, law,
-                   layout)
+                   layout, {name: spec.locked[name] for name in scene_fingers(spec) if name in spec.locked})
     return Model(s, spec, urdf, model, layers.geom, tuple(end_effectors), tuple(modules), spec.grasps, robot_joint,
                  tuple(fingers), layers.finger_geoms, layers.contact_joints, q0, np.zeros(model.nv), free,
                  faces, layout, sim_model(model_fields(parts)))
@@ -258,7 +262,7 @@ def _scene_frames(model: pin.Model, spec: SceneSpec) -> tuple[list[EndEffector],
 
 
 def on_table(s) -> bool:
-    """The scenario's bodies float on the air-bearing testbed's table (`build.table`)."""
+    """The scenario's bodies float on the air-bearing testbed's table (`assemble.table`)."""
     return getattr(getattr(s, "testbed", None), "mount", None) == "air_bearing"
 
 
@@ -280,6 +284,14 @@ def start_configuration(model: pin.Model, spec: SceneSpec, end_effectors, module
         jMb = model.jointPlacements[j].inverse() * oMb * modules[k].placement.inverse()
         q0[model.idx_qs[j]:model.idx_qs[j] + 7] = pin.SE3ToXYZQUAT(jMb)
     return q0
+
+
+def with_openings(model: pin.Model, q: np.ndarray, fingers) -> np.ndarray:
+    """q (nq,) with each finger's joint at its start opening."""
+    q = q.copy()
+    for f in fingers:
+        q[model.idx_qs[f.joint]] = f.opening_start
+    return q
 
 
 def with_start(model: Model, s) -> Model:
@@ -312,7 +324,8 @@ def with_start(model: Model, s) -> Model:
     sections = list(modules_of(s).values())
     spec = replace(model.spec, modules=tuple((name, prefix, sections[k], e)
                                              for k, (name, prefix, _, e) in enumerate(model.spec.modules)))
-    q0 = start_configuration(model.pin_model, spec, model.end_effectors, model.modules)
+    q0 = with_openings(model.pin_model, start_configuration(model.pin_model, spec, model.end_effectors,
+                                                           model.modules), model.fingers)
     return replace(model, scenario=s, spec=spec, q0=q0)
 
 
@@ -325,7 +338,6 @@ class _Layers:
     master_normal_J: np.ndarray
     master_joint: np.ndarray
     master_face: np.ndarray
-    master_finger: np.ndarray
     slave: SlaveSpheres
     faces: FaceTable
     finger_geoms: tuple[tuple[int, int], ...]
@@ -336,8 +348,8 @@ class _Layers:
 def _contact_layers(model, faces, finger_links, module_prefixes, law) -> _Layers:
     """Sphere layers of the active contact faces, stacked by role, and the coal face patches.
 
-    Master faces: those on `finger_links`, placed at opening 0 on the joint the finger is
-    mounted on. Slave faces: those on links of the modules named by `module_prefixes`. Every
+    Master faces: those on `finger_links`, on each finger's joint. Slave faces: those on links
+    of the modules named by `module_prefixes`. Every
     master face may touch every slave face of a kind it can touch (`faces.TOUCHING_KINDS`):
     one coal collision pair (and one FaceTable row) each.
     """
@@ -379,7 +391,6 @@ def _contact_layers(model, faces, finger_links, module_prefixes, law) -> _Layers
 
     m_centres, m_normals, m_joint, m_face = stack(roles["master"])
     s_centres, s_normals, s_joint, s_face = stack(roles["slave"])
-    master_finger = np.asarray(finger_of_face, dtype=np.int64)[m_face]
     starts_m = np.cumsum([0] + [len(e[2].centres) for e in roles["master"]])
     starts_s = np.cumsum([0] + [len(e[2].centres) for e in roles["slave"]])
     shapes = np.array([e[2].index_map.shape for e in roles["slave"]])
@@ -403,21 +414,20 @@ def _contact_layers(model, faces, finger_links, module_prefixes, law) -> _Layers
                       column(7).reshape(-1, 3), column(8).reshape(-1, 3), column(9, np.int64).reshape(-1, 2),
                       column(10).reshape(-1, 3), column(11))
     contact_joints = tuple(sorted({*m_joint.tolist(), *s_joint.tolist()}))
-    return _Layers(geom, m_centres, m_normals, m_joint, m_face, master_finger,
+    return _Layers(geom, m_centres, m_normals, m_joint, m_face,
                    SlaveSpheres(s_centres, s_normals, s_joint, s_face, maps), table, tuple(finger_geoms),
                    contact_joints, tuple(tuple(e[3] for e in roles[r]) for r in ("master", "slave")))
 
 
-def _opening_at_touch(model, parent_joint, axis_J, layers, on_finger, ee, module, law):
-    """The finger opening (m) at which its flanks' sphere layers first touch its groove's,
-    centred.
+def _opening_at_touch(model, joint, layers, ee, module, law):
+    """The opening (m) of the finger on prismatic joint `joint` at which its flanks' sphere
+    layers first touch its groove's, centred.
 
     For each of the finger's flanks opposed to a groove face (normals anti-parallel), the
     sphere envelopes touch when the face planes are 2 (r1 + r2) apart; the finger moves
-    along its axis, so that distance is linear in the opening.
-    on_finger: (|S1|,) bool, the master spheres of this finger (given at opening 0).
+    along its joint's axis, so that distance is linear in the opening.
     """
-    q = pin.neutral(model)
+    q = pin.neutral(model)  # every finger at opening 0
     data = model.createData()
     pin.forwardKinematics(model, data, q)
     oMa = data.oMi[ee.joint] * ee.placement
@@ -429,13 +439,13 @@ def _opening_at_touch(model, parent_joint, axis_J, layers, on_finger, ee, module
         oMm = data.oMi[module.joint]
     else:  # a planar joint cannot leave its plane: the centred pose is taken as it is
         oMm = oMa * module.placement.inverse()
-    oMf = data.oMi[parent_joint]
-    axis_W = oMf.rotation @ axis_J
+    oMf = data.oMi[joint]
+    axis_W = oMf.rotation @ joint_axis(model, joint)
     slave = layers.slave
     on_module = slave.joint == module.joint
     best = None
     master_kind, slave_kind = layers.kinds
-    for fm in np.unique(layers.master_face[on_finger]):
+    for fm in np.unique(layers.master_face[layers.master_joint == joint]):
         if master_kind[fm] != "flank":
             continue
         k = np.flatnonzero(layers.master_face == fm)[0]
@@ -475,103 +485,100 @@ class _Parts:
     layers: _Layers
     law: ContactLaw
     layout: Layout
+    held: dict  # the locked fingers' openings, by name (`scene.scene_spec`)
 
 
 def model_fields(p: _Parts) -> ModelFields:
     """The fields of a scene's compiled Model."""
     s, model, layers, law = p.scenario, p.pin_model, p.layers, p.law
-    bodies = free_bodies(model)
-    body_row = {int(j): b for b, j in enumerate(bodies.joint)}
-    axes = np.array([f.axis_J for f in p.fingers], dtype=float).reshape(-1, 3)
-    master = MasterSpheres(layers.master_centre_J, layers.master_normal_J, layers.master_joint, layers.master_face,
-                           layers.master_finger, np.ascontiguousarray(axes[layers.master_finger]))
-    fingers = Fingers(np.array([f.parent_joint for f in p.fingers], dtype=np.int64), axes,
-                      np.array([f.drive for f in p.fingers], dtype=np.int64))
-    ees, mods = [ee for ee, _ in p.grasps], [k for _, k in p.grasps]
-    grasps = Grasps(np.array(ees, dtype=np.int64), np.array(mods, dtype=np.int64),
-                    np.array([p.end_effectors[e].joint for e in ees], dtype=np.int64),
-                    np.array([p.end_effectors[e].placement.rotation for e in ees]).reshape(-1, 3, 3),
-                    np.array([p.modules[k].joint for k in mods], dtype=np.int64),
-                    np.array([model.inertias[p.modules[k].joint].lever for k in mods]).reshape(-1, 3))
-    reach = _sphere_reach(master, layers.slave, p.fingers)
-    reach = [(body_row[j], r) for j, r in reach if j != 0]
-    skin = s.contact.skin_mm * 1e-3
-    # a sphere centre sits r off its face, so faces whose spheres may pair are within
-    # r1 + cutoff + r2 of each other; the skin keeps the culling conservative
-    limits = Limits(min(law.r1, law.r2), skin, law.r1 + law.r2 + law.cutoff + skin,
-                    bool((master.joint == 0).any() or (layers.slave.joint == 0).any()),
-                    np.array([b for b, _ in reach], dtype=np.int64), np.array([r for _, r in reach], dtype=float))
-    c, ee, sim = s.completion, s.end_effector, s.simulation
-    i = sim.integrator
-    A, b, c_nodes, e = tableau(i.method)
-    integrator = IntegratorParams(METHODS.index(i.method), i.method in ADAPTIVE, A, b, c_nodes, e, i.rtol, i.atol,
-                                  i.h_min_s, i.h_max_s, i.velocity_tol_m_s, i.onset_depth_m,
-                                  i.bristle_switches == "located",
-                                  _error_levers(bodies, master, layers.slave, p.fingers))
+    master = MasterSpheres(layers.master_centre_J, layers.master_normal_J, layers.master_joint, layers.master_face)
     table = np.array(s.testbed.table_normal, dtype=float) if on_table(s) else np.zeros(3)
     if table.any():
         table /= np.linalg.norm(table)
-    return ModelFields(bodies, np.array(model.gravity.linear), table, master, layers.slave, layers.faces, law,
-                    s.contact.broad_phase == "none", fingers, grasps,
-                    drive_params(ee),
-                    CompletionParams(c.hold_s, c.max_contact_speed_m_s, c.max_net_force_N, c.phase_timeout_s),
-                    limits, _record_frames(p, body_row), integrator, sim.dt_s, sim.substeps, sim.dt_s / sim.substeps)
+    # each contact layer with the travel of the fingers above it, for the levers and the
+    # motion bound (fingers anywhere between closed and their start opening)
+    travel = max((f.opening_start for f in p.fingers), default=0.0)
+    finger_joints = {f.joint for f in p.fingers}
+    spheres = [(j, master.centre_J[master.joint == j], travel if j in finger_joints else 0.0)
+               for j in np.unique(master.joint)]
+    spheres += [(j, layers.slave.centre_J[layers.slave.joint == j], 0.0) for j in np.unique(layers.slave.joint)]
+    tree, branches = kinematic_tree(model, prescribed=[f.joint for f in p.fingers], gravity_W=model.gravity.linear,
+                                    table_normal=table if table.any() else None, spheres=spheres)
+    ees, mods = [ee for ee, _ in p.grasps], [k for _, k in p.grasps]
+    grasps = Grasps(ee=np.array(ees, dtype=np.int64), module=np.array(mods, dtype=np.int64),
+                    ee_joint=np.array([p.end_effectors[e].joint for e in ees], dtype=np.int64),
+                    R_ee=np.array([p.end_effectors[e].placement.rotation for e in ees]).reshape(-1, 3, 3),
+                    module_joint=np.array([p.modules[k].joint for k in mods], dtype=np.int64),
+                    module_lever=np.array([model.inertias[p.modules[k].joint].lever for k in mods]).reshape(-1, 3))
+    skin = s.contact.skin_mm * 1e-3
+    # a sphere centre sits r off its face, so faces whose spheres may pair are within
+    # r1 + cutoff + r2 of each other; the skin keeps the culling conservative
+    limits = Limits(max_penetration=min(law.r1, law.r2), skin=skin, margin=law.r1 + law.r2 + law.cutoff + skin,
+                    external_contact=bool((~tree.free[master.joint]).any() or (~tree.free[layers.slave.joint]).any()))
+    c, sim = s.completion, s.simulation
+    i = sim.integrator
+    A, b, c_nodes, e = tableau(i.method)
+    floating = branches.mass[branches.floating]
+    integrator = IntegratorParams(
+        method=METHODS.index(i.method), adaptive=i.method in ADAPTIVE, A=A, b=b, c=c_nodes, e=e, rtol=i.rtol,
+        atol=i.atol, h_min=i.h_min_s, h_max=i.h_max_s, velocity_tol=i.velocity_tol_m_s, onset_depth=i.onset_depth_m,
+        locate_switches=i.bristle_switches == "located",
+        lever=np.concatenate([branches.lever, tree.reach[tree.internal]]),
+        lightest=float(floating.min()) if len(floating) else float(tree.mass[1:].max()))
+    return ModelFields(
+        tree=tree, branches=branches, gravity_W=np.array(model.gravity.linear), table_normal=table, master=master,
+        slave=layers.slave, faces=layers.faces, law=law, literal=s.contact.broad_phase == "none",
+        actuators=Actuators(joint=np.array([f.joint for f in p.fingers], dtype=np.int64),
+                            drive=np.array([f.drive for f in p.fingers], dtype=np.int64)),
+        drives=drives(s.end_effector, len(p.end_effectors)), grasps=grasps,
+        completion=CompletionParams(c.hold_s, c.max_contact_speed_m_s, c.max_net_force_N, c.phase_timeout_s),
+        limits=limits, record=_record_frames(p, tree, branches), integrator=integrator, dt=sim.dt_s,
+        substeps=sim.substeps, h=sim.dt_s / sim.substeps)
 
 
-def drive_params(ee) -> DriveParams:
-    """The compiled finger drive of a scenario's end_effector block (`sim.drive`)."""
-    return DriveParams(DRIVES.index(ee.drive), ee.closing_speed_m_s, ee.grasp_load_N,
-                       ee.closing_speed_m_s / (1.0 - ee.slowdown_fraction), ee.resume_fraction,
-                       ee.control_period_s)
+def drives(ee, n: int) -> Drives:
+    """The compiled finger drives of n end-effectors, each from a scenario's end_effector block
+    (`sim.actuation`)."""
+    row = lambda x, dtype=float: np.full(n, x, dtype=dtype)
+    return Drives(law=row(DRIVES.index(ee.drive), np.int64), closing_speed=row(ee.closing_speed_m_s),
+                  grasp_load=row(ee.grasp_load_N), no_load_speed=row(ee.closing_speed_m_s / (1.0 - ee.slowdown_fraction)),
+                  resume_fraction=row(ee.resume_fraction), period=row(ee.control_period_s))
 
 
-def _error_levers(bodies, master, slave, fingers) -> np.ndarray:
-    """Each free body's farthest contact sphere from its centroid (fingers anywhere in their
-    travel), m; a body without spheres: its radius of gyration. The adaptive integrator
-    bounds how far its spheres' errors reach with it."""
-    travel = max((f.opening_start for f in fingers), default=0.0)
-    levers = np.empty(len(bodies.joint))
-    for b, j in enumerate(bodies.joint):
-        far = [np.linalg.norm(layer.centre_J[layer.joint == j] - bodies.lever[b], axis=1).max() + extra
-               for layer, extra in ((master, travel), (slave, 0.0)) if np.any(layer.joint == j)]
-        levers[b] = max(far) if far else np.sqrt(np.trace(bodies.inertia_G[b]) / (2 * bodies.mass[b]))
-    return levers
-
-
-def _sphere_reach(master, slave, fingers) -> list[tuple[int, float]]:
-    """The farthest contact sphere from each contact joint's origin, fingers at any opening
-    within their travel (start opening), m."""
-    travel = max((f.opening_start for f in fingers), default=0.0)
-    reach = {}
-    for layers, extra in ((master, travel), (slave, 0.0)):
-        for j in np.unique(layers.joint):
-            r = np.linalg.norm(layers.centre_J[layers.joint == j], axis=1).max() + extra
-            reach[int(j)] = max(reach.get(int(j), 0.0), float(r))
-    return sorted(reach.items())
-
-
-def _record_frames(p: _Parts, body_row: dict) -> RecordFrames:
+def _record_frames(p: _Parts, tree, branches) -> RecordFrames:
     """What a record row reads: the modules' groove frames, the end-effectors' grasp frames and
-    the robot's base, each on its body's row (-1: fixed)."""
-    row_of = lambda j: body_row[j] if j else -1
-    frames = [(row_of(j), M) for j, M in (groove_placement(p.pin_model, m) for m in p.modules)]
-    frames += [(row_of(e.joint), e.placement) for e in p.end_effectors]
-    frames.append((row_of(p.robot_joint), None))
-    rows = lambda joints: np.array([body_row[j] for j in joints], dtype=np.int64)
+    the robot's base, each on its joint (0: fixed); the fingers' openings and loads."""
+    frames = [groove_placement(p.pin_model, m) for m in p.modules]
+    frames += [(e.joint, e.placement) for e in p.end_effectors]
+    frames.append((p.robot_joint, None))
+    of = lambda joints: np.array([tree.branch[j] for j in joints], dtype=np.int64)
+    model = p.pin_model
+    names = [f.name for f in p.fingers]
+    finger_q, locked, actuator = [], [], []
+    for name in p.layout.fingers:
+        if name in names:
+            k = names.index(name)
+            finger_q.append(model.idx_qs[p.fingers[k].joint])
+            locked.append(np.nan)
+            actuator.append(k)
+        else:  # a weld locked it: its opening is the one its spec holds it at
+            finger_q.append(-1)
+            locked.append(p.held.get(name, 0.0))
+            actuator.append(-1)
     dt = p.scenario.simulation.dt_s
     return RecordFrames(
-        row=np.array([r for r, _ in frames], dtype=np.int64),
+        joint=np.array([j for j, _ in frames], dtype=np.int64),
         R=np.array([np.eye(3) if M is None else M.rotation for _, M in frames]).reshape(-1, 3, 3),
         p=np.array([np.zeros(3) if M is None else M.translation for _, M in frames]).reshape(-1, 3),
-        module_row=np.array([row_of(m.joint) for m in p.modules], dtype=np.int64),
-        # each finger of this model among the unwelded scene's (a weld leaves some out)
-        finger_map=np.array([p.layout.fingers.index(f.name) for f in p.fingers], dtype=np.int64),
-        all_rows=np.arange(len(body_row), dtype=np.int64),
-        robot_rows=rows([p.robot_joint] if p.robot_joint else []),
-        system_rows=rows(p.free_joints),
+        module_joint=np.array([m.joint for m in p.modules], dtype=np.int64),
+        finger_q=np.array(finger_q, dtype=np.int64), locked_opening=np.array(locked, dtype=float),
+        finger_actuator=np.array(actuator, dtype=np.int64),
+        all_branches=np.flatnonzero(branches.floating).astype(np.int64),
+        robot_branches=of([p.robot_joint] if p.robot_joint else []),
+        system_branches=of(p.free_joints),
         free_robot=p.layout.free_robot,
         # the drives' work bounds the energy only without gravity (which does work of its own)
-        energy_bound=not np.any(p.pin_model.gravity.linear),
+        energy_bound=not np.any(model.gravity.linear),
         width=p.layout.width,
         replay_every=max(1, int(round(1.0 / (REPLAY_RATE_HZ * dt)))))
 

@@ -14,23 +14,24 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 
-from .. import measures
-from ..build.model import Model, build_model, on_table
-from ..contact.search import literal_search
-from ..errors import ScenarioError
-from ..scenario import in_grooves, modules_of, tolerance_warnings
-from ..version import __version__
-from .bodies import kinematics
-from .broadphase import BroadPhase, StateOverflow
-from .data import APPROACH, PHASE_NAMES, ROWS_PER_CALL, SELF_CENTRING, make_data
-from .events import ENERGY, ENERGY_WORK, NONFINITE, RAN, REFRESH, TOO_DEEP, UNDERFLOW
-from .loop import progress_of, run_intervals, skin_used
-from .phase import completion_criteria
-from .record import begin_record
-from .recorder import Recorder
-from .stability import ENERGY_GROWTH, stability_warnings
-from .step import step
-from .weld import weld
+from . import measures
+from .assemble.model import Model, build_model, on_table
+from .contact.search import literal_search
+from .errors import ScenarioError
+from .scenario import in_grooves, modules_of, tolerance_warnings
+from .version import __version__
+from .sim.broadphase import BroadPhase, StateOverflow
+from .sim.data import ROWS_PER_CALL, make_data
+from .sim.events import ENERGY, ENERGY_WORK, NONFINITE, RAN, REFRESH, TOO_DEEP, UNDERFLOW
+from .sim.loop import progress_of, run_intervals, skin_used
+from .sim.phase import completion_criteria
+from .sim.record import begin_record
+from .sim.recorder import Recorder
+from .sim.stability import ENERGY_GROWTH, stability_warnings
+from .sim.step import step
+from .sim.tree import kinematics
+from .tables import APPROACH, PHASE_NAMES, SELF_CENTRING
+from .assemble.weld import weld
 
 COMPLETED, INCOMPLETE, DIVERGED, INTERRUPTED = "completed", "incomplete", "diverged", "interrupted"
 #: The layout of summary.json and timeseries.npz; a reader refuses any other (`results.read_results`).
@@ -333,7 +334,7 @@ def initial_contacts(model: Model) -> int:
     data = make_data(model)
     kinematics(model.sim, data)
     # spheres of faces whose patches coal finds apart by more than the margin do not touch
-    if not model.sim.literal and not len(BroadPhase(model).near(data.q, data.opening)):
+    if not model.sim.literal and not len(BroadPhase(model).near(data.q)):
         return 0
     return len(literal_search(model.sim, data).key)
 

@@ -13,8 +13,8 @@ import numpy as np
 import pinocchio as pin
 
 from ..errors import ModelError
-from ..scenario import DualArmScenario, Scenario
-from . import assets
+from ..scenario import DualArmScenario, Geometry, Scenario
+from . import assets, robot
 
 #: Smallest eigenvalue a body's inertia may have, kg m^2, below which it is not positive definite.
 MIN_INERTIA_EIGENVALUE = 1e-12
@@ -58,23 +58,24 @@ def module_args(prefix: str, m) -> dict:
     return args
 
 
-def scene_spec(s, welded: dict | None = None) -> SceneSpec:
+def scene_spec(s, welded: dict | None = None, held: dict | None = None) -> SceneSpec:
     """The scene of a scenario. welded: module index -> (xyz, rpy) of its O_b in its
-    end-effector's grasp frame, for modules already grasped."""
-    welded = welded or {}
+    end-effector's grasp frame, for modules already grasped; held: finger joint name -> the
+    opening (m) it is locked at: a welded module's end-effector's fingers (0 if not given)
+    and any other finger that does not move in the scene. The other fingers stay on their
+    prismatic joints."""
+    welded, held = welded or {}, held or {}
     if isinstance(s, Scenario):
         args = {**geometry_args(s.geometry), **module_args("module_", s.module)}
         arm = [f"joint{i}" for i in range(1, 7)]
         locked = {**dict(zip(arm, s.arm.joint_angles_rad, strict=True)), "jointGripper": 0.0,
-                  "ee_finger_upper": 0.0, "ee_finger_lower": 0.0}
+                  **{name: float(x) for name, x in held.items()}}
         checked = {name: f"arm.joint_angles_rad[{i}]" for i, name in enumerate(arm)}
         return SceneSpec(assets.URDF_DIR / "single_arm_scene.urdf.xacro", args, locked, checked,
                          (("EE", "ee_"),), (("TM", "tm_", s.module, 0),), ((0, 0),))
     if isinstance(s, DualArmScenario):
-        from .robot import ARM_JOINTS, LAYOUTS
-
         args = {**geometry_args(s.geometry), **module_args("tm1_", s.tm1), **module_args("tm2_", s.tm2),
-                **LAYOUTS[s.robot.layout]}
+                **robot.LAYOUTS[s.robot.layout]}
         for k, (xyz, rpy) in welded.items():
             prefix = ("tm1_", "tm2_")[k]
             args.update({f"{prefix}joint_type": "fixed", f"{prefix}parent": f"ee{k + 1}_grasp",
@@ -82,11 +83,13 @@ def scene_spec(s, welded: dict | None = None) -> SceneSpec:
                          f"{prefix}rpy": " ".join(repr(float(x)) for x in rpy)})
         locked, checked = {}, {}
         for arm, angles in (("arm1_", s.robot.arm1_joint_angles_rad), ("arm2_", s.robot.arm2_joint_angles_rad)):
-            for i, (name, angle) in enumerate(zip(ARM_JOINTS, angles, strict=True)):
+            for i, (name, angle) in enumerate(zip(robot.ARM_JOINTS, angles, strict=True)):
                 locked[arm + name] = angle
                 checked[arm + name] = f"robot.{arm}joint_angles_rad[{i}]"
             for finger in FINGER_NAMES:
-                locked[f"ee{arm[3]}_{finger}"] = 0.0
+                name = f"ee{arm[3]}_{finger}"
+                if int(arm[3]) - 1 in welded or name in held:  # its fingers hold its module, or stay
+                    locked[name] = float(held.get(name, 0.0))
         return SceneSpec(assets.URDF_DIR / "dual_arm_scene.urdf.xacro", args, locked, checked,
                          (("EE-1", "ee1_"), ("EE-2", "ee2_")),
                          (("TM-1", "tm1_", s.tm1, 0), ("TM-2", "tm2_", s.tm2, 1)),
@@ -164,7 +167,8 @@ def check_inertias(model: pin.Model, joints=None) -> None:
 
 
 def lock_joints(full: pin.Model, spec: SceneSpec) -> tuple[pin.Model, list[str]]:
-    """Reduce away the locked joints (arms at the scenario's angles, fingers at opening 0)."""
+    """Reduce away the locked joints (arms at the scenario's angles, a welded end-effector's
+    fingers at their openings)."""
     q_ref = pin.neutral(full)
     problems, lock = [], []
     for name, angle in spec.locked.items():
@@ -205,3 +209,22 @@ def weld_urdf(urdf: str, spec: SceneSpec) -> str:
         joint.find("origin").set("rpy", " ".join(repr(float(x)) for x in rpy))
         urdf = urdf[:found.start()] + ET.tostring(joint, encoding="unicode") + urdf[found.end():]
     return urdf
+
+
+def fdr_inertia(s, with_tm1: bool = False) -> pin.Inertia:
+    """The free-flying robot of a dual-arm scenario as one body (Table 5 body 3), or with TM-1
+    welded to EE-1 at the grasp frame (body 4): its scene (`scene.scene_spec`, the robot's
+    layout included) with the arms locked at the scenario's angles."""
+    spec = scene_spec(s, {0: ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))} if with_tm1 else None)
+    for arm, prefix in spec.arms:
+        assets.prefixed_arm(arm, prefix)
+    angles = {"arm1_": s.robot.arm1_joint_angles_rad, "arm2_": s.robot.arm2_joint_angles_rad}
+    model, j = robot.locked_robot(assets.compile_xacro(spec.xacro, spec.args), angles)
+    return model.inertias[j]
+
+
+def xacro_defaults_agree() -> list[str]:
+    """Differences between the scene XACRO's argument defaults and Geometry's defaults."""
+    xacro = assets.xacro_arg_defaults(assets.URDF_DIR / "single_arm_scene.urdf.xacro")
+    return [f"{f.name}: XACRO {xacro.get(f.name)} != scenario {f.default}"
+            for f in fields(Geometry) if xacro.get(f.name) != f.default]

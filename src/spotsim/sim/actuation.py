@@ -1,0 +1,222 @@
+"""Stage: the actuators, one finger drive per end-effector (paper Sec. 2.4).
+
+An end-effector's drive moves its two fingers, each a body on its prismatic joint whose
+coordinate is the finger's opening, symmetrically (a linkage mirrors them), through a
+self-locking transmission (a worm or lead screw): the fingers never open under load. Its
+load, the grasp force, is the mean of its fingers' contact loads along their joints (the
+contact wrench's generalized force on each joint, `actuation`).
+
+Its controller is digital: every `control_period_s` it reads the load and sets the fingers'
+speed, held until the next reading (a zero-order hold). Its readings are the Model's periodic
+events (`next_event`): an adaptive integrator ends a step at each. Both laws prescribe the
+finger joints' motion (`tree.Tree.prescribed`): between readings the joints keep their speed
+whatever the load, so the drive's force is the constraint force the dynamics needs (computed
+nowhere it is not reported), and a new speed is an impulse on the robot (`dynamics.velocity_jump`),
+which keeps its momentum.
+
+- `kinematic` (the default), a current-limited DC motor with a speed limit: its torque-speed
+  line v0 (1 - F / F_g) runs from the no-load speed v0 to the stall force, the grasp load F_g
+  (the current limit, through the transmission), and a speed loop caps it at the closing speed
+  v_c. The fingers close at v_c while F <= slowdown F_g (v0 = v_c / (1 - slowdown)), slow down
+  along the line above it, and stop at F_g; the motor presses at most F_g, and a load above it
+  is carried by the self-locking transmission. The speed is a continuous function of the load.
+- `relay`, the earlier model, kept for comparison: the fingers close at v_c until F reaches
+  F_g, then stop dead, and close again at v_c once F falls below `resume_fraction` of F_g.
+
+Only the active grasp's drive moves; the others hold.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from ..jit import njit
+from ..tables import KINEMATIC
+from .dynamics import velocity_jump
+from .tree import kinematics
+
+#: A step ending within this share of a controller period before the drive is due ends at
+#: its due time: the steps' times carry round-off.
+DUE_ROUND_OFF = 1e-9
+
+
+class Actuators(NamedTuple):
+    """The actuated joints, one row each: the fingers on their prismatic joints, whose
+    coordinate is the opening (m) and whose closing is a negative speed."""
+
+    joint: np.ndarray  # (n_a,) its joint
+    drive: np.ndarray  # (n_a,) its drive (its end-effector)
+
+
+class Drives(NamedTuple):
+    """The finger drives, one row per end-effector."""
+
+    law: np.ndarray  # (n_ee,) index in tables.DRIVES
+    closing_speed: np.ndarray  # (n_ee,) the speed limit, m/s
+    grasp_load: np.ndarray  # (n_ee,) the stall force, N
+    no_load_speed: np.ndarray  # (n_ee,) the kinematic law's torque-speed line at zero load, m/s
+    resume_fraction: np.ndarray  # (n_ee,) the relay: a stalled drive closes again below this share of the grasp load
+    period: np.ndarray  # (n_ee,) the controller's period: it reads the load and sets the speed this often, s
+
+
+@njit
+def actuation(m, d):
+    """Stage, after the wrenches: each actuated joint's contact load d.load (N, the contact
+    wrench's generalized force on the joint, S^T f, never negative: a finger is pushed open);
+    and the actuators' joint forces d.tau (zero: both drives prescribe their joints' motion,
+    and the dynamics gives the force that takes)."""
+    t = m.tree
+    for i in range(m.actuators.joint.shape[0]):
+        j = m.actuators.joint[i]
+        f = d.loads.f_local[j]
+        load = f[0] * t.axis[j, 0] + f[1] * t.axis[j, 1] + f[2] * t.axis[j, 2]
+        d.load[i] = max(load, 0.0)
+
+
+@njit
+def kinematic_speed(p, ee, load, stiffness, damping, speed, h):
+    """The kinematic drive's closing speed (m/s) for a step of h (s): the speed v at which its
+    law v = min(v_c, v0 (1 - F / F_g)), never negative, holds with the load the step will end
+    at, F = load + damping (v - speed) + stiffness h v (N), linearised about the last
+    evaluation's load, made at the closing speed `speed`, with its slopes in the finger's
+    advance (stiffness, N/m) and speed (damping, N s/m).
+
+    Taken at the last load alone (explicitly), the law would be a stiff feedback loop: a
+    contact's slopes turn the speed the load allows within microseconds, and the damping's
+    share at once, so that explicit decisions overshoot and alternate between stop and
+    closing. At the step's end (implicitly, as backward Euler) the load approaches the grasp
+    load without overshoot at any step; as h -> 0 with the slopes the law itself. p: the
+    Drives, ee: the drive's row.
+    """
+    unloaded = 1.0 - (load - damping * speed) / p.grasp_load[ee]
+    v = p.no_load_speed[ee] * unloaded / (1.0 + p.no_load_speed[ee] * (damping + stiffness * h) / p.grasp_load[ee])
+    return min(p.closing_speed[ee], max(0.0, v))
+
+
+@njit
+def grasp_force(m, d, ee):
+    """The grasp force on end-effector ee's drive at the last evaluation: the mean of its
+    fingers' loads (N), and of their slopes in the fingers' advance (N/m) and speed (N s/m):
+    each pair in contact on a finger's body adds its contact's stiffness and damping
+    (`contact.forces.Contacts`) projected twice on the finger's axis. Zeros without fingers."""
+    t = m.tree
+    force = stiffness = damping = 0.0
+    n = 0
+    c = d.contacts
+    for i in range(m.actuators.joint.shape[0]):
+        if m.actuators.drive[i] != ee:
+            continue
+        j = m.actuators.joint[i]
+        force += d.load[i]
+        a = (d.R_W[j, 0, 0] * t.axis[j, 0] + d.R_W[j, 0, 1] * t.axis[j, 1] + d.R_W[j, 0, 2] * t.axis[j, 2],
+             d.R_W[j, 1, 0] * t.axis[j, 0] + d.R_W[j, 1, 1] * t.axis[j, 1] + d.R_W[j, 1, 2] * t.axis[j, 2],
+             d.R_W[j, 2, 0] * t.axis[j, 0] + d.R_W[j, 2, 1] * t.axis[j, 1] + d.R_W[j, 2, 2] * t.axis[j, 2])
+        for k in range(c.master.shape[0]):
+            if m.master.joint[c.master[k]] != j:
+                continue
+            # closing by dx along the axis indents the pair by (g . a)^2 dx along g and bends a
+            # holding bristle by the axis' share in the tangent plane of n_c
+            ga = c.direction_W[k, 0] * a[0] + c.direction_W[k, 1] * a[1] + c.direction_W[k, 2] * a[2]
+            na = c.normal_W[k, 0] * a[0] + c.normal_W[k, 1] * a[1] + c.normal_W[k, 2] * a[2]
+            tangent = 1.0 - na * na
+            stiffness += ga * ga * c.normal_stiffness[k] + tangent * c.tangent_stiffness[k]
+            damping += ga * ga * c.normal_damping[k] + tangent * c.tangent_damping[k]
+        n += 1
+    return (force / n, stiffness / n, damping / n) if n else (0.0, 0.0, 0.0)
+
+
+@njit
+def current_speed(m, d):
+    """The active drive's closing speed, m/s (0 without fingers)."""
+    ee = m.grasps.ee[d.active]
+    for i in range(m.actuators.joint.shape[0]):
+        if m.actuators.drive[i] == ee:
+            return -d.v[m.tree.idx_v[m.actuators.joint[i]]]
+    return 0.0
+
+
+@njit
+def closing_speed(m, d, ee, h):
+    """End-effector ee's closing speed for a coming step of h (s), m/s, from the last
+    evaluation's grasp force, by its drive's law (the relay updates its state)."""
+    p = m.drives
+    force, stiffness, damping = grasp_force(m, d, ee)
+    if p.law[ee] == KINEMATIC:
+        return kinematic_speed(p, ee, force, stiffness, damping, current_speed(m, d), h)
+    if force >= p.grasp_load[ee]:
+        d.stalled[ee] = True
+    elif force < p.resume_fraction[ee] * p.grasp_load[ee]:
+        d.stalled[ee] = False
+    return 0.0 if d.stalled[ee] else p.closing_speed[ee]
+
+
+@njit
+def _decide(m, d, t, horizon):
+    """The active drive's reading at time t (s), from the last evaluation's loads: its
+    fingers' speed until it is next due, `horizon` (s) later, set by an impulse
+    (`dynamics.velocity_jump`; d.jumped when a speed changed). Returns its speed before and
+    after (m/s)."""
+    ee = m.grasps.ee[d.active]
+    d.sample_t = t + horizon
+    before = current_speed(m, d)
+    speed = closing_speed(m, d, ee, horizon)
+    n = 0
+    for i in range(m.actuators.joint.shape[0]):
+        n += m.actuators.drive[i] == ee
+    joints, speeds = np.empty(n, dtype=np.int64), np.empty(n)
+    n = 0
+    for i in range(m.actuators.joint.shape[0]):
+        if m.actuators.drive[i] == ee:
+            joints[n], speeds[n] = m.actuators.joint[i], -speed
+            n += 1
+    if velocity_jump(m, d, joints, speeds):
+        d.jumped = True
+    return before, speed
+
+
+@njit
+def next_event(m, d):
+    """The time of the Model's next periodic event (s): the active drive's next reading."""
+    return d.sample_t
+
+
+@njit
+def drive_power(m, d):
+    """A bound on the power the drives put in at d's speeds, W: each actuator's load times
+    its joint's speed."""
+    power = 0.0
+    for i in range(m.actuators.joint.shape[0]):
+        power += d.load[i] * abs(d.v[m.tree.idx_v[m.actuators.joint[i]]])
+    return power
+
+
+@njit
+def sample_controllers(m, d, t, h):
+    """The controllers' events at time t (s), the end of a step of h (s): if the active drive
+    is due (t at or past d.sample_t), its reading (`_decide`) for a controller period, or the
+    step if longer.
+
+    The grasp counts the drive's resumes (closing again at more than half its closing speed
+    after it had stopped) and its largest speed change from one reading to the next."""
+    ee = m.grasps.ee[d.active]
+    period = m.drives.period[ee]
+    if t < d.sample_t - DUE_ROUND_OFF * period:
+        return
+    before, speed = _decide(m, d, t, max(period, h))
+    g = d.active
+    d.drive_jump[g] = max(d.drive_jump[g], abs(speed - before))
+    if before == 0.0:
+        d.drive_stopped[g] = True
+    if d.drive_stopped[g] and speed > 0.5 * m.drives.closing_speed[ee]:
+        d.drive_resumes[g] += 1
+        d.drive_stopped[g] = False
+
+
+@njit
+def start_drive(m, d):
+    """The active drive's first reading, now (a run's or a weld's start, its kinematics made
+    here): its start, not a change of speed, so nothing is counted."""
+    kinematics(m, d)
+    _decide(m, d, d.t, m.drives.period[m.grasps.ee[d.active]])

@@ -1,0 +1,66 @@
+"""A kinematic tree alone, outside a scene: the compiled Model and Data fields the dynamics
+stages read (`tree.kinematics`, `dynamics.accelerations`, the integrators' updates), for
+checking them against Pinocchio on any model, and for driving a tree without contact.
+
+    model, data = bare(pin_model)
+    data.q[:] = q; data.v[:] = v; data.tau[:] = tau; data.loads.f_local[:] = f
+    kinematics(model, data); accelerations(model, data)   # data.a: pin.aba's
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+import pinocchio as pin
+
+from .dynamics import new_articulation
+from .integrators import state_size
+from .tree import kinematic_tree, new_frames
+
+
+class BareModel(NamedTuple):
+    """The tree's compiled fields (`tree.Tree`, `tree.Branches`)."""
+
+    tree: object
+    branches: object
+
+
+class BareLoads(NamedTuple):
+    """External wrenches on each joint's body: (force, moment about its origin) in its frame,
+    and the force in the world (the integrators' centroids read it)."""
+
+    f_local: np.ndarray  # (nj, 6) N, N m
+    force_W: np.ndarray  # (nj, 3) N
+
+
+class BareData(NamedTuple):
+    """The state and scratch the dynamics stages read and write (`data.Data`'s fields of the
+    same names)."""
+
+    q: np.ndarray
+    v: np.ndarray
+    tau: np.ndarray
+    loads: BareLoads
+    work: object
+    a: np.ndarray
+    R_W: np.ndarray
+    p_W: np.ndarray
+    w_W: np.ndarray
+    vo_W: np.ndarray
+    now: object
+    fsal_dy: np.ndarray
+
+
+def bare(model: pin.Model, prescribed=(), stiffness=None, rest=None) -> tuple[BareModel, BareData]:
+    """The compiled Model and a Data (at the neutral configuration, at rest) of a Pinocchio
+    model's tree; `prescribed`, `stiffness`, `rest` as `tree.kinematic_tree`. Its gravity is the
+    model's. External wrenches go into data.loads.f_local, and their world forces, which the
+    integrators' centroids read, into data.loads.force_W."""
+    tree, branches = kinematic_tree(model, prescribed, model.gravity.linear, stiffness=stiffness, rest=rest)
+    nj, nv = model.njoints, model.nv
+    frames = new_frames(nj)
+    data = BareData(pin.neutral(model), np.zeros(nv), np.zeros(nv), BareLoads(np.zeros((nj, 6)), np.zeros((nj, 3))),
+                    new_articulation(nj, nv), np.zeros(nv), frames.R_W, frames.p_W, frames.w_W, frames.vo_W,
+                    new_frames(nj), np.zeros(state_size(tree, branches)))
+    return BareModel(tree, branches), data
