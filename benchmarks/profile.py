@@ -31,7 +31,7 @@ from spotsim.contact.forces import pair_forces
 from spotsim.contact.search import find_pairs
 from spotsim.contact.wrenches import body_wrenches, contact_summary
 from spotsim.sim.dynamics import accelerations
-from spotsim.sim.run import Stepper
+from spotsim.run import Stepper
 from spotsim.sim.step import step
 
 #: The clamp whose step is timed: this long before the first grasp completes, s.

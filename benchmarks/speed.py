@@ -41,7 +41,7 @@ from numba import njit
 
 import spotsim
 from spotsim.sim.forces import forces
-from spotsim.sim.run import Stepper
+from spotsim.run import Stepper
 
 ROOT = Path(__file__).resolve().parents[1]
 CASES = {"I": "single_arm_case_I.yaml", "II": "single_arm_case_II.yaml", "III": "single_arm_case_III.yaml",

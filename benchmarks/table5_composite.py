@@ -36,8 +36,8 @@ import pinocchio as pin
 from scipy.optimize import minimize
 
 from speed import measured_at
-from spotsim.build import assets
-from spotsim.build.robot import (
+from spotsim.assemble import assets
+from spotsim.assemble.robot import (
     ARM,
     DUAL_ARM_XACRO,
     MASSLESS_BASE,

@@ -20,8 +20,9 @@ import numpy as np
 
 import spotsim
 from speed import measured_at
-from spotsim.build import assets
-from spotsim.build.robot import LAYOUTS, TABLE5, TABLE6, fdr_inertia
+from spotsim.assemble import assets
+from spotsim.assemble.robot import LAYOUTS, TABLE5, TABLE6
+from spotsim.assemble.scene import fdr_inertia
 from spotsim.scenario import LAYOUT_TM1_COM_MM
 from spotsim.studies.ensemble import ensemble
 

@@ -283,8 +283,8 @@ def extras(results: dict) -> dict:
     out["momentum_window"] = window
 
     # the robot with TM-1 seated in EE-1 (paper body 4), arms locked at Table 6
-    from spotsim.build import assets
-    from spotsim.build.robot import DUAL_ARM_XACRO, TABLE6, locked_robot
+    from spotsim.assemble import assets
+    from spotsim.assemble.robot import DUAL_ARM_XACRO, TABLE6, locked_robot
 
     for prefix in TABLE6:
         assets.prefixed_arm("ur3", prefix)

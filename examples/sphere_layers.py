@@ -10,9 +10,9 @@ above the face, which must equal the radius.
 
 import numpy as np
 
-from spotsim.build.assets import URDF_DIR, compile_xacro
-from spotsim.build.faces import contact_faces, face_basis, sphere_layer
-from spotsim.build.scene import geometry_args
+from spotsim.assemble.assets import URDF_DIR, compile_xacro
+from spotsim.assemble.faces import contact_faces, face_basis, sphere_layer
+from spotsim.assemble.scene import geometry_args
 from spotsim.scenario import Contact, Geometry
 
 
