@@ -28,7 +28,12 @@ def rows(e: EnsembleResult) -> list[dict]:
 
 
 def same_fields(a, b) -> bool:
-    """Whether two compiled Models' fields hold the same values (named tuples of arrays)."""
+    """Whether two compiled Models' fields hold the same values (named tuples and structures
+    of arrays)."""
+    from spotsim.structs import StructProxy
+
+    if isinstance(a, StructProxy):
+        return same_fields(a.view(), b.view())
     if isinstance(a, tuple):
         return len(a) == len(b) and all(same_fields(x, y) for x, y in zip(a, b, strict=True))
     if isinstance(a, np.ndarray):

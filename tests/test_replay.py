@@ -142,8 +142,10 @@ def server_commands(zmq_url):
 
 def test_welded_model_spheres_map_to_the_same_first_model_spheres():
     """After a weld, each remaining sphere keeps its place: mapped by face name to the first
-    model, it has the same centre and normal in the same joint's frame."""
+    model, it has the same centre in its body's frame (a finger's link, whether on its joint or
+    locked; a module's joint), and a module's the same joint."""
     from spotsim.assemble.model import build_model
+    from spotsim.replay.scene import _in_body_frames
     from spotsim.sim.recorder import SphereIds
 
     s = spotsim.load_scenario(DUAL)
@@ -151,11 +153,13 @@ def test_welded_model_spheres_map_to_the_same_first_model_spheres():
     welded = build_model(s, welded={0: ((0.0, 0.001, 0.0), (0.0, 0.0, 0.0))})
     ids = SphereIds(welded, first)
     assert len(welded.master.centre_J) < len(first.master.centre_J)
-    for layers, f_layers, idx in ((welded.master, first.master, ids.master), (welded.slave, first.slave, ids.slave)):
-        assert np.array_equal(f_layers.centre_J[idx], layers.centre_J)
-        assert np.array_equal(f_layers.normal_J[idx], layers.normal_J)
-        names = [first.pin_model.names[int(j)] for j in f_layers.joint[idx]]
-        assert names == [welded.pin_model.names[int(j)] for j in layers.joint]
+    # EE-2's fingers: locked on the robot in the first model, on their joints after the weld
+    centres, f_centres = _in_body_frames(welded)[0], _in_body_frames(first)[0]
+    np.testing.assert_allclose(f_centres[ids.master], centres, rtol=0, atol=1e-15)
+    assert np.array_equal(first.slave.centre_J[ids.slave], welded.slave.centre_J)
+    assert np.array_equal(first.slave.normal_J[ids.slave], welded.slave.normal_J)
+    names = [first.pin_model.names[int(j)] for j in first.slave.joint[ids.slave]]
+    assert names == [welded.pin_model.names[int(j)] for j in welded.slave.joint]
 
 
 def test_recorder_keeps_contact_snapshots_at_the_replay_rate(single):
@@ -200,9 +204,11 @@ def test_html_page_is_self_contained_and_covers_the_run(single, capsys):
 
 def check_sphere_colours(run_dir, cmds, frame_t):
     """At the display frame nearest frame_t, the coloured spheres on every finger and module are
-    exactly the spheres of the recorded pairs (first-model centres), coloured by state, and the
-    layers shown are those of the faces recorded in contact range."""
+    exactly the spheres of the recorded pairs (first-model centres, in the finger link's or the
+    module joint's frame), coloured by state, and the layers shown are those of the faces
+    recorded in contact range."""
     from spotsim import replay
+    from spotsim.replay.scene import _body_of_faces, _in_body_frames
 
     run = replay.load_run(run_dir)
     snaps = run.snapshots
@@ -213,11 +219,12 @@ def check_sphere_colours(run_dir, cmds, frame_t):
     model = run.model
     n_mf = len(snaps["master_faces"])
     seen = 0
-    bodies = [(f.name, model.master, snaps["master"][lo:hi], model.master.joint == f.joint)
-              for f in model.fingers]
-    bodies += [(m.name, model.slave, snaps["slave"][lo:hi], model.slave.joint == m.joint)
+    master_B, _ = _in_body_frames(model)
+    bodies = [(name, model.master, master_B, snaps["master"][lo:hi], np.isin(model.master.face, faces))
+              for name, kind, _, faces, _ in _body_of_faces(model)[0] if kind == "finger"]
+    bodies += [(m.name, model.slave, model.slave.centre_J, snaps["slave"][lo:hi], model.slave.joint == m.joint)
                for m in model.modules]
-    for name, layers, idx, on_body in bodies:
+    for name, layers, centres_B, idx, on_body in bodies:
         path = f"/meshcat/spotsim/contact/{name}"
         tr, kids = tracks(anim, path), children(objs[path])
         shown = {n[:-len(".visible")] for n, t in tr.items() if n.endswith(".visible") and at(t, frame)}
@@ -240,12 +247,12 @@ def check_sphere_colours(run_dir, cmds, frame_t):
         (cloud,) = clouds
         pos = geometry(objs[path], kids[cloud], "position")
         col = geometry(objs[path], kids[cloud], "color") / 255.0
-        centres = layers.centre_J[sorted(expected)]
+        centres = centres_B[sorted(expected)].astype(np.float32)  # as drawn: both sorted alike
         order = np.lexsort(pos.T[::-1])
         assert np.allclose(pos[order], centres[np.lexsort(centres.T[::-1])], atol=F32)
         by_pos = {tuple(np.round(p, 6)): c for p, c in zip(pos, col)}
         for i, x in expected.items():
-            c = by_pos[tuple(np.round(layers.centre_J[i].astype(np.float32), 6))]
+            c = by_pos[tuple(np.round(centres_B[i].astype(np.float32), 6))]
             assert np.allclose(c, replay.STATE_COLOURS[x], atol=1 / 255), (name, i, x)
         seen += len(expected)
     return seen

@@ -160,8 +160,8 @@ def contact_law(s) -> ContactLaw:
         # rate of delta = phi / 2 at that speed (the one place the two are converted)
         floor=indentation(c.approach_speed_floor_m_s),
         cutoff=cutoff_distance(r1, r2, min(r1, r2)),
-        bristle=BristleParams(f.mu_k, f.mu_s, f.bristle_stiffness_N_m, f.bristle_damping_N_s_m,
-                              f.velocity_deadband_m_s),
+        bristle=BristleParams(mu_k=f.mu_k, mu_s=f.mu_s, k_b=f.bristle_stiffness_N_m, c_b=f.bristle_damping_N_s_m,
+                              v_d=f.velocity_deadband_m_s),
         common_point=c.force_point == "common",
         gradient=c.normal_direction == "gradient",
     )
@@ -406,17 +406,17 @@ def _contact_layers(model, faces, finger_links, module_prefixes, law) -> _Layers
             if (kind_m, kind_s) not in TOUCHING_KINDS:
                 continue
             geom.addCollisionPair(pin.CollisionPair(gid_m, gid_s))
-            rows.append((starts_m[a], starts_m[a + 1], jm, js, b, lay.origin, lay.t1, lay.t2, lay.normal,
-                         lay.index_map.shape, middle, np.linalg.norm(centres - middle, axis=1).max()))
-    column = lambda i, dtype=float: np.array([r[i] for r in rows], dtype=dtype)
-    table = FaceTable(column(0, np.int64), column(1, np.int64), column(2, np.int64), column(3, np.int64),
-                      column(4, np.int64), column(5).reshape(-1, 3), column(6).reshape(-1, 3),
-                      column(7).reshape(-1, 3), column(8).reshape(-1, 3), column(9, np.int64).reshape(-1, 2),
-                      column(10).reshape(-1, 3), column(11))
+            rows.append(dict(master_start=starts_m[a], master_stop=starts_m[a + 1], master_joint=jm, slave_joint=js,
+                             slave_face=b, origin_J=lay.origin, t1_J=lay.t1, t2_J=lay.t2, n_J=lay.normal,
+                             shape=lay.index_map.shape, master_centre_J=middle,
+                             master_radius=np.linalg.norm(centres - middle, axis=1).max()))
+    ints = ("master_start", "master_stop", "master_joint", "slave_joint", "slave_face", "shape")
+    table = FaceTable(**{name: np.array([r[name] for r in rows], dtype=np.int64 if name in ints else float)
+                         for name in FaceTable._fields})
     contact_joints = tuple(sorted({*m_joint.tolist(), *s_joint.tolist()}))
     return _Layers(geom, m_centres, m_normals, m_joint, m_face,
-                   SlaveSpheres(s_centres, s_normals, s_joint, s_face, maps), table, tuple(finger_geoms),
-                   contact_joints, tuple(tuple(e[3] for e in roles[r]) for r in ("master", "slave")))
+                   SlaveSpheres(centre_J=s_centres, normal_J=s_normals, joint=s_joint, face=s_face, maps=maps), table,
+                   tuple(finger_geoms), contact_joints, tuple(tuple(e[3] for e in roles[r]) for r in ("master", "slave")))
 
 
 def _opening_at_touch(model, joint, layers, ee, module, law):
@@ -491,7 +491,8 @@ class _Parts:
 def model_fields(p: _Parts) -> ModelFields:
     """The fields of a scene's compiled Model."""
     s, model, layers, law = p.scenario, p.pin_model, p.layers, p.law
-    master = MasterSpheres(layers.master_centre_J, layers.master_normal_J, layers.master_joint, layers.master_face)
+    master = MasterSpheres(centre_J=layers.master_centre_J, normal_J=layers.master_normal_J, joint=layers.master_joint,
+                           face=layers.master_face)
     table = np.array(s.testbed.table_normal, dtype=float) if on_table(s) else np.zeros(3)
     if table.any():
         table /= np.linalg.norm(table)
@@ -531,7 +532,8 @@ def model_fields(p: _Parts) -> ModelFields:
         actuators=Actuators(joint=np.array([f.joint for f in p.fingers], dtype=np.int64),
                             drive=np.array([f.drive for f in p.fingers], dtype=np.int64)),
         drives=drives(s.end_effector, len(p.end_effectors)), grasps=grasps,
-        completion=CompletionParams(c.hold_s, c.max_contact_speed_m_s, c.max_net_force_N, c.phase_timeout_s),
+        completion=CompletionParams(hold_s=c.hold_s, max_contact_speed=c.max_contact_speed_m_s,
+                                    max_net_force=c.max_net_force_N, phase_timeout=c.phase_timeout_s),
         limits=limits, record=_record_frames(p, tree, branches), integrator=integrator, dt=sim.dt_s,
         substeps=sim.substeps, h=sim.dt_s / sim.substeps)
 
@@ -559,7 +561,7 @@ def _record_frames(p: _Parts, tree, branches) -> RecordFrames:
         if name in names:
             k = names.index(name)
             finger_q.append(model.idx_qs[p.fingers[k].joint])
-            locked.append(np.nan)
+            locked.append(0.0)  # not read: its joint gives its opening
             actuator.append(k)
         else:  # a weld locked it: its opening is the one its spec holds it at
             finger_q.append(-1)

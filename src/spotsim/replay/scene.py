@@ -155,10 +155,15 @@ def build(run: Run, rate_hz: float = 100.0, spheres: bool = True, force_mm_per_N
     clips = []
     vdata = visual.createData()
     placements = [[] for _ in visual.geometryObjects]
+    finger_frames = {name: full.getFrameId(name, pin.BODY) for name in model.layout.fingers}
+    finger_poses = {name: [] for name in finger_frames}  # each finger link's, per display frame
     for s in states:
-        pin.updateGeometryPlacements(full, full_kin.place(*s), visual, vdata)
+        data = full_kin.place(*s)
+        pin.updateGeometryPlacements(full, data, visual, vdata)
         for g, M in enumerate(vdata.oMg):
             placements[g].append(M.copy())
+        for name, fid in finger_frames.items():
+            finger_poses[name].append(pin.updateFramePlacement(full, data, fid).copy())
     for g, obj in enumerate(visual.geometryObjects):
         if moves(placements[g]):
             clip = Clip(f"{ROOT}/visuals/{obj.name}")
@@ -167,7 +172,8 @@ def build(run: Run, rate_hz: float = 100.0, spheres: bool = True, force_mm_per_N
 
     first = Kinematics(run, model.pin_model)
     datas = [[M.copy() for M in first.place(*s).oMi] for s in states]
-    clips += _contact_bodies(run, frames, keys, states, datas, spheres, window.commands)
+    module_poses = [[oMi[m.joint] for oMi in datas] for m in model.modules]
+    clips += _contact_bodies(run, frames, keys, finger_poses, module_poses, spheres, window.commands)
     scale = _force_scale(run, frames) if force_mm_per_N is None else force_mm_per_N * 1e-3
     clips += _force_arrows(run, frames, keys, states, scale, window.commands)
     clips.append(_hud(run, frames, keys, scale, spheres, window.commands))
@@ -188,37 +194,55 @@ def build(run: Run, rate_hz: float = 100.0, spheres: bool = True, force_mm_per_N
 
 
 def _body_of_faces(model):
-    """Group the first model's faces by the body their spheres ride: each finger (on its joint)
-    and each module. Returns [(name, kind, index, master faces, slave faces)]."""
+    """Group the first model's faces by the body their spheres ride: each finger link (on its
+    joint, or locked on the body it is mounted on) and each module. Returns [(name, kind,
+    index, master faces, slave faces)], kind "finger" (index: the link's name) or "module"."""
+    link_of = {face.name: face.link for face in model.faces}
+    masters, _ = model.face_names
     bodies = []
-    n_master_faces = int(model.master.face.max()) + 1 if len(model.master.face) else 0
-    for i, f in enumerate(model.fingers):
-        faces = np.unique(model.master.face[model.master.joint == f.joint])
-        bodies.append((f.name, "finger", i, faces, np.zeros(0, int)))
+    n_master_faces = len(masters)
+    for name in model.layout.fingers:
+        faces = np.array([k for k, n in enumerate(masters) if link_of[n] == name], dtype=int)
+        if len(faces):
+            bodies.append((name, "finger", name, faces, np.zeros(0, int)))
     for k, mod in enumerate(model.modules):
         faces = np.unique(model.slave.face[model.slave.joint == mod.joint])
         bodies.append((mod.name, "module", k, np.zeros(0, int), faces + n_master_faces))
     return bodies, n_master_faces
 
 
-def _body_frame(model, kind, i, oMi) -> pin.SE3:
-    """World pose of the frame the spheres of a finger or a module are given in: its joint's."""
-    return oMi[model.fingers[i].joint if kind == "finger" else model.modules[i].joint]
+def _in_body_frames(model) -> tuple[np.ndarray, dict]:
+    """The master spheres' centres in their finger link's frame (they are given in their
+    joint's, the finger's own or, locked, the body it is mounted on), and each master face's
+    placement change from its joint's frame to its link's (an SE3 per face)."""
+    link_of = {face.name: face.link for face in model.faces}
+    masters, _ = model.face_names
+    centres = model.master.centre_J.copy()
+    to_link = {}
+    for f, name in enumerate(masters):
+        link = model.pin_model.frames[model.pin_model.getFrameId(link_of[name], pin.BODY)].placement.inverse()
+        on = model.master.face == f
+        centres[on] = model.master.centre_J[on] @ link.rotation.T + link.translation
+        to_link[f] = link
+    return centres, to_link
 
 
-def _contact_bodies(run, frames, keys, states, datas, spheres, commands) -> list[Clip]:
+def _contact_bodies(run, frames, keys, finger_poses, module_poses, spheres, commands) -> list[Clip]:
     """Per finger and per module: its contact faces as thin plates, the sphere layers of its
-    faces in contact range and, over them, the spheres of the pairs in contact by state."""
+    faces in contact range and, over them, the spheres of the pairs in contact by state. A
+    finger is drawn in its link's frame (finger_poses: each link's world pose per display
+    frame), a module in its joint's (module_poses)."""
     model = run.model
     snaps = run.snapshots
     bodies, _ = _body_of_faces(model)
     p = model.law
+    master_B, to_link = _in_body_frames(model)
     # three.js draws a point of `size` as wide as a segment of size * tan(fov / 2) at its depth
     focal = 1 / np.tan(np.radians(CAMERA_FOV_DEG) / 2)
     face_layers = []  # per face (first-model numbering): (positions in its body frame, radius)
-    for layers, r in ((model.master, p.r1), (model.slave, p.r2)):
+    for layers, centres, r in ((model.master, master_B, p.r1), (model.slave, model.slave.centre_J, p.r2)):
         for f in range(int(layers.face.max()) + 1):
-            face_layers.append((layers.centre_J[layers.face == f], r))
+            face_layers.append((centres[layers.face == f], r))
     plates = _plates(model)
     clips = []
     for name, kind, i, mfaces, sfaces in bodies:
@@ -229,10 +253,12 @@ def _contact_bodies(run, frames, keys, states, datas, spheres, commands) -> list
                                            "color": colour((0.3, 0.45, 0.9) if kind == "finger" else (0.5, 0.5, 0.52))})
         for f in [*mfaces, *sfaces]:
             size, M = plates[f]
+            if f in to_link:
+                M = to_link[f] * M
             g = tree.add("geometries", {"type": "BoxGeometry", "width": size[0], "height": size[1], "depth": size[2]})
             children.append(node("Mesh", f"plate{f}", g, plate_mat, matrix=matrix_of(M)))
         clip = Clip(f"{ROOT}/contact/{name}")
-        clip.pose("", [_body_frame(model, kind, i, oMi) for oMi in datas], keys)
+        clip.pose("", finger_poses[i] if kind == "finger" else module_poses[i], keys)
         if spheres and snaps is not None:
             snap = frames.snapshot
             for f in [*mfaces, *sfaces]:
@@ -241,7 +267,11 @@ def _contact_bodies(run, frames, keys, states, datas, spheres, commands) -> list
                 children.append(tree.points(f"f{f}", centres, None, IDLE_SPHERE_SIZE * r * focal,
                                             STATE_COLOURS[NONE], visible=bool(shown[0])))
                 clip.visible(f"f{f}", shown, keys)
-            for child, shown in _pair_clouds(model, snaps, snap, kind, i, tree, focal):
+            if kind == "finger":
+                on_body, layer = np.isin(model.master.face, mfaces), (master_B, p.r1, "master")
+            else:
+                on_body, layer = model.slave.joint == model.modules[i].joint, (model.slave.centre_J, p.r2, "slave")
+            for child, shown in _pair_clouds(snaps, snap, layer, on_body, tree, focal):
                 children.append(child)
                 clip.visible(child["name"], shown, keys)
         commands.append(tree.command(f"{ROOT}/contact/{name}", node("Group", "body", children=children)))
@@ -261,17 +291,15 @@ def _plates(model) -> dict:
     return out
 
 
-def _pair_clouds(model, snaps, snap, kind, i, tree, focal):
+def _pair_clouds(snaps, snap, layer, on_body, tree, focal):
     """The coloured spheres of one body at each display frame, one point cloud per distinct
-    set (a grasp that holds shows one cloud for many frames). Yields (cloud, shown per frame)."""
+    set (a grasp that holds shows one cloud for many frames). layer: (the role's sphere
+    centres in the body's frame, their radius, "master" or "slave"); on_body: (n,) the role's
+    spheres on this body. Yields (cloud, shown per frame)."""
     ends = snaps["pairs_end"]
     clouds: dict[bytes, tuple[dict, np.ndarray]] = {}
     order = []
-    if kind == "finger":
-        layers, r, idx_key, on_body = model.master, model.law.r1, "master", model.master.joint == model.fingers[i].joint
-    else:
-        layers, r, idx_key = model.slave, model.law.r2, "slave"
-        on_body = layers.joint == model.modules[i].joint
+    centres, r, idx_key = layer
     for frame, s in enumerate(snap):
         if s < 0:
             continue
@@ -289,7 +317,7 @@ def _pair_clouds(model, snaps, snap, kind, i, tree, focal):
         key = idx.tobytes() + st.tobytes()
         if key not in clouds:
             colours = np.array([STATE_COLOURS[int(x)] for x in st])
-            cloud = tree.points(f"s{len(order)}", layers.centre_J[idx], colours, PAIR_SPHERE_SIZE * r * focal,
+            cloud = tree.points(f"s{len(order)}", centres[idx], colours, PAIR_SPHERE_SIZE * r * focal,
                                 visible=False, render_order=1)
             clouds[key] = (cloud, np.zeros(len(snap), dtype=bool))
             order.append(key)

@@ -130,9 +130,11 @@ def _put(row, at, x, scale=1.0):
 
 @njit
 def sample(m, d, row):
-    """Write one row of the time series (`Layout`) into row, from the kinematics d.now of the
-    state: the active grasp's module, its offset in the grasp frame, the last step's contact
-    wrench and pairs, the fingers, and for a free-flying robot its centroids and frames."""
+    """Write one row of the time series (`Layout`) into row, from the state's kinematics
+    (made here, into d.now): the active grasp's module, its offset in the grasp frame, the
+    last step's contact wrench and pairs, the fingers, and for a free-flying robot its
+    centroids and frames."""
+    current_frames(m, d)
     g = d.active
     ee, k = m.grasps.ee[g], m.grasps.module[g]
     n_pairs = d.contacts.key.shape[0]
@@ -217,8 +219,7 @@ def _snapshot(m, d):
 
 @njit
 def record_row(m, d):
-    """Write the next row of d.rows from d's state (its kinematics d.now), and its snapshot
-    when one is due."""
+    """Write the next row of d.rows from d's state, and its snapshot when one is due."""
     sample(m, d, d.rows[d.n_rows])
     if d.row_index % m.record.replay_every == 0:
         _snapshot(m, d)
