@@ -89,7 +89,7 @@ DRIVE_CASES = ("single_arm_case_I", "single_arm_case_II", "single_arm_case_III",
 #: The drives: their `--set`s, and the settings they run at. The relay read at every step (a
 #: controller period below any step: the model before the drive had a controller period) runs at
 #: the fine fixed step only: an adaptive step ends at each reading, so it could not grow.
-DRIVES = {"actuator": (["end_effector.drive=actuator"], ("default", "fine")),
+DRIVES = {"kinematic": (["end_effector.drive=kinematic"], ("default", "fine")),
           "relay": (["end_effector.drive=relay"], ("default", "fine")),
           "relay_every_step": (["end_effector.drive=relay", "end_effector.control_period_s=1.0e-9"], ("fine",))}
 DRIVE_SETTINGS = {"default": [], "fine": ["simulation.integrator.method=symplectic_euler", "simulation.substeps=320"]}
@@ -1068,7 +1068,7 @@ def spreads_table(r: Results) -> str:
 
 
 def drives_table(r: Results) -> str:
-    """Relay against actuator: each case's 32-member ensemble with each drive, at the default
+    """Relay against the kinematic drive: each case's 32-member ensemble with each drive, at the default
     integrator and at a fine fixed step (docs/results/drives/)."""
     if not r.drives:
         return f"No drive comparison in docs/results/drives/: run `{GENERATE} drives`."
