@@ -18,9 +18,9 @@ import argparse
 import time
 
 import numpy as np
+from speed import ROOT, measured_at
 
 import spotsim
-from speed import ROOT, measured_at
 
 CASE_II = ROOT / "config" / "single_arm_case_II.yaml"
 DAMPINGS = (80.0, 8.0, 0.08)

@@ -19,11 +19,11 @@ import argparse
 import csv
 
 import numpy as np
+from speed import ROOT, measured_at
 
 import spotsim
 from spotsim.studies.accuracy_ensemble import compare
 from spotsim.studies.ensemble import grasp_prefix, member_row
-from speed import ROOT, measured_at
 
 CASES = (("Case I", "single_arm_case_I"), ("Case II", "single_arm_case_II"), ("Case III", "single_arm_case_III"),
          ("dual arm", "dual_arm_sequential"))

@@ -20,12 +20,12 @@ from __future__ import annotations
 import argparse
 
 import numpy as np
+from bristle_switches import CASES, pct, reference_rows
+from speed import ROOT, measured_at
 
 import spotsim
 from spotsim.studies.accuracy_ensemble import compare
 from spotsim.studies.ensemble import grasp_prefix, member_row
-from bristle_switches import CASES, pct, reference_rows
-from speed import ROOT, measured_at
 
 #: The reference's step: the accuracy study's, symplectic Euler at 1/1280 of the 1 ms record step.
 FINE = {"method": "symplectic_euler"}

@@ -24,14 +24,14 @@ import time
 
 import numpy as np
 from numba import njit
+from speed import CASES, ROOT, measured_at, repeat_forces
 
 import spotsim
-from speed import CASES, ROOT, measured_at, repeat_forces
 from spotsim.contact.forces import pair_forces
 from spotsim.contact.search import find_pairs
 from spotsim.contact.wrenches import body_wrenches, contact_summary
-from spotsim.sim.dynamics import accelerations
 from spotsim.run import Stepper
+from spotsim.sim.dynamics import accelerations
 from spotsim.sim.step import step
 
 #: The clamp whose step is timed: this long before the first grasp completes, s.

@@ -40,8 +40,8 @@ import pinocchio as pin
 from numba import njit
 
 import spotsim
-from spotsim.sim.forces import forces
 from spotsim.run import Stepper
+from spotsim.sim.forces import forces
 
 ROOT = Path(__file__).resolve().parents[1]
 CASES = {"I": "single_arm_case_I.yaml", "II": "single_arm_case_II.yaml", "III": "single_arm_case_III.yaml",

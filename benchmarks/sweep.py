@@ -25,6 +25,7 @@ import time
 from pathlib import Path
 
 from speed import measured_at
+
 from spotsim.studies import sweep as sw
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -34,8 +34,8 @@ import argparse
 import numpy as np
 import pinocchio as pin
 from scipy.optimize import minimize
-
 from speed import measured_at
+
 from spotsim.assemble import assets
 from spotsim.assemble.robot import (
     ARM,

@@ -17,9 +17,9 @@ from __future__ import annotations
 import argparse
 
 import numpy as np
+from speed import measured_at
 
 import spotsim
-from speed import measured_at
 from spotsim.assemble import assets
 from spotsim.assemble.robot import LAYOUTS, TABLE5, TABLE6
 from spotsim.assemble.scene import fdr_inertia

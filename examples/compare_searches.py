@@ -16,8 +16,8 @@ import numpy as np
 import spotsim
 from spotsim.contact.forces import pair_forces
 from spotsim.contact.search import grid_search, literal_search
-from spotsim.sim.tree import kinematics
 from spotsim.run import Stepper
+from spotsim.sim.tree import kinematics
 
 ROOT = Path(__file__).resolve().parents[1]
 

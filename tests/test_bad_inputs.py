@@ -5,16 +5,15 @@ message and nothing else on stderr (no traceback), and nothing written."""
 from __future__ import annotations
 
 import json
-import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pytest
 import yaml
+from conftest import CASE_I
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from conftest import CASE_I
 
 import spotsim
 from spotsim.cli import main

@@ -4,6 +4,7 @@ import csv
 import json
 
 import pytest
+from conftest import ROOT
 
 import spotsim
 from spotsim.cli import main
@@ -13,7 +14,6 @@ from spotsim.studies.accuracy import parse_setting
 from spotsim.studies.estimate import (
     MIN_SPREAD_COUNT,
     QUANTITIES,
-    VALIDATION_SEED,
     companion,
     error_estimate,
     quantities,
@@ -23,8 +23,6 @@ from spotsim.studies.estimate import (
     validate,
     validation_table,
 )
-
-from conftest import ROOT
 
 
 def test_companion_takes_steps_twice_as_long(case_I):

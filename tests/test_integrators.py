@@ -14,8 +14,8 @@ from spotsim.run import Stepper
 from spotsim.sim.actuation import current_speed
 from spotsim.sim.dynamics import accelerations, velocity_jump
 from spotsim.sim.forces import forces
-from spotsim.sim.tree import kinematics
 from spotsim.sim.integrators import SWITCH_WINDOW, error_rates, euler_error, switch_fraction, tableau
+from spotsim.sim.tree import kinematics
 
 #: Round-off on O(1) numbers over a few thousand steps.
 ROUND_OFF = 1e-12
@@ -116,9 +116,10 @@ def test_tableaus_are_consistent():
 def test_momenta_match_pinocchio(model_I):
     """The compiled momenta of the floating branches (a free-flying robot with its fingers and
     two modules: the dual arm) equal Pinocchio's, summed over their bodies, at random states."""
+    from conftest import ROOT
+
     from spotsim.sim.data import make_data
     from spotsim.sim.tree import current_frames, momenta
-    from conftest import ROOT
 
     model = spotsim.build_model(spotsim.load_scenario(ROOT / "config" / "dual_arm_sequential.yaml"))
     pm, pd = model.pin_model, model.pin_model.createData()

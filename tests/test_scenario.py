@@ -8,8 +8,8 @@ import yaml
 from conftest import CASE_I, CONFIGS
 
 import spotsim
-from spotsim.cli import main
 from spotsim.assemble.scene import xacro_defaults_agree
+from spotsim.cli import main
 from spotsim.scenario import Geometry, from_dict, to_dict
 
 

@@ -6,9 +6,9 @@ import pinocchio as pin
 from spotsim.contact.forces import pair_forces
 from spotsim.contact.search import grid_search, literal_search
 from spotsim.contact.wrenches import body_wrenches
-from spotsim.sim.tree import kinematics
 from spotsim.sim.broadphase import BroadPhase
 from spotsim.sim.data import make_data
+from spotsim.sim.tree import kinematics
 
 #: Both searches feed the same kernel; forces may differ only by the order of summation.
 FORCE_RTOL = 1e-12

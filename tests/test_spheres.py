@@ -55,8 +55,8 @@ def test_shipped_faces_have_unit_normals_pointing_at_their_partner(model_I):
     assert np.allclose(np.linalg.norm(M.normal_J, axis=1), 1) and np.allclose(np.linalg.norm(S.normal_J, axis=1), 1)
     # each finger face has a groove face whose normal is exactly opposite once seated
     from spotsim.contact.search import world_spheres
-    from spotsim.sim.tree import kinematics
     from spotsim.sim.data import make_data
+    from spotsim.sim.tree import kinematics
 
     data = make_data(model_I)
     kinematics(model_I.sim, data)

@@ -4,10 +4,10 @@ import numpy as np
 import pinocchio as pin
 
 from spotsim.contact.search import GAP_SLACK, _moved, by_key, empty_pair_list, face_frame, grid_search, listed_search
-from spotsim.sim.tree import kinematics
-from spotsim.sim.broadphase import BroadPhase
 from spotsim.run import Stepper
+from spotsim.sim.broadphase import BroadPhase
 from spotsim.sim.step import travel_rate
+from spotsim.sim.tree import kinematics
 
 H = 1e-4
 

@@ -11,8 +11,8 @@
 from .assemble.model import Model, build_model
 from .errors import ModelError, ScenarioError, SimulationError, SpotsimError
 from .results import read_results, write_results
-from .scenario import Scenario, from_dict, load_scenario, replace, to_yaml
 from .run import Result, simulate
+from .scenario import Scenario, from_dict, load_scenario, replace, to_yaml
 from .studies.ensemble import EnsembleResult, ensemble
 from .studies.sweep import sweep
 from .version import __version__

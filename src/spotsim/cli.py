@@ -152,7 +152,7 @@ def _envelope(args) -> int:
         axes = tuple(a for a in args.axes.split(",") if a) if args.axes != "none" else ()
         bad = [a for a in axes if a not in AXES]
         planes = () if args.planes == "none" else tuple(tuple(p.split("-")) for p in args.planes.split(","))
-        bad += [f"-".join(p) for p in planes if p not in PLANES]
+        bad += ["-".join(p) for p in planes if p not in PLANES]
         if bad:
             raise ScenarioError([f"--axes/--planes: {', '.join(bad)}: not one of {', '.join(AXES)} / "
                                  f"{', '.join('-'.join(p) for p in PLANES)}"])
@@ -589,8 +589,8 @@ def _config_path(arg: str | None) -> Path:
 
 def _load(path: Path, overrides):
     from .assemble.model import build_model
-    from .scenario import load_scenario
     from .run import check_start
+    from .scenario import load_scenario
 
     scenario = load_scenario(path, overrides)
     model = build_model(scenario, str(path))

@@ -13,8 +13,8 @@ import numpy as np
 from . import measures
 from .errors import SpotsimError
 from .files import atomic, atomic_write, prepare, save_figure
-from .scenario import to_yaml
 from .run import RESULTS_FORMAT, Result
+from .scenario import to_yaml
 
 SUMMARY = "summary.json"
 MARKERS = "markers.csv"  # a dual-arm run's bodies' displacements at a camera's rate (`measures`)

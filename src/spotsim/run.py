@@ -16,10 +16,10 @@ import numpy as np
 
 from . import measures
 from .assemble.model import Model, build_model, on_table
+from .assemble.weld import weld
 from .contact.search import literal_search
 from .errors import ScenarioError
 from .scenario import in_grooves, modules_of, tolerance_warnings
-from .version import __version__
 from .sim.broadphase import BroadPhase, StateOverflow
 from .sim.data import ROWS_PER_CALL, make_data
 from .sim.events import ENERGY, ENERGY_WORK, NONFINITE, RAN, REFRESH, TOO_DEEP, UNDERFLOW
@@ -31,7 +31,7 @@ from .sim.stability import ENERGY_GROWTH, stability_warnings
 from .sim.step import step
 from .sim.tree import kinematics
 from .tables import APPROACH, PHASE_NAMES, SELF_CENTRING
-from .assemble.weld import weld
+from .version import __version__
 
 COMPLETED, INCOMPLETE, DIVERGED, INTERRUPTED = "completed", "incomplete", "diverged", "interrupted"
 #: The layout of summary.json and timeseries.npz; a reader refuses any other (`results.read_results`).

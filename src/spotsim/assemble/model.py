@@ -414,9 +414,9 @@ def _contact_layers(model, faces, finger_links, module_prefixes, law) -> _Layers
     table = FaceTable(**{name: np.array([r[name] for r in rows], dtype=np.int64 if name in ints else float)
                          for name in FaceTable._fields})
     contact_joints = tuple(sorted({*m_joint.tolist(), *s_joint.tolist()}))
-    return _Layers(geom, m_centres, m_normals, m_joint, m_face,
-                   SlaveSpheres(centre_J=s_centres, normal_J=s_normals, joint=s_joint, face=s_face, maps=maps), table,
-                   tuple(finger_geoms), contact_joints, tuple(tuple(e[3] for e in roles[r]) for r in ("master", "slave")))
+    slave = SlaveSpheres(centre_J=s_centres, normal_J=s_normals, joint=s_joint, face=s_face, maps=maps)
+    return _Layers(geom, m_centres, m_normals, m_joint, m_face, slave, table, tuple(finger_geoms), contact_joints,
+                   tuple(tuple(e[3] for e in roles[r]) for r in ("master", "slave")))
 
 
 def _opening_at_touch(model, joint, layers, ee, module, law):
@@ -543,7 +543,8 @@ def drives(ee, n: int) -> Drives:
     (`sim.actuation`)."""
     row = lambda x, dtype=float: np.full(n, x, dtype=dtype)
     return Drives(law=row(DRIVES.index(ee.drive), np.int64), closing_speed=row(ee.closing_speed_m_s),
-                  grasp_load=row(ee.grasp_load_N), no_load_speed=row(ee.closing_speed_m_s / (1.0 - ee.slowdown_fraction)),
+                  grasp_load=row(ee.grasp_load_N),
+                  no_load_speed=row(ee.closing_speed_m_s / (1.0 - ee.slowdown_fraction)),
                   resume_fraction=row(ee.resume_fraction), period=row(ee.control_period_s))
 
 

@@ -25,7 +25,6 @@ from typing import NamedTuple
 
 import numpy as np
 import pinocchio as pin
-
 from numba.experimental import structref
 
 from ..errors import ModelError

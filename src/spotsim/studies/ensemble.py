@@ -262,8 +262,8 @@ def _in_pool(scenario, source, model, starts, members, workers, bar, fork: bool)
     each.
     """
     if fork:  # load the compiled loop and start check here once, for every worker to inherit
-        from ..sim.data import make_data
         from ..run import compile_loop, initial_contacts
+        from ..sim.data import make_data
 
         compile_loop(model, make_data(model))
         initial_contacts(model)

@@ -30,12 +30,12 @@ import numpy as np
 
 from ..errors import ScenarioError
 from ..files import atomic_write, prepare, save_figure
-from ..scenario import TOLERANCE_DEG, TOLERANCE_OFFSET_MM, from_dict, set_value, to_dict
+from ..scenario import TOLERANCE_DEG, TOLERANCE_OFFSET_MM, from_dict, set_value
 from .sweep import (
     CONVERGED,
-    Cluster,
     POINTS_FILE,
     PRECISION_MM,
+    Cluster,
     Point,
     _append,
     dask_client,

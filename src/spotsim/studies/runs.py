@@ -17,8 +17,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import SpotsimError
-from ..scenario import modules_of, replace, to_dict
 from ..run import WALL_LIMIT
+from ..scenario import modules_of, replace, to_dict
 
 #: What a run ended as, besides the simulator's statuses.
 REJECTED, EXCEPTION = "rejected", "exception"

@@ -53,8 +53,8 @@ import yaml
 from ..errors import ScenarioError, SpotsimError
 from ..files import atomic_write
 from ..jit import add_sources
-from ..scenario import from_dict, modules_of, parse_yaml, read_yaml, set_value, to_dict, to_yaml
 from ..run import WALL_LIMIT
+from ..scenario import from_dict, modules_of, parse_yaml, read_yaml, set_value, to_dict, to_yaml
 from .ensemble import Member, Start, grasp_prefix, member_row
 
 #: What a point ended as besides the run's own statuses (completed, incomplete, diverged,
@@ -335,8 +335,8 @@ def model_for(scenario, source: str = "<sweep>"):
 def warm_worker(scenario, source: str = "<sweep>") -> int:
     """Build the scenario's model and load the compiled loop into this worker (once per
     worker, before its first point): the points' wall times are then their runs'."""
-    from ..sim.data import make_data
     from ..run import compile_loop
+    from ..sim.data import make_data
 
     model = model_for(scenario, source)
     compile_loop(model, make_data(model))
