@@ -165,7 +165,7 @@ def main() -> None:
         "  sphere pairs (culled search)": fastest_us(lambda d, n: repeat_search(m, d, n), data),
         "  pair forces": fastest_us(lambda d, n: repeat_pair_forces(m, d, h, n), data),
         "  wrenches and summary": fastest_us(lambda d, n: repeat_wrenches(m, d, n), data),
-        "accelerations (free-body dynamics)": fastest_us(lambda d, n: repeat_accelerations(m, d, n), data),
+        "accelerations (the articulated-body algorithm)": fastest_us(lambda d, n: repeat_accelerations(m, d, n), data),
     }
     whole = next(iter(timed.values()))
     print(f"\nOne step at the clamp (grasp 1, {at:.3f} s, {n_pairs} pairs in contact), each stage timed "

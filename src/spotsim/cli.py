@@ -303,8 +303,8 @@ def _numbers(text: str | None, kind, what: str):
 def _study(args) -> int:
     """`spotsim study accuracy|stability`: exit 2 on bad input, 130 if interrupted, 1 if a
     stability case failed, else 0."""
-    from .sim.integrators import ADAPTIVE, METHODS
     from .studies import accuracy, stability
+    from .tables import ADAPTIVE, METHODS
 
     overrides = list(args.set)
     duration = args.duration

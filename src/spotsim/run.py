@@ -257,7 +257,7 @@ def _summary(s, model, v, rec, series, status, message, wall, welds) -> dict:
             entry["robot_centroid_displacement_mm"] = [float(x) for x in d * 1e3]
         if on_table(s):
             # what the grasp pressed into the air-bearing table: the largest contact force along
-            # its normal and moment about a body's centroid in its plane, over the free bodies
+            # its normal and moment about a branch's centroid in its plane, over the floating branches
             entry["table_force_peak_N"] = float(v.peak_table_force[g])
             entry["table_moment_peak_Nm"] = float(v.peak_table_moment[g])
         grasps.append(entry)
@@ -310,10 +310,10 @@ def _summary(s, model, v, rec, series, status, message, wall, welds) -> dict:
             "linear_drift_rel": v.momentum_drift / max(v.momentum_max, 1e-300),
             "angular_drift_rel": v.angular_momentum_drift / max(v.angular_momentum_max, 1e-300),
             "definition": (
-                "max over the run of |total momentum of the free bodies - initial|, relative to "
+                "max over the run of |total momentum of the floating bodies - initial|, relative to "
                 "the largest single body's momentum (angular about the world origin); the robot "
                 "floats freely, so momentum is conserved" if free and not on_table(s) else
-                "max over the run of |in-plane momentum of the free bodies - initial| and of |their "
+                "max over the run of |in-plane momentum of the floating bodies - initial| and of |their "
                 "angular momentum about the table's normal - initial|, relative to the largest single "
                 "body's momentum (angular about the world origin); the bodies float on the air-bearing "
                 "table, which reacts the rest, so these are conserved" if free else

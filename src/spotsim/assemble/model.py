@@ -96,7 +96,7 @@ class Model:
     grasps: tuple[tuple[int, int], ...]  # (end-effector, module) in the order they are grasped
     robot_joint: int  # the free-flying robot's joint, 0 for a fixed base
     fingers: tuple[Finger, ...]  # the fingers on their joints (a welded end-effector's are locked: not here)
-    finger_geoms: tuple[tuple[int, int], ...]  # (geometry object, finger) of each finger patch
+    master_geoms: tuple[int, ...]  # the geometry object (coal patch) of each master face, in layer order
     contact_joints: tuple[int, ...]  # joints carrying contact faces
     q0: np.ndarray
     v0: np.ndarray
@@ -120,9 +120,9 @@ class Model:
     @cached_property
     def face_names(self) -> tuple[list[str], list[str]]:
         """The names of the master and of the slave faces, in the order of their layers' `face`
-        index: each face is one coal patch, added in that order (masters are `finger_geoms`)."""
+        index: each face is one coal patch, added in that order (masters are `master_geoms`)."""
         objects = self.geom_model.geometryObjects
-        masters = [g for g, _ in self.finger_geoms]
+        masters = list(self.master_geoms)
         slaves = [g for g in range(len(objects)) if g not in set(masters)]
         return [objects[g].name for g in masters], [objects[g].name for g in slaves]
 
@@ -239,11 +239,15 @@ def build_model(s, source: str = "<scenario>", welded: dict | None = None, urdf:
         return build_model(s, source, welded, urdf=urdf, faces=faces, held={**(held or {}), **idle})
     q0 = with_openings(model, q0, fingers)
     layout = Layout(scene_fingers(spec), bool(robot_joint), [m.name for m in modules], [e.name for e in end_effectors])
-    parts = _Parts(s, model, end_effectors, modules, spec.grasps, robot_joint, tuple(fingers), free, layers, law,
-                   layout, {name: spec.locked[name] for name in scene_fingers(spec) if name in spec.locked})
-    return Model(s, spec, urdf, model, layers.geom, tuple(end_effectors), tuple(modules), spec.grasps, robot_joint,
-                 tuple(fingers), layers.finger_geoms, layers.contact_joints, q0, np.zeros(model.nv), free,
-                 faces, layout, sim_model(model_fields(parts)))
+    parts = _Parts(scenario=s, pin_model=model, end_effectors=end_effectors, modules=modules, grasps=spec.grasps,
+                   robot_joint=robot_joint, fingers=tuple(fingers), free_joints=free, layers=layers, law=law,
+                   layout=layout, held={name: spec.locked[name] for name in scene_fingers(spec) if name in spec.locked})
+    return Model(scenario=s, spec=spec, urdf=urdf, pin_model=model, geom_model=layers.geom,
+                 end_effectors=tuple(end_effectors), modules=tuple(modules), grasps=spec.grasps,
+                 robot_joint=robot_joint,
+                 fingers=tuple(fingers), master_geoms=layers.master_geoms, contact_joints=layers.contact_joints, q0=q0,
+                 v0=np.zeros(model.nv), free_joints=free, faces=faces, layout=layout,
+                 sim=sim_model(model_fields(parts)))
 
 
 def _scene_frames(model: pin.Model, spec: SceneSpec) -> tuple[list[EndEffector], list[ModuleBody]]:
@@ -340,7 +344,7 @@ class _Layers:
     master_face: np.ndarray
     slave: SlaveSpheres
     faces: FaceTable
-    finger_geoms: tuple[tuple[int, int], ...]
+    master_geoms: tuple[int, ...]
     contact_joints: tuple[int, ...]
     kinds: tuple[tuple[str, ...], tuple[str, ...]]  # each master face's and each slave face's kind (FACE_KINDS)
 
@@ -355,7 +359,7 @@ def _contact_layers(model, faces, finger_links, module_prefixes, law) -> _Layers
     """
     geom = pin.GeometryModel()
     roles = {"master": [], "slave": []}
-    finger_of_face, finger_geoms = [], []
+    master_geoms = []
     for face in faces:
         if face.link in finger_links:
             role = "master"
@@ -372,8 +376,7 @@ def _contact_layers(model, faces, finger_links, module_prefixes, law) -> _Layers
             if verts_J is None:
                 continue  # a land narrower than a sphere: no layer
         if role == "master":
-            finger_of_face.append(finger_links.index(face.link))
-            finger_geoms.append((len(geom.geometryObjects), finger_of_face[-1]))
+            master_geoms.append(len(geom.geometryObjects))
         layer = sphere_layer(verts_J, radius)
         T = face.T_LC
         placement = jMl * pin.SE3(T[:3, :3], T[:3, 3])
@@ -415,8 +418,10 @@ def _contact_layers(model, faces, finger_links, module_prefixes, law) -> _Layers
                          for name in FaceTable._fields})
     contact_joints = tuple(sorted({*m_joint.tolist(), *s_joint.tolist()}))
     slave = SlaveSpheres(centre_J=s_centres, normal_J=s_normals, joint=s_joint, face=s_face, maps=maps)
-    return _Layers(geom, m_centres, m_normals, m_joint, m_face, slave, table, tuple(finger_geoms), contact_joints,
-                   tuple(tuple(e[3] for e in roles[r]) for r in ("master", "slave")))
+    return _Layers(geom=geom, master_centre_J=m_centres, master_normal_J=m_normals, master_joint=m_joint,
+                   master_face=m_face, slave=slave, faces=table, master_geoms=tuple(master_geoms),
+                   contact_joints=contact_joints,
+                   kinds=tuple(tuple(e[3] for e in roles[r]) for r in ("master", "slave")))
 
 
 def _opening_at_touch(model, joint, layers, ee, module, law):

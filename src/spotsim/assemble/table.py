@@ -1,4 +1,4 @@
-"""The air-bearing testbed (paper Sec. 5.2): free bodies on planar joints over a table.
+"""The air-bearing testbed (paper Sec. 5.2): floating bodies on planar joints over a table.
 
 On the SPOT testbed the floating base, TM-1 and TM-2 float on air bearings over a granite
 table: each moves in the table's plane and turns about its normal, and gravity, along the
@@ -58,6 +58,14 @@ def mount_on_table(model: pin.Model, q0: np.ndarray, joints, normal_W) -> tuple[
             jid = new.addJoint(model.parents[j], model.joints[j], placement, model.names[j])
             new.appendBodyToJoint(jid, model.inertias[j], pin.SE3.Identity())
             q.extend(q0[model.idx_qs[j]:model.idx_qs[j] + model.nqs[j]])
+    # the joints' rotors and dampers carried over (a mounted joint's are the table's: none)
+    armature, damping = np.array(new.armature), np.array(new.damping)
+    for j in range(1, model.njoints):
+        if j not in turn:
+            src = slice(model.idx_vs[j], model.idx_vs[j] + model.nvs[j])
+            dst = slice(new.idx_vs[j], new.idx_vs[j] + new.nvs[j])
+            armature[dst], damping[dst] = model.armature[src], model.damping[src]
+    new.armature, new.damping = armature, damping
     for f in list(model.frames)[1:]:  # the first is the universe, which every model has
         g = pin.Frame(f)
         if f.parentJoint in turn:

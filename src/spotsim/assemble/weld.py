@@ -98,7 +98,7 @@ def weld(model: Model, data, source: str = "<scenario>") -> tuple[Model, object]
     v[nm.idx_vs[r]:nm.idx_vs[r] + nm.nvs[r]] = root_velocity_for_momentum(nm, q, v, r, h_W)
     t_start = old.t_start.copy()
     t_start[old.active + 1] = old.t
-    new_data = make_data(new)
+    new_data = make_data(new, start=False)
     carried = {name: getattr(old, name) for name in (
         "t", "stalled", "drive_stopped", "drive_resumes", "drive_jump", "phase", "t_contact", "t_complete",
         "peak_force", "peak_torque", "peak_force_norm", "peak_torque_norm", "peak_pairs", "peak_table_force",

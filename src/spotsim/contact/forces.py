@@ -73,8 +73,10 @@ class Memory(NamedTuple):
 
 def no_contacts() -> Contacts:
     ints, vec = lambda: np.zeros(0, dtype=np.int64), lambda: np.zeros((0, 3))
-    return Contacts(ints(), ints(), ints(), np.zeros(0), vec(), vec(), vec(), vec(), np.zeros(0), ints(), vec(),
-                    np.zeros(0), np.zeros(0), vec(), vec(), np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0))
+    return Contacts(master=ints(), slave=ints(), key=ints(), phi=np.zeros(0), point_W=vec(), c1_W=vec(), c2_W=vec(),
+                    force_W=vec(), speed=np.zeros(0), state=ints(), s=vec(), v_minus=np.zeros(0), slack=np.zeros(0),
+                    direction_W=vec(), normal_W=vec(), normal_stiffness=np.zeros(0), normal_damping=np.zeros(0),
+                    tangent_stiffness=np.zeros(0), tangent_damping=np.zeros(0))
 
 
 def no_memory() -> Memory:
@@ -165,7 +167,9 @@ def pair_forces(m, d, h, jump):
         if held > 0.0 and slack <= 0.0:
             shared += 1
         n += 1
-    d.contacts = Contacts(out_m[:n], out_s[:n], out_key[:n], phi_out[:n], point_out[:n], c1_out[:n], c2_out[:n],
-                          force_out[:n], speed_out[:n], state_out[:n], s_out[:n], v_minus_out[:n], slack_out[:n],
-                          g_out[:n], n_out[:n], k_n_out[:n], c_n_out[:n], k_t_out[:n], c_t_out[:n])
+    d.contacts = Contacts(master=out_m[:n], slave=out_s[:n], key=out_key[:n], phi=phi_out[:n], point_W=point_out[:n],
+                          c1_W=c1_out[:n], c2_W=c2_out[:n], force_W=force_out[:n], speed=speed_out[:n],
+                          state=state_out[:n], s=s_out[:n], v_minus=v_minus_out[:n], slack=slack_out[:n],
+                          direction_W=g_out[:n], normal_W=n_out[:n], normal_stiffness=k_n_out[:n],
+                          normal_damping=c_n_out[:n], tangent_stiffness=k_t_out[:n], tangent_damping=c_t_out[:n])
     return shared

@@ -39,11 +39,12 @@ class Summary(NamedTuple):
 
 
 def no_loads(njoints: int) -> Loads:
-    return Loads(np.zeros((njoints, 6)), np.zeros((njoints, 3)), np.zeros((njoints, 3)), np.zeros(3), np.zeros(3))
+    return Loads(f_local=np.zeros((njoints, 6)), force_W=np.zeros((njoints, 3)), torque_O_W=np.zeros((njoints, 3)),
+                 external_force_W=np.zeros(3), external_torque_O_W=np.zeros(3))
 
 
 def no_summary() -> Summary:
-    return Summary((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.0, 0.0)
+    return Summary(force_A=(0.0, 0.0, 0.0), torque_A=(0.0, 0.0, 0.0), max_speed=0.0, max_penetration=0.0)
 
 
 @njit_inline
@@ -106,7 +107,7 @@ def body_wrenches(m, d):
         T_O[j, 0] = T[j, 0] + p_W[j, 1] * F[j, 2] - p_W[j, 2] * F[j, 1]
         T_O[j, 1] = T[j, 1] + p_W[j, 2] * F[j, 0] - p_W[j, 0] * F[j, 2]
         T_O[j, 2] = T[j, 2] + p_W[j, 0] * F[j, 1] - p_W[j, 1] * F[j, 0]
-    d.loads = Loads(local, F, T_O, ext_f, ext_t)
+    d.loads = Loads(f_local=local, force_W=F, torque_O_W=T_O, external_force_W=ext_f, external_torque_O_W=ext_t)
 
 
 @njit_inline
@@ -136,8 +137,9 @@ def contact_summary(m, d):
     fastest = deepest = 0.0
     if d.contacts.speed.shape[0]:
         fastest, deepest = d.contacts.speed.max(), d.contacts.phi.max()
-    d.summary = Summary((dot3(x, f), dot3(y, f), dot3(z, f)), (dot3(x, tau), dot3(y, tau), dot3(z, tau)), fastest,
-                        deepest)
+    d.summary = Summary(force_A=(dot3(x, f), dot3(y, f), dot3(z, f)),
+                        torque_A=(dot3(x, tau), dot3(y, tau), dot3(z, tau)),
+                        max_speed=fastest, max_penetration=deepest)
 
 
 @njit_inline

@@ -282,7 +282,7 @@ def _contact_bodies(run, frames, keys, finger_poses, module_poses, spheres, comm
 def _plates(model) -> dict:
     """Each contact face's thin box: (size (3,), placement in its body's sphere frame)."""
     objects = model.geom_model.geometryObjects
-    masters = [g for g, _ in model.finger_geoms]
+    masters = list(model.master_geoms)
     slaves = [g for g in range(len(objects)) if g not in set(masters)]
     out = {}
     for f, g in enumerate(masters + slaves):

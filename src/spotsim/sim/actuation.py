@@ -64,9 +64,10 @@ class Drives(NamedTuple):
 @njit
 def actuation(m, d):
     """Stage, after the wrenches: each actuated joint's contact load d.load (N, the contact
-    wrench's generalized force on the joint, S^T f, never negative: a finger is pushed open);
-    and the actuators' joint forces d.tau (zero: both drives prescribe their joints' motion,
-    and the dynamics gives the force that takes)."""
+    wrench's generalized force on the joint, S^T f, never negative: a finger is pushed open).
+    Both drives prescribe their joints' motion, so they put no joint force into d.tau (it
+    stays zero): the dynamics gives the force the motion takes. A drive that pushes with a
+    force of its own writes it there."""
     t = m.tree
     for i in range(m.actuators.joint.shape[0]):
         j = m.actuators.joint[i]

@@ -20,10 +20,11 @@ from .tree import kinematic_tree, new_frames
 
 
 class BareModel(NamedTuple):
-    """The tree's compiled fields (`tree.Tree`, `tree.Branches`)."""
+    """The tree's compiled fields (`tree.Tree`, `tree.Branches`), in space (no table)."""
 
     tree: object
     branches: object
+    table_normal: np.ndarray  # (3,) zero: no air-bearing table
 
 
 class BareLoads(NamedTuple):
@@ -60,7 +61,8 @@ def bare(model: pin.Model, prescribed=(), stiffness=None, rest=None) -> tuple[Ba
     tree, branches = kinematic_tree(model, prescribed, model.gravity.linear, stiffness=stiffness, rest=rest)
     nj, nv = model.njoints, model.nv
     frames = new_frames(nj)
-    data = BareData(pin.neutral(model), np.zeros(nv), np.zeros(nv), BareLoads(np.zeros((nj, 6)), np.zeros((nj, 3))),
-                    new_articulation(nj, nv), np.zeros(nv), frames.R_W, frames.p_W, frames.w_W, frames.vo_W,
-                    new_frames(nj), np.zeros(state_size(tree, branches)))
-    return BareModel(tree, branches), data
+    data = BareData(q=pin.neutral(model), v=np.zeros(nv), tau=np.zeros(nv),
+                    loads=BareLoads(f_local=np.zeros((nj, 6)), force_W=np.zeros((nj, 3))),
+                    work=new_articulation(nj, nv), a=np.zeros(nv), R_W=frames.R_W, p_W=frames.p_W, w_W=frames.w_W,
+                    vo_W=frames.vo_W, now=new_frames(nj), fsal_dy=np.zeros(state_size(tree, branches)))
+    return BareModel(tree=tree, branches=branches, table_normal=np.zeros(3)), data

@@ -1,5 +1,5 @@
 """Stage: what a run keeps of each step: counts, the active grasp's peaks, the drives' work and
-the external impulse on the free bodies (for the momentum balance)."""
+the external impulse on the floating branches (for the momentum balance)."""
 
 from __future__ import annotations
 

@@ -23,7 +23,6 @@ from ..contact.forces import Contacts, Memory, no_contacts, no_memory
 from ..contact.search import Candidates, PairList, empty_pair_list, no_candidates
 from ..contact.wrenches import Loads, Summary, no_loads, no_summary
 from ..structs import StructProxy, StructType, new_struct, register, view
-from ..tables import APPROACH, COMPLETE, PHASE_NAMES, SELF_CENTRING  # noqa: F401 (read from here by the stages)
 from .actuation import start_drive
 from .dynamics import Articulation, new_articulation
 from .integrators import state_size
@@ -93,7 +92,7 @@ class DataFields(NamedTuple):
     peak_force_norm: np.ndarray  # (n_g,) N
     peak_torque_norm: np.ndarray  # (n_g,) N m
     peak_pairs: np.ndarray  # (n_g,) most pairs in contact at once
-    # (n_g,) on the air-bearing table, the most any free body's contact wrench pressed into it:
+    # (n_g,) on the air-bearing table, the most any floating branch's contact wrench pressed into it:
     # the force along its normal, N, and the moment about the body's centroid in its plane, N m
     peak_table_force: np.ndarray
     peak_table_moment: np.ndarray
@@ -165,10 +164,10 @@ def _copied(x):
     return x
 
 
-def make_data(model, rows: int = ROWS_PER_CALL) -> Data:
+def make_data(model, rows: int = ROWS_PER_CALL, start: bool = True) -> Data:
     """The Data of a run's start on `model` (an `assemble.model.Model`): at rest in q0 (the
-    fingers at their start openings), the first grasp's drive closing, no contact, every grasp
-    still to come."""
+    fingers at their start openings), the first grasp's drive closing (unless not `start`: a
+    weld starts the next grasp's itself), no contact, every grasp still to come."""
     sim = model.sim
     nj, nv = model.pin_model.njoints, model.pin_model.nv
     n_g, n_ee, n_mod = len(model.grasps), len(model.end_effectors), len(model.modules)
@@ -200,9 +199,10 @@ def make_data(model, rows: int = ROWS_PER_CALL) -> Data:
         h_next=0.0, fsal=False, fsal_t=0.0,
         fsal_dy=np.zeros(state_size(sim.tree, sim.branches)), fsal_external=np.zeros(6),
         rows=np.zeros((rows, sim.record.width)), n_rows=0, row_index=0,
-        snapshots=Snapshots(ints(snap_cap), ints(snap_cap), np.zeros((snap_cap, n_mod, 3)), ints(64), ints(64),
-                            ints(64)),
+        snapshots=Snapshots(row=ints(snap_cap), pairs=ints(snap_cap), force_W=np.zeros((snap_cap, n_mod, 3)),
+                            master=ints(64), slave=ints(64), state=ints(64)),
         n_snapshots=0, n_snapshot_pairs=0)
     data = new_struct(f)
-    start_drive(sim, data)  # the first grasp's drive closes from the start (no load yet)
+    if start:
+        start_drive(sim, data)  # the first grasp's drive closes from the start (no load yet)
     return data

@@ -35,7 +35,7 @@ from ..jit import njit, njit_inline
 from ..linalg import add3, cross3, mtv3, mv3, solve_spd3, sub3
 from ..structs import StructProxy, StructType, new_struct, register
 from ..tables import PLANAR, PRISMATIC
-from .tree import ARTICULATED, NEWTON_EULER, joint_twist
+from .tree import ARTICULATED, NEWTON_EULER, branch_centroid, joint_twist
 
 
 class Articulation(NamedTuple):
@@ -84,33 +84,27 @@ def new_articulation(nj: int, nv: int) -> ArticulationStruct:
 
 
 @njit_inline
-def free_body_acceleration(t, j, R, v, f, tau_O, g_W):
-    """A free-flyer's (a_O, alpha), two 3-tuples, given its rotation R (3, 3) in the world.
+def body_acceleration(t, j, R, v, f, tau_O, g_W, planar):
+    """One free body's (a_O, alpha), two 3-tuples: the articulated-body algorithm of a branch
+    whose articulated inertia is the body's own, Newton about its centroid (world) and Euler
+    about it (body axes), given its rotation R (3, 3) in the world.
 
     v: (nv,) velocities. f, tau_O: the wrench on its body, force and moment about the joint
-    origin in the joint frame, N and N m (3-tuples). g_W: (3,) gravity, m/s^2.
+    origin in the joint frame, N and N m (3-tuples). g_W: (3,) gravity, m/s^2. planar: on a
+    planar joint its centroid accelerates by the in-plane force and gravity, and it turns by the
+    moment about its centroid along the normal over I_zz (with omega along the normal,
+    omega x I omega has no normal component).
     """
-    m, c, I_G = t.mass[j], t.lever[j], t.inertia_G[j]
-    v_O, w = joint_twist(t, j, v)
-    # Newton about the centroid (world) and Euler about it (body axes)
-    g = mtv3(R, g_W)
-    a_G = (f[0] / m + g[0], f[1] / m + g[1], f[2] / m + g[2])
-    alpha = solve_spd3(I_G, sub3(sub3(tau_O, cross3(c, f)), cross3(w, mv3(I_G, w))))
-    return _origin_acceleration(a_G, alpha, c, v_O, w), alpha
-
-
-@njit_inline
-def planar_body_acceleration(t, j, R, v, f, tau_O, g_W):
-    """A planar body's (a_O, alpha), two 3-tuples, as `free_body_acceleration`: its centroid
-    accelerates by the in-plane force and gravity, and it turns by the moment about its
-    centroid along the normal over I_zz (with omega along the normal, omega x I omega has no
-    normal component)."""
     m, c, I_G = t.mass[j], t.lever[j], t.inertia_G[j]
     v_O, w = joint_twist(t, j, v)
     g = mtv3(R, g_W)
     tau_G = sub3(tau_O, cross3(c, f))
-    a_G = (f[0] / m + g[0], f[1] / m + g[1], 0.0)
-    alpha = (0.0, 0.0, tau_G[2] / I_G[2, 2])
+    if planar:
+        a_G = (f[0] / m + g[0], f[1] / m + g[1], 0.0)
+        alpha = (0.0, 0.0, tau_G[2] / I_G[2, 2])
+    else:
+        a_G = (f[0] / m + g[0], f[1] / m + g[1], f[2] / m + g[2])
+        alpha = solve_spd3(I_G, sub3(tau_G, cross3(w, mv3(I_G, w))))
     return _origin_acceleration(a_G, alpha, c, v_O, w), alpha
 
 
@@ -129,16 +123,17 @@ def _newton_euler(m, d, b):
     t = m.tree
     j = m.branches.joint[b]
     iv = t.idx_v[j]
-    g = m.branches.gravity_W[b]
     fl, tau = d.loads.f_local, d.tau
-    if t.kind[j] == PLANAR:
-        f = (fl[j, 0] + tau[iv], fl[j, 1] + tau[iv + 1], fl[j, 2])
-        a_O, alpha = planar_body_acceleration(t, j, d.R_W[j], d.v, f, (fl[j, 3], fl[j, 4], fl[j, 5] + tau[iv + 2]), g)
+    planar = t.kind[j] == PLANAR
+    if planar:  # its joint force: (v_O,x, v_O,y, omega_z)
+        f, tau_O = (fl[j, 0] + tau[iv], fl[j, 1] + tau[iv + 1], fl[j, 2]), (fl[j, 3], fl[j, 4], fl[j, 5] + tau[iv + 2])
+    else:
+        f = (fl[j, 0] + tau[iv], fl[j, 1] + tau[iv + 1], fl[j, 2] + tau[iv + 2])
+        tau_O = (fl[j, 3] + tau[iv + 3], fl[j, 4] + tau[iv + 4], fl[j, 5] + tau[iv + 5])
+    a_O, alpha = body_acceleration(t, j, d.R_W[j], d.v, f, tau_O, m.branches.gravity_W[b], planar)
+    if planar:
         d.a[iv], d.a[iv + 1], d.a[iv + 2] = a_O[0], a_O[1], alpha[2]
     else:
-        a_O, alpha = free_body_acceleration(t, j, d.R_W[j], d.v, (fl[j, 0] + tau[iv], fl[j, 1] + tau[iv + 1],
-                                                                   fl[j, 2] + tau[iv + 2]),
-                                            (fl[j, 3] + tau[iv + 3], fl[j, 4] + tau[iv + 4], fl[j, 5] + tau[iv + 5]), g)
         d.a[iv], d.a[iv + 1], d.a[iv + 2] = a_O[0], a_O[1], a_O[2]
         d.a[iv + 3], d.a[iv + 4], d.a[iv + 5] = alpha[0], alpha[1], alpha[2]
 
@@ -529,10 +524,11 @@ def _jumps(m, d, b):
 def table_load(m, d, b):
     """What floating branch b's contact wrench presses into its table (a planar branch): the
     force along the normal, N, and the moment about its centroid in the plane, N m, as
-    magnitudes: the bearings and the table react them, and nothing moves by them."""
-    br, t = m.branches, m.tree
+    magnitudes: the bearings and the table react them, and nothing moves by them. From the
+    kinematics and loads of the last evaluation."""
+    br = m.branches
     n = m.table_normal
-    F0 = F1 = F2 = T0 = T1 = T2 = c0 = c1 = c2 = 0.0
+    F0 = F1 = F2 = T0 = T1 = T2 = 0.0
     for i in range(br.first[b], br.stop[b]):
         j = br.members[i]
         F0 += d.loads.force_W[j, 0]
@@ -541,12 +537,7 @@ def table_load(m, d, b):
         T0 += d.loads.torque_O_W[j, 0]
         T1 += d.loads.torque_O_W[j, 1]
         T2 += d.loads.torque_O_W[j, 2]
-        p_G = add3((d.p_W[j, 0], d.p_W[j, 1], d.p_W[j, 2]), mv3(d.R_W[j], t.lever[j]))
-        c0 += t.mass[j] * p_G[0]
-        c1 += t.mass[j] * p_G[1]
-        c2 += t.mass[j] * p_G[2]
-    M = br.mass[b]
-    c = (c0 / M, c1 / M, c2 / M)
+    c, _ = branch_centroid(m, d, b)
     F = (F0, F1, F2)
     tau_G = sub3((T0, T1, T2), cross3(c, F))
     along = tau_G[0] * n[0] + tau_G[1] * n[1] + tau_G[2] * n[2]

@@ -18,7 +18,7 @@ from .tree import kinematics
 
 @njit
 def forces(m, d, h, jump):
-    """The contact wrenches and the actuators' joint forces at d's state (q, v), the bristles
+    """The contact wrenches and the actuated joints' loads at d's state (q, v), the bristles
     bent over h (s) from d.memory, which is left as it is. `jump`: a controller changed the
     prescribed joints' speeds since the memory's evaluation, and h is the step to come
     (`friction.bristle`). Returns how many saturated pairs held a share of h (`pair_forces`)."""
@@ -30,7 +30,7 @@ def forces(m, d, h, jump):
 @njit
 def contact_forces(m, d, h, jump):
     """`forces`' stages after the search: the wrenches of d.candidates at d's kinematics, the
-    bristles bent over h (s) from d.memory (`forces`), and the actuators; returns `forces`'."""
+    bristles bent over h (s) from d.memory (`forces`), and the actuation stage; returns `forces`'."""
     shared = pair_forces(m, d, h, jump)  # Eq. (11)-(17), per pair
     body_wrenches(m, d)  # Eq. (18)-(21), one wrench per body
     contact_summary(m, d)  # the active module's wrench in O_a, the fastest and deepest pair

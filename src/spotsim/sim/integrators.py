@@ -31,14 +31,14 @@ import numpy as np
 
 from ..contact.forces import commit_memory
 from ..jit import njit, njit_inline
-from ..linalg import add3, axpy3, cross3, mm9, mm33, mv3, mv9, put3, put9, quat_times_exp4, sub3
-from ..tables import ADAPTIVE, ADAPTIVE_EULER, METHODS, PRISMATIC, SYMPLECTIC_EULER  # noqa: F401 (the tables' home)
+from ..linalg import add3, axpy3, cross3, mv3, mv9, put3, quat_times_exp4, sub3
+from ..tables import ADAPTIVE_EULER, METHODS, SYMPLECTIC_EULER
 from .actuation import sample_controllers
 from .dynamics import accelerations
 from .forces import contact_forces, forces
 from .tree import (
-    _EYE,
     branch_centroid,
+    frame_of,
     joint_motion,
     joint_quat,
     joint_twist,
@@ -87,8 +87,9 @@ def integrate(m, d, h):
 
 @njit_inline
 def branch_force(m, d, b):
-    """The force on floating branch b's bodies (world, N, a 3-tuple): its contact forces and
-    gravity (on the air-bearing table, gravity's part in its plane)."""
+    """The force that moves floating branch b's centroid (world, N, a 3-tuple): its contact
+    forces and gravity; on the air-bearing table their part in its plane (the table reacts
+    the rest)."""
     br = m.branches
     g, M = br.gravity_W[b], br.mass[b]
     F0, F1, F2 = M * g[0], M * g[1], M * g[2]
@@ -97,6 +98,10 @@ def branch_force(m, d, b):
         F0 += d.loads.force_W[j, 0]
         F1 += d.loads.force_W[j, 1]
         F2 += d.loads.force_W[j, 2]
+    if br.planar[b]:
+        n = m.table_normal
+        along = F0 * n[0] + F1 * n[1] + F2 * n[2]
+        F0, F1, F2 = F0 - along * n[0], F1 - along * n[1], F2 - along * n[2]
     return F0, F1, F2
 
 
@@ -111,68 +116,30 @@ def branch_offset(m, d, b):
     """Floating branch b's centroid relative to its root's origin, and the velocity its
     internal joints give it, both in the root's frame (3-tuples), at (d.q, d.v): the centroid
     is at p + R c and moves at v_O + omega x (R c) + R u, for the root at p, turned by R,
-    moving at v_O and turning at omega (world). Uses d.now for the poses relative to the root."""
+    moving at v_O and turning at omega (world). Uses d.now: the branch's kinematics with its
+    root at rest at the origin (`tree.frame_of`)."""
     t, br = m.tree, m.branches
     j0 = br.joint[b]
-    q, v = d.q, d.v
-    rel_R, rel_p, rel_w, rel_v = d.now.R_W, d.now.p_W, d.now.w_W, d.now.vo_W
-    mass = t.mass[j0]
-    c0, c1, c2 = mass * t.lever[j0, 0], mass * t.lever[j0, 1], mass * t.lever[j0, 2]
-    u0 = u1 = u2 = 0.0
+    f = d.now
+    R_W, p_W, w_W, vo_W = f.R_W, f.p_W, f.w_W, f.vo_W
+    for a in range(3):
+        for k in range(3):
+            R_W[j0, a, k] = 1.0 if a == k else 0.0
+        p_W[j0, a] = w_W[j0, a] = vo_W[j0, a] = 0.0
     for i in range(br.first[b] + 1, br.stop[b]):
-        j = br.members[i]
-        par = t.parent[j]
-        R_P = t.R_P[j]
-        if t.kind[j] == PRISMATIC:  # no turn
-            x, xd = q[t.idx_q[j]], v[t.idx_v[j]]
-            a = t.axis[j]
-            shift = add3(mv3(R_P, (x * a[0], x * a[1], x * a[2])), t.p_P[j])
-            R_loc = mm33(_EYE, R_P)
-            vJ, wJ = mv3(R_P, (xd * a[0], xd * a[1], xd * a[2])), (0.0, 0.0, 0.0)
-        else:
-            RJ, pJ = joint_motion(t, j, q)
-            vJl, wJl = joint_twist(t, j, v)
-            R_loc = mm9(R_P, RJ)
-            shift = add3(mv3(R_P, pJ), t.p_P[j])
-            vJ, wJ = mv9(R_loc, vJl), mv9(R_loc, wJl)
-        if par == j0:  # a child of the root: its pose relative to the root is its own
-            R, p, w, vo = R_loc, shift, wJ, vJ
-        else:
-            R = mm9(rel_R[par], R_loc)
-            p = add3(mv3(rel_R[par], shift), rel_p[par])
-            wp = (rel_w[par, 0], rel_w[par, 1], rel_w[par, 2])
-            w = add3(wp, mv3(rel_R[par], wJ))
-            vo = add3(add3((rel_v[par, 0], rel_v[par, 1], rel_v[par, 2]), cross3(wp, sub3(p, rel_p[par]))),
-                      mv3(rel_R[par], vJ))
-        if not t.leaf[j]:
-            put9(rel_R[j], R)
-            put3(rel_p[j], 0, p)
-            put3(rel_w[j], 0, w)
-            put3(rel_v[j], 0, vo)
-        r = mv9(R, t.lever[j])
-        g, gv = add3(p, r), add3(vo, cross3(w, r))
-        mass = t.mass[j]
-        c0 += mass * g[0]
-        c1 += mass * g[1]
-        c2 += mass * g[2]
-        u0 += mass * gv[0]
-        u1 += mass * gv[1]
-        u2 += mass * gv[2]
-    M = br.mass[b]
-    return (c0 / M, c1 / M, c2 / M), (u0 / M, u1 / M, u2 / M)
+        frame_of(t, br.members[i], d.q, d.v, R_W, p_W, w_W, vo_W)
+    return branch_centroid(m, f, b)
 
 
 @njit_inline
-def branch_state(m, d, b):
-    """Floating branch b's centroid (world) and the velocity of it, 3-tuples, at (d.q, d.v)."""
+def root_frame(m, d, b):
+    """Floating branch b's root at (d.q, d.v): its rotation in the world (a 9-tuple), its
+    origin and the origin's velocity (world, 3-tuples) and its angular velocity (its frame)."""
     t, j = m.tree, m.branches.joint[b]
     R = root_rotation9(t, j, joint_quat(t, j, d.q))
     _, pJ = joint_motion(t, j, d.q)
     vJ, wJ = joint_twist(t, j, d.v)
-    c, u = branch_offset(m, d, b)
-    r = mv9(R, c)
-    return (add3(add3(mv3(t.R_P[j], pJ), t.p_P[j]), r),
-            add3(add3(mv9(R, vJ), cross3(mv9(R, wJ), r)), mv9(R, u)))
+    return R, add3(mv3(t.R_P[j], pJ), t.p_P[j]), mv9(R, vJ), wJ
 
 
 @njit_inline
@@ -183,6 +150,14 @@ def root_offset(m, d, b, R, w):
     c_rel, u_rel = branch_offset(m, d, b)
     r = mv9(R, c_rel)
     return r, add3(cross3(mv9(R, w), r), mv9(R, u_rel))
+
+
+@njit_inline
+def branch_state(m, d, b):
+    """Floating branch b's centroid (world) and the velocity of it, 3-tuples, at (d.q, d.v)."""
+    R, p, vo, w = root_frame(m, d, b)
+    r, u = root_offset(m, d, b, R, w)
+    return add3(p, r), add3(vo, u)
 
 
 #: A reference state of a floating root's branch that `place_branch` moves from: the root's
@@ -227,20 +202,19 @@ def _advance_joints(m, d, b, h, first):
 @njit
 def _euler_update(m, d, h):
     """Every joint's symplectic Euler step of h (s) from (q, v), in place, with the
-    accelerations d.a of the last evaluation and the kinematics d.R_W ... made at its start:
-    velocities first, then positions with the new velocities. A floating branch's centroid
-    moves on its momentum (v_c += h F / M, x_c += h v_c) and its root turns by exp(h omega)."""
+    accelerations d.a of the last evaluation (made at q, at v before any controller's impulse
+    since): velocities first, then positions with the new velocities. A floating branch's
+    centroid moves on its momentum (v_c += h F / M, x_c += h v_c) and its root turns by
+    exp(h omega)."""
     t, br = m.tree, m.branches
     for b in range(br.joint.shape[0]):
         if not br.floating[b]:
             _advance_joints(m, d, b, h, 0)
             continue
         j = br.joint[b]
-        R0 = (d.R_W[j, 0, 0], d.R_W[j, 0, 1], d.R_W[j, 0, 2], d.R_W[j, 1, 0], d.R_W[j, 1, 1], d.R_W[j, 1, 2],
-              d.R_W[j, 2, 0], d.R_W[j, 2, 1], d.R_W[j, 2, 2])
-        w0 = _root_spin(t, j, d.v)
+        R0, p0, vo0, w0 = root_frame(m, d, b)
         r0, u00 = root_offset(m, d, b, R0, w0)  # before its joints move
-        c0, u0 = branch_centroid(m, d, b)
+        c0, u0 = add3(p0, r0), add3(vo0, u00)
         _advance_joints(m, d, b, h, 1)
         F, M = branch_force(m, d, b), br.mass[b]
         u = (u0[0] + h * (F[0] / M), u0[1] + h * (F[1] / M), u0[2] + h * (F[2] / M))
@@ -248,8 +222,7 @@ def _euler_update(m, d, h):
         w = axpy3(h, _root_spin(t, j, d.a), w0)
         # a unit quaternion, or the round-off in R compounds from step to step
         quat = quat_times_exp4(joint_quat(t, j, d.q), h * w[0], h * w[1], h * w[2])
-        ref = ((d.p_W[j, 0], d.p_W[j, 1], d.p_W[j, 2]), (d.vo_W[j, 0], d.vo_W[j, 1], d.vo_W[j, 2]), c0, u0, r0, u00)
-        place_branch(m, d, b, c, u, quat, w, ref)
+        place_branch(m, d, b, c, u, quat, w, (p0, vo0, c0, u0, r0, u00))
 
 
 @njit
@@ -491,11 +464,10 @@ def pack(m, d):
 def unpack(m, d, y):
     """Write the state y into (d.q, d.v), in place; quaternions normalised."""
     t, br = m.tree, m.branches
-    o = ROOT_STATE * 0
     n_roots = 0
     for b in range(br.joint.shape[0]):
         n_roots += br.floating[b]
-    o = ROOT_STATE * n_roots
+    o = ROOT_STATE * n_roots  # the joints first: a root is placed from them
     for j in t.internal:
         d.q[t.idx_q[j]], d.v[t.idx_v[j]] = y[o], y[o + 1]
         o += JOINT_STATE

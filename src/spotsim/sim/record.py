@@ -204,7 +204,8 @@ def _snapshot(m, d):
         master, slave, state = d.snapshots.master, d.snapshots.slave, d.snapshots.state
         while at + n > master.shape[0]:
             master, slave, state = grow(master), grow(slave), grow(state)
-        d.snapshots = Snapshots(d.snapshots.row, d.snapshots.pairs, d.snapshots.force_W, master, slave, state)
+        d.snapshots = Snapshots(row=d.snapshots.row, pairs=d.snapshots.pairs, force_W=d.snapshots.force_W,
+                                master=master, slave=slave, state=state)
     d.snapshots.row[i], d.snapshots.pairs[i] = d.row_index, n
     d.snapshots.master[at:at + n] = d.contacts.master
     d.snapshots.slave[at:at + n] = d.contacts.slave

@@ -11,7 +11,7 @@ rate c/m only while h c/m stays inside it on the negative real axis. The contact
 - Zhang damping: lambda delta^1.5 delta_dot is a damper of n * factor F_pair / v_minus, its
   largest with the onset speed at the floor.
 
-The mass is the lightest free body's effective mass at its groove, 1 / (1/m + r^2 / I_min),
+The mass is the lightest free module's effective mass at its groove, 1 / (1/m + r^2 / I_min),
 with r the distance from its centroid to the groove frame: a rotation about the weak axis
 moves the contact as a lighter mass would. The load is the larger of the grasp load and the
 peak of a single-pair Hertz impact at the closing speed (closed form); the pair count is

@@ -139,7 +139,8 @@ register(FramesType, Frames, FramesStruct)
 
 
 def new_frames(nj: int) -> FramesStruct:
-    return new_struct(Frames(np.tile(np.eye(3), (nj, 1, 1)), np.zeros((nj, 3)), np.zeros((nj, 3)), np.zeros((nj, 3))))
+    return new_struct(Frames(R_W=np.tile(np.eye(3), (nj, 1, 1)), p_W=np.zeros((nj, 3)), w_W=np.zeros((nj, 3)),
+                             vo_W=np.zeros((nj, 3))))
 
 
 # ------------------------------------------------------------------------------- the build
@@ -427,14 +428,6 @@ def frame_of(t, j, q, v, R_W, p_W, w_W, vo_W):
 
 
 @njit
-def forward_branch(m, q, v, f, b):
-    """The frames and motions (Frames f) of branch b's joints at (q, v)."""
-    br = m.branches
-    for i in range(br.first[b], br.stop[b]):
-        frame_of(m.tree, br.members[i], q, v, f.R_W, f.p_W, f.w_W, f.vo_W)
-
-
-@njit
 def kinematics(m, d):
     """Stage 1: every joint's frame and motion in the world at (d.q, d.v), into d.R_W, d.p_W,
     d.w_W, d.vo_W (the universe stays at rest at the origin)."""
@@ -518,16 +511,13 @@ def momenta(m, f, branches):
 def centroid3(m, f, branches):
     """The centroid (world, m) of the bodies of `branches` as a 3-tuple, from the Frames f."""
     c0 = c1 = c2 = m_sum = 0.0
-    t = m.tree
     for b in branches:
-        for i in range(m.branches.first[b], m.branches.stop[b]):
-            j = m.branches.members[i]
-            mass = t.mass[j]
-            p_G = add3((f.p_W[j, 0], f.p_W[j, 1], f.p_W[j, 2]), mv3(f.R_W[j], t.lever[j]))
-            c0 += mass * p_G[0]
-            c1 += mass * p_G[1]
-            c2 += mass * p_G[2]
-            m_sum += mass
+        c, _ = branch_centroid(m, f, b)
+        M = m.branches.mass[b]
+        c0 += M * c[0]
+        c1 += M * c[1]
+        c2 += M * c[2]
+        m_sum += M
     return c0 / m_sum, c1 / m_sum, c2 / m_sum
 
 
@@ -566,13 +556,20 @@ def spring_energy(m, q):
 @njit
 def travel_rate(m, d):
     """A bound on how fast any two contact spheres approach each other, m/s: over the floating
-    branches with spheres, |v_O| + |omega| reach of their roots, plus the fastest sphere motion
-    a joint inside one branch adds (|v| times its reach)."""
+    branches with spheres, |v_O| + |omega| reach of their roots, plus the fastest motion the
+    joints inside one branch add to a sphere: along each chain of revolute and prismatic
+    joints, the sum of |v| times each one's reach."""
     t, br = m.tree, m.branches
     rate = inner = 0.0
     for j in t.internal:
-        if t.reach[j] > 0.0:
-            inner = max(inner, abs(d.v[t.idx_v[j]]) * t.reach[j])
+        if t.reach[j] == 0.0:
+            continue
+        chain = 0.0  # the joints from j up its branch (the floating root's motion is counted above)
+        k = j
+        while k and (t.kind[k] == REVOLUTE or t.kind[k] == PRISMATIC):
+            chain += abs(d.v[t.idx_v[k]]) * t.reach[k]
+            k = t.parent[k]
+        inner = max(inner, chain)
     for b in range(br.joint.shape[0]):
         if br.reach[b] > 0.0:
             vJ, wJ = joint_twist(t, br.joint[b], d.v)  # norms are frame-free

@@ -19,7 +19,7 @@ import numpy as np
 
 from ..files import atomic_write, prepare, save_figure
 from ..scenario import Integrator, modules_of, replace, to_dict
-from ..sim.integrators import ADAPTIVE, METHODS
+from ..tables import ADAPTIVE, METHODS
 from .runs import (
     COMPARABLE,
     Outcome,

@@ -371,7 +371,7 @@ def plot_envelope(report: EnvelopeReport, path: Path) -> None:
     for ax, (a, b) in zip(axes[0], planes):
         ua, ub = AXES[a][1], AXES[b][1]
         xs, ys, res = [], [], []
-        bx, by = [], []
+        bx = []
         for r in report.rays:
             if not set(r.direction) <= {a, b}:
                 continue

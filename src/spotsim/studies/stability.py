@@ -14,7 +14,7 @@ import numpy as np
 from ..errors import SpotsimError
 from ..files import atomic_write, prepare
 from ..scenario import TOLERANCE_DEG, TOLERANCE_OFFSET_MM, modules_of, replace, to_dict
-from ..sim.integrators import ADAPTIVE
+from ..tables import ADAPTIVE
 from .runs import (
     COMPARABLE,
     EXCEPTION,
