@@ -128,6 +128,12 @@ class DataFields(NamedTuple):
     fsal: bool  # the last committed evaluation can be the next step's first stage
     fsal_t: float  # ... at this time,
     fsal_dy: np.ndarray  # (`integrators.state_size`,) its state derivative
+    # the last symplectic Euler update's (q, v), and each floating branch's offset from its root
+    # then (`integrators.root_offset`: r, u), to start the next from if nothing moved since
+    placed: bool
+    placed_q: np.ndarray  # (nq,)
+    placed_v: np.ndarray  # (nv,)
+    placed_offset: np.ndarray  # (nb, 6)
     fsal_external: np.ndarray  # (6,) its external wrench (force, moment about the origin)
     # the record rows and replay snapshots of one call of the loop
     rows: np.ndarray  # (ROWS_PER_CALL, width)
@@ -198,6 +204,8 @@ def make_data(model, rows: int = ROWS_PER_CALL, start: bool = True) -> Data:
         left=0, h=sim.h, t_end=0.0, flight=False, held=False,
         h_next=0.0, fsal=False, fsal_t=0.0,
         fsal_dy=np.zeros(state_size(sim.tree, sim.branches)), fsal_external=np.zeros(6),
+        placed=False, placed_q=np.zeros(model.pin_model.nq), placed_v=np.zeros(nv),
+        placed_offset=np.zeros((len(sim.branches.joint), 6)),
         rows=np.zeros((rows, sim.record.width)), n_rows=0, row_index=0,
         snapshots=Snapshots(row=ints(snap_cap), pairs=ints(snap_cap), force_W=np.zeros((snap_cap, n_mod, 3)),
                             master=ints(64), slave=ints(64), state=ints(64)),

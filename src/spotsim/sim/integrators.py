@@ -32,7 +32,7 @@ import numpy as np
 from ..contact.forces import commit_memory
 from ..jit import njit, njit_inline
 from ..linalg import add3, axpy3, cross3, mv3, mv9, put3, quat_times_exp4, sub3
-from ..tables import ADAPTIVE_EULER, METHODS, SYMPLECTIC_EULER
+from ..tables import ADAPTIVE_EULER, FREE_FLYER, METHODS, SYMPLECTIC_EULER
 from .actuation import sample_controllers
 from .dynamics import accelerations
 from .forces import contact_forces, forces
@@ -120,6 +120,9 @@ def branch_offset(m, d, b):
     root at rest at the origin (`tree.frame_of`)."""
     t, br = m.tree, m.branches
     j0 = br.joint[b]
+    if br.stop[b] == br.first[b] + 1:  # one body (a module): branch_centroid's sums, its frame at rest at the origin
+        M, mass, lever = br.mass[b], t.mass[j0], t.lever[j0]
+        return ((mass * lever[0]) / M, (mass * lever[1]) / M, (mass * lever[2]) / M), (0.0, 0.0, 0.0)
     f = d.now
     R_W, p_W, w_W, vo_W = f.R_W, f.p_W, f.w_W, f.vo_W
     for a in range(3):
@@ -182,6 +185,7 @@ def place_branch(m, d, b, c, u, quat, w, ref):
     origin = add3(p_ref, sub3(sub3(c, c_ref), sub3(r, r_ref)))
     vo = add3(vo_ref, sub3(sub3(u, u_ref), sub3(u0, u0_ref)))
     put_root(t, j, d.q, d.v, R, origin, quat, vo, w)
+    return r, u0
 
 
 # ------------------------------------------------------------------------- symplectic Euler
@@ -207,13 +211,20 @@ def _euler_update(m, d, h):
     centroid moves on its momentum (v_c += h F / M, x_c += h v_c) and its root turns by
     exp(h omega)."""
     t, br = m.tree, m.branches
+    # a free-flying root's offset as the last update placed it, if nothing moved since: the
+    # same numbers root_offset gives (its quaternion and spin are stored as they were given)
+    placed = d.placed and _unchanged(d.q, d.placed_q) and _unchanged(d.v, d.placed_v)
     for b in range(br.joint.shape[0]):
         if not br.floating[b]:
             _advance_joints(m, d, b, h, 0)
             continue
         j = br.joint[b]
         R0, p0, vo0, w0 = root_frame(m, d, b)
-        r0, u00 = root_offset(m, d, b, R0, w0)  # before its joints move
+        if placed and t.kind[j] == FREE_FLYER:
+            o = d.placed_offset[b]
+            r0, u00 = (o[0], o[1], o[2]), (o[3], o[4], o[5])
+        else:
+            r0, u00 = root_offset(m, d, b, R0, w0)  # before its joints move
         c0, u0 = add3(p0, r0), add3(vo0, u00)
         _advance_joints(m, d, b, h, 1)
         F, M = branch_force(m, d, b), br.mass[b]
@@ -222,7 +233,21 @@ def _euler_update(m, d, h):
         w = axpy3(h, _root_spin(t, j, d.a), w0)
         # a unit quaternion, or the round-off in R compounds from step to step
         quat = quat_times_exp4(joint_quat(t, j, d.q), h * w[0], h * w[1], h * w[2])
-        place_branch(m, d, b, c, u, quat, w, (p0, vo0, c0, u0, r0, u00))
+        r, u_off = place_branch(m, d, b, c, u, quat, w, (p0, vo0, c0, u0, r0, u00))
+        for a in range(3):
+            d.placed_offset[b, a], d.placed_offset[b, 3 + a] = r[a], u_off[a]
+    d.placed_q[:] = d.q
+    d.placed_v[:] = d.v
+    d.placed = True
+
+
+@njit_inline
+def _unchanged(x, before):
+    """Whether x holds the values of before, every one."""
+    for i in range(x.shape[0]):
+        if x[i] != before[i]:
+            return False
+    return True
 
 
 @njit
