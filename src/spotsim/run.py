@@ -30,7 +30,7 @@ from .sim.recorder import Recorder
 from .sim.stability import ENERGY_GROWTH, stability_warnings
 from .sim.step import step
 from .sim.tree import kinematics
-from .tables import APPROACH, PHASE_NAMES, SELF_CENTRING
+from .tables import APPROACH, PHASE_NAMES, SELF_CENTRING, TRANSMISSION_STATES
 from .version import __version__
 
 COMPLETED, INCOMPLETE, DIVERGED, INTERRUPTED = "completed", "incomplete", "diverged", "interrupted"
@@ -255,6 +255,14 @@ def _summary(s, model, v, rec, series, status, message, wall, welds) -> dict:
             # first grasp, the FDR + TM-1 composite after the weld)
             d = series["robot_centroid_m"][last] - series["robot_centroid_m"][rows[0]]
             entry["robot_centroid_displacement_mm"] = [float(x) for x in d * 1e3]
+        if s.end_effector.drive == "motor":
+            # the motor: its largest current, its transmission's time in each state and how often
+            # it stopped sliding fingers, their largest deceleration between stops
+            entry["motor_peak_current_A"] = float(v.peak_current[g])
+            entry["transmission_time_s"] = {name: float(x) for name, x in
+                                            zip(TRANSMISSION_STATES, v.transmission_time[g], strict=True)}
+            entry["transmission_stops"] = int(v.transmission_stops[g])
+            entry["finger_peak_deceleration_m_s2"] = float(v.peak_deceleration[g])
         if on_table(s):
             # what the grasp pressed into the air-bearing table: the largest contact force along
             # its normal and moment about a branch's centroid in its plane, over the floating branches

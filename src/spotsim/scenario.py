@@ -50,6 +50,10 @@ def _bevel(x):
     return None if 0 < x < 90 else "must be in (0, 90) deg"
 
 
+def _flank(x):
+    return None if 0 <= x < 90 else "must be in [0, 90) deg"
+
+
 def _crossing(x):
     return None if 0 <= x <= 180 else "must be in [0, 180] deg"
 
@@ -137,21 +141,46 @@ class Arm:
 
 
 @dataclass(frozen=True, kw_only=True)
+class Motor:
+    rotor_inertia_g_cm2: float = key(0.56, _positive, "the motor's rotor inertia, g cm^2")
+    torque_constant_mNm_A: float = key(11.5, _positive, "the motor's torque constant (and back-EMF constant), mN m/A")
+    terminal_resistance_ohm: float = key(19.8, _positive, "the motor's terminal resistance, ohm: with the supply "
+                                         "voltage and the back-EMF, the current it can draw at a speed")
+    supply_voltage_V: float = key(12.0, _positive, "the drive's supply voltage, V")
+    current_limit_A: float = key(0.335, _non_negative, "the current loop's clamp, A: the grasp load follows from it "
+                                 "through the transmission (forward efficiency x ratio x torque constant)")
+    gear_ratio: float = key(4.4, _positive, "the planetary gearhead's reduction (motor turns per screw turn)")
+    gear_efficiency: float = key(0.9, _open_unit, "the gearhead's efficiency (both ways)")
+    screw_lead_mm: float = key(0.7, _positive, "the lead screw's lead: nut travel per screw turn, mm")
+    screw_diameter_mm: float = key(3.545, _positive, "the lead screw's pitch diameter, mm (with the lead, its lead "
+                                   "angle)")
+    thread_half_angle_deg: float = key(30.0, _flank, "the thread's flank (half) angle, deg: 30 for ISO metric, "
+                                       "15 for trapezoidal")
+    screw_friction: float = key(0.13, _non_negative, "the friction coefficient of the screw's thread in its nut")
+    speed_loop_period_s: float = key(4e-4, _positive, "the digital speed loop (PI, anti-windup) reads the fingers' "
+                                     "speed and sets the current this often; the current loop is ideal")
+    speed_loop_bandwidth_Hz: float = key(50.0, _positive, "the speed loop's design bandwidth, Hz: its gains follow "
+                                         "from it and the drive's inertia")
+
+
+@dataclass(frozen=True, kw_only=True)
 class EndEffector:
     closing_speed_m_s: float = key(rule=_positive, doc="finger closing speed (Table 3), the drive's speed limit")
     grasp_load_N: float = key(20.0, _positive, "mean finger load at which the drive stalls (not in the paper)")
     start_gap_mm: float = key(9.0, _positive, "finger travel from start to touching a centred groove")
     drive: str = key("kinematic", _choice(*DRIVES, renamed={"actuator": "kinematic"}),
-                     "both prescribe the fingers' speed at each controller reading: kinematic (a current-limited, "
-                     "self-locking motor's law: slows down along its torque-speed line and presses at the grasp "
-                     "load) or relay (stops dead at the grasp load, resumes at full speed below resume_fraction "
-                     "of it)")
+                     "kinematic and relay prescribe the fingers' speed at each controller reading: kinematic (a "
+                     "current-limited, self-locking motor's law: slows down along its torque-speed line and presses "
+                     "at the grasp load) or relay (stops dead at the grasp load, resumes at full speed below "
+                     "resume_fraction of it); motor pushes them by a motor's torque through a gearhead and a "
+                     "lead screw (the motor block; the grasp load follows from its current limit)")
     slowdown_fraction: float = key(0.5, _fraction, "kinematic: the share of the grasp load above which the fingers "
                                    "slow down (its no-load speed is the closing speed / (1 - this))")
     resume_fraction: float = key(0.5, _fraction, "relay: a stalled drive resumes closing below this share of the "
                                  "grasp load")
     control_period_s: float = key(1e-4, _positive, "the drive's controller reads the load and sets the speed this "
                                   "often (a digital servo), holding it in between")
+    motor: Motor = key(Motor(), doc="motor: the motor, gearhead, lead screw and speed loop behind the fingers")
 
 
 @dataclass(frozen=True, kw_only=True)

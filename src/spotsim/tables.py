@@ -29,10 +29,16 @@ SYMPLECTIC_EULER, RK4, DOPRI5, ADAPTIVE_EULER = range(len(METHODS))
 #: The error-controlled methods.
 ADAPTIVE = ("dopri5", "adaptive_euler")
 
-#: The finger drives, by their scenario names (`sim.actuation`): both prescribe the finger
-#: joints' motion at the speed their law sets at each controller sample.
-DRIVES = ("kinematic", "relay")
-KINEMATIC, RELAY = range(len(DRIVES))
+#: The finger drives, by their scenario names (`sim.actuation`): `kinematic` and `relay`
+#: prescribe the finger joints' motion at the speed their law sets at each controller sample;
+#: `motor` pushes them with a motor's torque through a gearhead and a lead screw.
+DRIVES = ("kinematic", "relay", "motor")
+KINEMATIC, RELAY, MOTOR = range(len(DRIVES))
+#: The states of a motor drive's transmission (a stick-slip element, as Modelica's
+#: `LossyGear`): stuck; sliding with the power flowing from the motor to the fingers
+#: (forward efficiency); sliding with it flowing back (backward efficiency).
+TRANSMISSION_STATES = ("stuck", "forward", "backward")
+STUCK, FORWARD, BACKWARD = range(len(TRANSMISSION_STATES))
 
 #: The grasp phases, in order.
 PHASE_NAMES = ("approach", "self_centring", "complete")

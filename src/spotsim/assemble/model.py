@@ -12,6 +12,7 @@ its fingers.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -39,7 +40,7 @@ from ..sim.model import (
 )
 from ..sim.record import REPLAY_RATE_HZ, Layout
 from ..sim.tree import joint_axis, kinematic_tree
-from ..tables import ADAPTIVE, DRIVES, METHODS
+from ..tables import ADAPTIVE, DRIVES, METHODS, MOTOR
 from . import assets
 from .faces import INSET_KINDS, TOUCHING_KINDS, contact_faces, inset, sphere_layer
 from .scene import FINGER_NAMES, SceneSpec, check_inertials, check_inertias, frame, lock_joints, scene_spec, weld_urdf
@@ -508,7 +509,9 @@ def model_fields(p: _Parts) -> ModelFields:
     spheres = [(j, master.centre_J[master.joint == j], travel if j in finger_joints else 0.0)
                for j in np.unique(master.joint)]
     spheres += [(j, layers.slave.centre_J[layers.slave.joint == j], 0.0) for j in np.unique(layers.slave.joint)]
-    tree, branches = kinematic_tree(model, prescribed=[f.joint for f in p.fingers], gravity_W=model.gravity.linear,
+    # a kinematic or relay drive prescribes its fingers' motion; a motor pushes them
+    prescribed = [] if s.end_effector.drive == "motor" else [f.joint for f in p.fingers]
+    tree, branches = kinematic_tree(model, prescribed=prescribed, gravity_W=model.gravity.linear,
                                     table_normal=table if table.any() else None, spheres=spheres)
     ees, mods = [ee for ee, _ in p.grasps], [k for _, k in p.grasps]
     grasps = Grasps(ee=np.array(ees, dtype=np.int64), module=np.array(mods, dtype=np.int64),
@@ -536,21 +539,72 @@ def model_fields(p: _Parts) -> ModelFields:
         slave=layers.slave, faces=layers.faces, law=law, literal=s.contact.broad_phase == "none",
         actuators=Actuators(joint=np.array([f.joint for f in p.fingers], dtype=np.int64),
                             drive=np.array([f.drive for f in p.fingers], dtype=np.int64)),
-        drives=drives(s.end_effector, len(p.end_effectors)), grasps=grasps,
+        drives=drives(s.end_effector, len(p.end_effectors),
+                      max((model.inertias[f.joint].mass for f in p.fingers), default=0.0)), grasps=grasps,
         completion=CompletionParams(hold_s=c.hold_s, max_contact_speed=c.max_contact_speed_m_s,
                                     max_net_force=c.max_net_force_N, phase_timeout=c.phase_timeout_s),
         limits=limits, record=_record_frames(p, tree, branches), integrator=integrator, dt=sim.dt_s,
         substeps=sim.substeps, h=sim.dt_s / sim.substeps)
 
 
-def drives(ee, n: int) -> Drives:
+def screw_efficiencies(lead_m: float, diameter_m: float, half_angle_rad: float, friction: float):
+    """A lead screw's forward and backward efficiencies (Shigley; Simscape Driveline's
+    Leadscrew): lead angle lambda = atan(L / (pi d)), thread half-angle alpha, friction k:
+    eta_f = (cos a - k tan l) / (cos a + k / tan l), eta_b = (cos a - k / tan l) / (cos a + k tan l).
+    eta_b <= 0: self-locking."""
+    lam = math.atan(lead_m / (math.pi * diameter_m))
+    ca, tl = math.cos(half_angle_rad), math.tan(lam)
+    return (ca - friction * tl) / (ca + friction / tl), (ca - friction / tl) / (ca + friction * tl)
+
+
+@dataclass(frozen=True)
+class MotorDrive:
+    """A motor drive's derived quantities, SI (`sim.actuation`, `sim.dynamics.transmissions`)."""
+
+    ratio: float  # rho, rad of rotor per m of each finger's travel
+    forward: float  # the transmission's efficiency, motor to fingers (gearhead x screw)
+    backward: float  # ... fingers to motor (<= 0: self-locking)
+    rotor: float  # kg m^2
+    torque_constant: float  # N m/A
+    reflected_inertia: float  # J rho^2 on the fingers' common coordinate, kg
+    stall_force: float  # the screw's closing force on the pair at the current limit, forward, N
+
+
+def motor_drive(mo) -> MotorDrive:
+    """The derived quantities of a scenario's end_effector.motor block."""
+    lead = mo.screw_lead_mm * 1e-3
+    ratio = mo.gear_ratio * 2.0 * math.pi / lead
+    eta_f, eta_b = screw_efficiencies(lead, mo.screw_diameter_mm * 1e-3, math.radians(mo.thread_half_angle_deg),
+                                      mo.screw_friction)
+    rotor, kt = mo.rotor_inertia_g_cm2 * 1e-7, mo.torque_constant_mNm_A * 1e-3
+    forward = mo.gear_efficiency * eta_f
+    return MotorDrive(ratio=ratio, forward=forward, backward=mo.gear_efficiency * eta_b, rotor=rotor,
+                      torque_constant=kt, reflected_inertia=rotor * ratio ** 2,
+                      stall_force=forward * ratio * kt * mo.current_limit_A)
+
+
+def drives(ee, n: int, finger_mass: float) -> Drives:
     """The compiled finger drives of n end-effectors, each from a scenario's end_effector block
-    (`sim.actuation`)."""
+    (`sim.actuation`); finger_mass: one finger's, kg. A motor drive's grasp load is its stall
+    force's share per finger; its speed loop's gain puts its crossover at the design bandwidth
+    on the fingers' inertia with the rotor's (forward), and its integral time is four times
+    that crossover's period over 2 pi (the PI's corner a fourth of it)."""
     row = lambda x, dtype=float: np.full(n, x, dtype=dtype)
-    return Drives(law=row(DRIVES.index(ee.drive), np.int64), closing_speed=row(ee.closing_speed_m_s),
-                  grasp_load=row(ee.grasp_load_N),
+    mo, law = ee.motor, DRIVES.index(ee.drive)
+    md = motor_drive(mo)
+    omega = 2.0 * math.pi * mo.speed_loop_bandwidth_Hz
+    inertia = md.forward * md.reflected_inertia + 2.0 * finger_mass
+    motor = law == MOTOR
+    return Drives(law=row(law, np.int64), closing_speed=row(ee.closing_speed_m_s),
+                  grasp_load=row(0.5 * md.stall_force if motor else ee.grasp_load_N),
                   no_load_speed=row(ee.closing_speed_m_s / (1.0 - ee.slowdown_fraction)),
-                  resume_fraction=row(ee.resume_fraction), period=row(ee.control_period_s))
+                  resume_fraction=row(ee.resume_fraction),
+                  period=row(mo.speed_loop_period_s if motor else ee.control_period_s),
+                  ratio=row(md.ratio), forward=row(md.forward), backward=row(md.backward), rotor=row(md.rotor),
+                  torque_constant=row(md.torque_constant), resistance=row(mo.terminal_resistance_ohm),
+                  voltage=row(mo.supply_voltage_V), current_limit=row(mo.current_limit_A),
+                  gain=row(inertia * omega / (md.forward * md.ratio * md.torque_constant)),
+                  integral_time=row(4.0 / omega))
 
 
 def _record_frames(p: _Parts, tree, branches) -> RecordFrames:

@@ -100,7 +100,8 @@ def weld(model: Model, data, source: str = "<scenario>") -> tuple[Model, object]
     t_start[old.active + 1] = old.t
     new_data = make_data(new, start=False)
     carried = {name: getattr(old, name) for name in (
-        "t", "stalled", "drive_stopped", "drive_resumes", "drive_jump", "phase", "t_contact", "t_complete",
+        "t", "stalled", "drive_stopped", "drive_resumes", "drive_jump", "peak_current", "transmission_time",
+        "transmission_stops", "peak_deceleration", "phase", "t_contact", "t_complete",
         "peak_force", "peak_torque", "peak_force_norm", "peak_torque_norm", "peak_pairs", "peak_table_force",
         "peak_table_moment", "impulse_W",
         "impulse_moment_O_W", "drive_work", "steps", "pair_steps", "flights", "evaluations", "accepted", "rejected",

@@ -33,8 +33,8 @@ from typing import NamedTuple
 import numpy as np
 
 from ..jit import njit
-from ..tables import KINEMATIC
-from .dynamics import velocity_jump
+from ..tables import BACKWARD, FORWARD, KINEMATIC, MOTOR, STUCK
+from .dynamics import apply_screw, closing_response, drive_fingers, joint_response, screw_force, velocity_jump
 from .tree import kinematics
 
 #: A step ending within this share of a controller period before the drive is due ends at
@@ -58,7 +58,18 @@ class Drives(NamedTuple):
     grasp_load: np.ndarray  # (n_ee,) the stall force, N
     no_load_speed: np.ndarray  # (n_ee,) the kinematic law's torque-speed line at zero load, m/s
     resume_fraction: np.ndarray  # (n_ee,) the relay: a stalled drive closes again below this share of the grasp load
-    period: np.ndarray  # (n_ee,) the controller's period: it reads the load and sets the speed this often, s
+    period: np.ndarray  # (n_ee,) the controller's period: it reads (and sets) the speed this often, s
+    # the motor drive (`motor`): its transmission's ratio rho, rad of rotor per m of each finger's travel
+    ratio: np.ndarray  # (n_ee,) rad/m
+    forward: np.ndarray  # (n_ee,) its efficiency, the power flowing from the motor to the fingers
+    backward: np.ndarray  # (n_ee,) ... flowing back (<= 0: self-locking, the load cannot drive it)
+    rotor: np.ndarray  # (n_ee,) the rotor's inertia, kg m^2
+    torque_constant: np.ndarray  # (n_ee,) N m/A (and back-EMF constant, V s/rad)
+    resistance: np.ndarray  # (n_ee,) the motor's terminal resistance, ohm
+    voltage: np.ndarray  # (n_ee,) the supply voltage, V
+    current_limit: np.ndarray  # (n_ee,) the current loop's clamp, A
+    gain: np.ndarray  # (n_ee,) the speed loop's proportional gain, A per m/s of closing speed
+    integral_time: np.ndarray  # (n_ee,) its integral time, s
 
 
 @njit
@@ -203,7 +214,13 @@ def sample_controllers(m, d, t, h):
     after it had stopped) and its largest speed change from one reading to the next."""
     ee = m.grasps.ee[d.active]
     period = m.drives.period[ee]
-    if t < d.sample_t - DUE_ROUND_OFF * period:
+    due = t >= d.sample_t - DUE_ROUND_OFF * period
+    if m.drives.law[ee] == MOTOR:
+        if due:
+            speed_loop(m, d, ee, t)
+        transmission_events(m, d, ee)
+        return
+    if not due:
         return
     before, speed = _decide(m, d, t, max(period, h))
     g = d.active
@@ -218,6 +235,141 @@ def sample_controllers(m, d, t, h):
 @njit
 def start_drive(m, d):
     """The active drive's first reading, now (a run's or a weld's start, its kinematics made
-    here): its start, not a change of speed, so nothing is counted."""
+    here): its start, not a change of speed, so nothing is counted. A motor drive starts
+    closing at its set speed, its transmission forward, its speed loop at rest."""
     kinematics(m, d)
-    _decide(m, d, d.t, m.drives.period[m.grasps.ee[d.active]])
+    ee = m.grasps.ee[d.active]
+    if m.drives.law[ee] != MOTOR:
+        _decide(m, d, d.t, m.drives.period[ee])
+        return
+    r1, r2 = drive_fingers(m, ee)
+    _set_closing(m, d, r1, r2, m.drives.closing_speed[ee])
+    d.transmission[ee] = FORWARD
+    d.integral[ee] = 0.0
+    d.direction[ee] = 1.0
+    speed_loop(m, d, ee, d.t)
+
+
+# -------------------------------------------------------------------------------- the motor
+
+
+@njit
+def _set_closing(m, d, r1, r2, speed):
+    """Set both fingers of a motor drive to close at `speed` (m/s) by an impulse on their
+    joints (momentum kept: the joints' forces are internal), at the frames of the last
+    `kinematics`, which must be made at d.q; their responses made here."""
+    t = m.tree
+    j1, j2 = m.actuators.joint[r1], m.actuators.joint[r2]
+    joint_response(m, d, j1, d.response[r1])
+    joint_response(m, d, j2, d.response[r2])
+    iv1, iv2 = t.idx_v[j1], t.idx_v[j2]
+    g11, g12, g22 = d.response[r1, iv1], d.response[r2, iv1], d.response[r2, iv2]
+    dv1, dv2 = -speed - d.v[iv1], -speed - d.v[iv2]
+    det = g11 * g22 - g12 * g12
+    p1, p2 = (g22 * dv1 - g12 * dv2) / det, (g11 * dv2 - g12 * dv1) / det
+    for k in range(d.v.shape[0]):
+        d.v[k] += p1 * d.response[r1, k] + p2 * d.response[r2, k]
+    d.v[iv1] = d.v[iv2] = -speed  # to the bit
+
+
+@njit
+def motor_closing(m, d, ee):
+    """A motor drive's closing speed (m/s): its fingers' mean."""
+    r1, r2 = drive_fingers(m, ee)
+    t = m.tree
+    return -0.5 * (d.v[t.idx_v[m.actuators.joint[r1]]] + d.v[t.idx_v[m.actuators.joint[r2]]])
+
+
+@njit
+def motor_records(m, d, h):
+    """A step of h (s) in the active grasp's motor records: its largest current, its
+    transmission's time in each state, its closing fingers' largest deceleration."""
+    ee, g = m.grasps.ee[d.active], d.active
+    if m.drives.law[ee] != MOTOR:
+        return
+    r1, r2 = drive_fingers(m, ee)
+    d.peak_current[g] = max(d.peak_current[g], abs(d.current[ee]))
+    d.transmission_time[g, d.transmission[ee]] += h
+    if r2 >= 0 and motor_closing(m, d, ee) > 0.0:  # the closing acceleration is -a of the opening
+        d.peak_deceleration[g] = max(d.peak_deceleration[g], d.a[m.tree.idx_v[m.actuators.joint[r1]]])
+
+
+@njit
+def rotor_energy(m, d):
+    """The kinetic energy of the motor drives' rotors, 1/2 J (rho x')^2 each, J."""
+    p = m.drives
+    total = 0.0
+    for ee in range(p.law.shape[0]):
+        if p.law[ee] == MOTOR and drive_fingers(m, ee)[1] >= 0:
+            total += 0.5 * p.rotor[ee] * (p.ratio[ee] * motor_closing(m, d, ee)) ** 2
+    return total
+
+
+@njit
+def speed_loop(m, d, ee, t):
+    """The motor drive's digital speed loop at time t (s): a PI on the closing speed's error
+    from its set speed, the current it asks for clamped by the current limit and by what the
+    supply voltage drives through the winding against the back-EMF at this speed, held until
+    the next reading; the integral stops while the clamp holds (anti-windup). The current
+    loop is ideal: the motor's current is the one asked for."""
+    p = m.drives
+    d.sample_t = t + p.period[ee]
+    speed = motor_closing(m, d, ee)
+    error = p.closing_speed[ee] - speed
+    integral = d.integral[ee] + p.gain[ee] * p.period[ee] / p.integral_time[ee] * error
+    wanted = p.gain[ee] * error + integral
+    emf = p.torque_constant[ee] * p.ratio[ee] * speed
+    hi = min(p.current_limit[ee], (p.voltage[ee] - emf) / p.resistance[ee])
+    lo = max(-p.current_limit[ee], (-p.voltage[ee] - emf) / p.resistance[ee])
+    current = min(hi, max(lo, wanted))
+    if current == wanted:
+        d.integral[ee] = integral
+    d.current[ee] = current
+
+
+@njit
+def transmission_events(m, d, ee):
+    """The motor drive's transmission at a step's boundary, at the last evaluation's forces
+    and responses (`dynamics.transmissions`):
+
+    - sliding, forward and backward swap when the power's direction does; it sticks when
+      the fingers' closing speed has reached or crossed zero since the last boundary, or when
+      the power would flow back through a self-locking screw from fingers too heavy for the
+      rotor's side to give (`dynamics.screw_force`): an impulse on the finger joints stops
+      them (the screw's friction, internal: momentum kept);
+    - stuck, it slides when the force that holds the fingers leaves the band the screw's
+      friction can hold at the motor's torque, forward in the direction the motor drives,
+      backward in the direction the load drives (never, self-locking).
+
+    The screw's force in d.a follows its state (`dynamics.apply_screw`)."""
+    p = m.drives
+    r1, r2 = drive_fingers(m, ee)
+    speed = motor_closing(m, d, ee)
+    state = d.transmission[ee]
+    if state != STUCK:
+        flows_back = d.screw_force[ee] * speed < 0.0
+        if flows_back != (state == BACKWARD):
+            state = BACKWARD if flows_back else FORWARD
+        x0, g = closing_response(m, d, r1, r2)
+        locks = state == BACKWARD and p.backward[ee] + p.rotor[ee] * p.ratio[ee] ** 2 * g <= 0.0
+        if speed * d.direction[ee] <= 0.0 or locks:
+            kinematics(m, d)  # the impulse's frames, at the state as it is
+            _set_closing(m, d, r1, r2, 0.0)
+            d.jumped = True
+            d.transmission_stops[d.active] += 1
+            state = STUCK
+        else:
+            d.direction[ee] = 1.0 if speed > 0.0 else -1.0
+    if state == STUCK:
+        d.direction[ee] = 0.0
+        held = screw_force(m, d, ee, r1, r2)
+        drive = p.ratio[ee] * p.torque_constant[ee] * d.current[ee]
+        closes = drive >= 0.0
+        if (p.forward[ee] * drive > held) == closes and p.forward[ee] * drive != held:
+            state = FORWARD  # the motor drives the fingers the way it turns
+            d.direction[ee] = 1.0 if closes else -1.0
+        elif p.backward[ee] > 0.0 and (drive / p.backward[ee] < held) == closes:
+            state = BACKWARD  # the load drives the motor back
+            d.direction[ee] = -1.0 if closes else 1.0
+    d.transmission[ee] = state
+    apply_screw(m, d, ee, r1, r2, screw_force(m, d, ee, r1, r2))

@@ -7,7 +7,7 @@ import math
 
 from ..jit import njit
 from ..linalg import cross, mv
-from .actuation import current_speed
+from .actuation import current_speed, motor_records
 from .dynamics import table_load
 
 
@@ -42,6 +42,7 @@ def bookkeeping(m, d, h):
     d.steps += 1
     d.pair_steps += n
     d.drive_work += h * d.drive_power
+    motor_records(m, d, h)
     if n:
         raise_peaks(m, d)
     if m.limits.external_contact:

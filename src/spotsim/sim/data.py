@@ -55,6 +55,16 @@ class DataFields(NamedTuple):
     a: np.ndarray  # (nv,) acceleration at the last force evaluation
     tau: np.ndarray  # (nv,) the actuators' joint forces (`actuation`), N or N m
     load: np.ndarray  # (n_a,) each actuated joint's contact load at the last evaluation, N (`actuation`)
+    # the motor drives (`dynamics.transmissions`, `actuation`): per actuated joint
+    drive_force: np.ndarray  # (n_a,) the joint force its drive's screw and linkage put on it, N
+    drive_free: np.ndarray  # (n_a,) its acceleration without that force, m/s^2
+    response: np.ndarray  # (n_a, nv) the accelerations a unit force on it gives (`dynamics.joint_response`)
+    # ... per end-effector
+    transmission: np.ndarray  # (n_ee,) its transmission's state, tables.TRANSMISSION_STATES
+    screw_force: np.ndarray  # (n_ee,) the screw's total closing force on the fingers, N
+    current: np.ndarray  # (n_ee,) the motor's current, A (the speed loop's last reading)
+    integral: np.ndarray  # (n_ee,) the speed loop's integral, A
+    direction: np.ndarray  # (n_ee,) the way its transmission slides: +1 closing, -1 opening (0: stuck)
     # the kinematics of the last force evaluation, rows by joint (the universe: identity)
     R_W: np.ndarray  # (njoints, 3, 3)
     p_W: np.ndarray  # (njoints, 3) m
@@ -82,6 +92,10 @@ class DataFields(NamedTuple):
     drive_stopped: np.ndarray  # (n_g,) each grasp's drive has stopped since it last closed at over half speed
     drive_resumes: np.ndarray  # (n_g,) ... the times it closed again at over half its closing speed after it stopped
     drive_jump: np.ndarray  # (n_g,) ... its largest change of speed from one reading to the next, m/s
+    peak_current: np.ndarray  # (n_g,) a motor drive's largest |current|, A
+    transmission_time: np.ndarray  # (n_g, 3) ... the time its transmission spent in each state, s
+    transmission_stops: np.ndarray  # (n_g,) ... the times its sliding fingers were stopped (stuck)
+    peak_deceleration: np.ndarray  # (n_g,) ... its closing fingers' largest deceleration between stops, m/s^2
     phase: np.ndarray  # (n_g,) APPROACH, SELF_CENTRING or COMPLETE
     held_since: float  # since when the completion criteria hold, s (nan: they do not)
     t_start: np.ndarray  # (n_g,) when each grasp's drive started, s (nan: not yet)
@@ -184,6 +198,9 @@ def make_data(model, rows: int = ROWS_PER_CALL, start: bool = True) -> Data:
     f = DataFields(
         t=0.0, q=model.q0.copy(), v=model.v0.copy(), a=np.zeros(nv), tau=np.zeros(nv),
         load=np.zeros(len(sim.actuators.joint)),
+        drive_force=np.zeros(len(sim.actuators.joint)), drive_free=np.zeros(len(sim.actuators.joint)),
+        response=np.zeros((len(sim.actuators.joint), nv)), transmission=ints(n_ee), screw_force=np.zeros(n_ee),
+        current=np.zeros(n_ee), integral=np.zeros(n_ee), direction=np.zeros(n_ee),
         R_W=frames.R_W, p_W=frames.p_W, w_W=frames.w_W, vo_W=frames.vo_W, now=new_frames(nj),
         work=new_articulation(nj, nv),
         near=ints(0), travel=math.inf, pair_list=empty_pair_list(len(sim.faces.master_start)),
@@ -191,7 +208,9 @@ def make_data(model, rows: int = ROWS_PER_CALL, start: bool = True) -> Data:
         summary=no_summary(), external_force_W=np.zeros(3), external_torque_O_W=np.zeros(3),
         active=0, stalled=np.zeros(n_ee, dtype=np.bool_), sample_t=0.0, jumped=False,
         drive_stopped=np.zeros(n_g, dtype=np.bool_),
-        drive_resumes=ints(n_g), drive_jump=np.zeros(n_g), phase=ints(n_g), held_since=math.nan,
+        drive_resumes=ints(n_g), drive_jump=np.zeros(n_g), peak_current=np.zeros(n_g),
+        transmission_time=np.zeros((n_g, 3)), transmission_stops=ints(n_g), peak_deceleration=np.zeros(n_g),
+        phase=ints(n_g), held_since=math.nan,
         t_start=np.r_[0.0, nan(n_g - 1)], t_contact=nan(n_g), t_complete=nan(n_g),
         peak_force=np.zeros((n_g, 3)), peak_torque=np.zeros((n_g, 3)), peak_force_norm=np.zeros(n_g),
         peak_torque_norm=np.zeros(n_g), peak_pairs=ints(n_g), peak_table_force=np.zeros(n_g),

@@ -34,7 +34,7 @@ from numba.experimental import structref
 from ..jit import njit, njit_inline
 from ..linalg import add3, cross3, mtv3, mv3, solve_spd3, sub3
 from ..structs import StructProxy, StructType, new_struct, register
-from ..tables import PLANAR, PRISMATIC
+from ..tables import FORWARD, MOTOR, PLANAR, PRISMATIC, STUCK
 from .tree import ARTICULATED, NEWTON_EULER, branch_centroid, joint_twist
 
 
@@ -58,6 +58,7 @@ class Articulation(NamedTuple):
     x: np.ndarray  # (3, 6) scratch vectors
     given: np.ndarray  # (nv,) prescribed joints' accelerations (zero), or velocity changes in a jump
     jump: np.ndarray  # (nv,) a velocity jump's response
+    unit: np.ndarray  # (nv,) the joint forces whose response `joint_response` asks for (zero otherwise)
 
 
 @structref.register
@@ -77,7 +78,7 @@ def new_articulation(nj: int, nv: int) -> ArticulationStruct:
         inertia_W=np.zeros((nj, 3, 3)), centroid_W=np.zeros((nj, 3)), S=np.zeros((nj, 6)), c=np.zeros((nj, 6)),
         IA=np.zeros((nj, 6, 6)), pA=np.zeros((nj, 6)), U=np.zeros((nj, 6)), D=np.zeros(nj), u=np.zeros(nj),
         acc=np.zeros((nj, 6)), L=np.zeros((6, 6)), A=np.zeros((6, 6)), M=np.zeros((6, 6)), x=np.zeros((3, 6)),
-        given=np.zeros(nv), jump=np.zeros(nv)))
+        given=np.zeros(nv), jump=np.zeros(nv), unit=np.zeros(nv)))
 
 
 # ------------------------------------------------------------------------------- one free body
@@ -261,7 +262,7 @@ def _articulated(m, d, b, bias, out):
     bias: the velocity products, gravity, the contact wrenches and the joint forces act, and
     prescribed joints accelerate as w_given (zero); else none acts, and out is the branch's
     response to prescribed velocity changes w_given (an impulse: M dv = S^T lambda on the
-    prescribed joints)."""
+    prescribed joints) and to the joint forces d.work.unit on the others."""
     t, br, w = m.tree, m.branches, d.work
     q, v, f_local = d.q, d.v, d.loads.f_local
     R_W, p_W, w_W, vo_W = d.R_W, d.p_W, d.w_W, d.vo_W
@@ -347,9 +348,10 @@ def _articulated(m, d, b, bias, out):
                 x += w_IA[j, a, k] * w_S[j, k]
             w_U[j, a] = x
         D = _dot6(w_S[j], w_U[j]) + t.armature[iv]
-        tau = 0.0
         if bias:
             tau = d.tau[iv] - t.stiffness[iv] * (q[t.idx_q[j]] - t.rest[iv]) - t.damping[iv] * v[iv]
+        else:
+            tau = w.unit[iv]
         w_D[j] = D
         w_u[j] = tau - _dot6(w_S[j], w_pA[j])
         if par == 0:
@@ -466,7 +468,8 @@ def _dot6(x, y):
 def accelerations(m, d):
     """Stage: d.a (nv,), the joints' accelerations at (d.q, d.v) under the joint forces d.tau
     and the passive springs and dampers, the contact wrenches d.loads.f_local and gravity;
-    prescribed joints' are given (zero), with the rotations of the last `kinematics`."""
+    prescribed joints' are given (zero), with the rotations of the last `kinematics`; then
+    the motor drives' transmissions (`transmissions`)."""
     br = m.branches
     for b in range(br.joint.shape[0]):
         mode = br.mode[b]
@@ -478,6 +481,124 @@ def accelerations(m, d):
             for i in range(br.first[b], br.stop[b]):
                 iv = m.tree.idx_v[br.members[i]]
                 d.a[iv] = d.work.given[iv]
+    transmissions(m, d)
+
+
+# -------------------------------------------------------------- the motor drives' transmissions
+# A motor drive (`sim.actuation`) closes its end-effector's two fingers through a gearhead and a
+# lead screw whose nut halves a mirror linkage moves alike: one degree of freedom, x, each
+# finger's closing travel. The screw's total closing force F on the pair is set by its
+# transmission's state (`tables.TRANSMISSION_STATES`, as Modelica's `LossyGear`):
+#
+# - sliding, the motor's torque tau_m = K_t i less the rotor's inertia J (B = J rho^2 on the
+#   pair's coordinate) passed on with the efficiency of the power's direction: forward (from
+#   the motor to the fingers) F = eta_f (rho tau_m - B x''), backward eta_b F = rho tau_m - B x''
+#   (with eta_b <= 0, a self-locking screw, only while the fingers are light enough against
+#   the rotor's inertia that the motor's side still gives: eta_b + B g > 0);
+# - stuck, x'' = 0: F is whatever holds the fingers (the constraint's force), until it leaves
+#   the band that the friction of the screw can hold (`sim.actuation.transmission_events`).
+#
+# The linkage shares F between the fingers so that they accelerate alike: the joint forces
+# (phi1, phi2) = (-F/2 + lambda, -F/2 - lambda) on their opening coordinates, lambda the
+# linkage's reaction. Both are internal forces: momentum is kept. With x'' = x0'' + g F (the
+# accelerations without the drive, and M^-1's block of the finger joints, `joint_response`),
+# each state's F is closed-form.
+
+
+@njit_inline
+def drive_fingers(m, ee):
+    """The actuator rows of end-effector ee's two fingers, (-1, -1) if they are not in the model."""
+    first = second = -1
+    for i in range(m.actuators.joint.shape[0]):
+        if m.actuators.drive[i] == ee:
+            if first < 0:
+                first = i
+            else:
+                second = i
+    return first, second
+
+
+@njit_inline
+def _mirror(m, d, r1, r2, force):
+    """The joint forces (phi1, phi2) on fingers r1 and r2 (opening positive) that a total
+    closing force `force` (N) of the screw comes to through the mirror linkage, and the
+    fingers' common closing acceleration then (m/s^2)."""
+    t = m.tree
+    iv1, iv2 = t.idx_v[m.actuators.joint[r1]], t.idx_v[m.actuators.joint[r2]]
+    g11, g12, g22 = d.response[r1, iv1], d.response[r2, iv1], d.response[r2, iv2]
+    a1, a2 = d.drive_free[r1], d.drive_free[r2]
+    share = (0.5 * force * (g11 - g22) - (a1 - a2)) / (g11 + g22 - 2.0 * g12)
+    phi1, phi2 = -0.5 * force + share, -0.5 * force - share
+    return phi1, phi2, -(a1 + g11 * phi1 + g12 * phi2)
+
+
+@njit_inline
+def closing_response(m, d, r1, r2):
+    """The fingers' closing acceleration without the screw's force (m/s^2), and its rate in
+    that force (m/s^2 per N)."""
+    x0 = _mirror(m, d, r1, r2, 0.0)[2]
+    return x0, _mirror(m, d, r1, r2, 1.0)[2] - x0
+
+
+@njit
+def screw_force(m, d, ee, r1, r2):
+    """The screw's total closing force on end-effector ee's fingers (N) in its transmission's
+    state d.transmission[ee], at the motor current d.current[ee]."""
+    p = m.drives
+    x0, g = closing_response(m, d, r1, r2)
+    state = d.transmission[ee]
+    if state == STUCK:
+        return -x0 / g
+    B = p.rotor[ee] * p.ratio[ee] ** 2
+    A = p.ratio[ee] * p.torque_constant[ee] * d.current[ee]
+    if state == FORWARD:
+        return p.forward[ee] * (A - B * x0) / (1.0 + p.forward[ee] * B * g)
+    return (A - B * x0) / (p.backward[ee] + B * g)
+
+
+@njit
+def apply_screw(m, d, ee, r1, r2, force):
+    """Put the screw's total closing force `force` (N) on end-effector ee's fingers into d.a,
+    in place of the one it put there before (d.drive_force)."""
+    phi1, phi2, _ = _mirror(m, d, r1, r2, force)
+    d1, d2 = phi1 - d.drive_force[r1], phi2 - d.drive_force[r2]
+    for k in range(d.a.shape[0]):
+        d.a[k] += d1 * d.response[r1, k] + d2 * d.response[r2, k]
+    d.drive_force[r1], d.drive_force[r2] = phi1, phi2
+    d.screw_force[ee] = force
+
+
+@njit
+def transmissions(m, d):
+    """The motor drives' forces on their fingers, by their transmissions' states, added to the
+    accelerations d.a of the articulated-body algorithm (which left them out), with the finger
+    joints' responses (d.response) that their controllers' events use."""
+    p = m.drives
+    for ee in range(p.law.shape[0]):
+        if p.law[ee] != MOTOR:
+            continue
+        r1, r2 = drive_fingers(m, ee)
+        if r2 < 0:
+            continue
+        for r in (r1, r2):
+            j = m.actuators.joint[r]
+            d.drive_free[r] = d.a[m.tree.idx_v[j]]
+            d.drive_force[r] = 0.0
+            joint_response(m, d, j, d.response[r])
+        apply_screw(m, d, ee, r1, r2, screw_force(m, d, ee, r1, r2))
+
+
+@njit
+def joint_response(m, d, j, out):
+    """out (nv,): M^-1 e_j, the accelerations that a unit force on one-dof joint j gives its
+    branch (zero elsewhere), or the velocity change a unit impulse on it gives; at the frames
+    of the last `kinematics`. Its rows for two joints are the joints' block of M^-1."""
+    t = m.tree
+    iv = t.idx_v[j]
+    out[:] = 0.0
+    d.work.unit[iv] = 1.0
+    _articulated(m, d, t.branch[j], False, out)
+    d.work.unit[iv] = 0.0
 
 
 @njit

@@ -3,9 +3,10 @@
 A grasp is complete when, for `hold_s` without a break, its finger drive presses at the grasp
 load and has come to rest (its fingers close no faster than the contact speed limit: the
 actuator within that speed's share of its torque-speed line below the grasp load, the relay
-stalled), every active contact's relative speed is below the contact speed limit, and the net
-contact force on the module is below the net force limit: the paper's rule (Sec. 3.2 step 3,
-Sec. 5.1; model.md Sec. 6). On the air-bearing table the net force is its part in the table's
+stalled; a motor drive's transmission stuck with its motor at its current limit), every
+active contact's relative speed is below the contact speed limit, and the net contact force
+on the module is below the net force limit: the paper's rule (Sec. 3.2 step 3, Sec. 5.1;
+model.md Sec. 6). On the air-bearing table the net force is its part in the table's
 plane: the table reacts the rest.
 """
 
@@ -15,7 +16,7 @@ import math
 
 from ..contact.wrenches import net_force
 from ..jit import njit
-from ..tables import APPROACH, COMPLETE, SELF_CENTRING
+from ..tables import APPROACH, COMPLETE, MOTOR, SELF_CENTRING, STUCK
 from .actuation import current_speed
 
 #: The hold is complete within this of hold_s, s: the steps' times carry round-off.
@@ -27,8 +28,12 @@ def completion_checks(m, d):
     """Whether each completion criterion holds at the last step: the drive at rest pressing,
     the contact speeds and the net force on the module within their limits."""
     c = m.completion
-    return (current_speed(m, d) <= c.max_contact_speed, d.summary.max_speed <= c.max_contact_speed,
-            net_force(m, d) <= c.max_net_force)
+    ee = m.grasps.ee[d.active]
+    if m.drives.law[ee] == MOTOR:  # stuck, the motor pressing at its current limit
+        pressing = d.transmission[ee] == STUCK and d.current[ee] >= m.drives.current_limit[ee]
+    else:
+        pressing = current_speed(m, d) <= c.max_contact_speed
+    return pressing, d.summary.max_speed <= c.max_contact_speed, net_force(m, d) <= c.max_net_force
 
 
 @njit
@@ -56,6 +61,8 @@ def completion_criteria(model, data) -> dict[str, bool]:
     """Each completion criterion, labelled, and whether it holds at data's last step (for
     messages)."""
     c = model.sim.completion
-    labels = (f"finger drive at rest (<= {c.max_contact_speed:g} m/s) at the grasp load",
+    drive = ("finger drive stuck, its motor at its current limit" if model.scenario.end_effector.drive == "motor"
+             else f"finger drive at rest (<= {c.max_contact_speed:g} m/s) at the grasp load")
+    labels = (drive,
               f"contact speeds <= {c.max_contact_speed:g} m/s", f"net contact force <= {c.max_net_force:g} N")
     return dict(zip(labels, (bool(x) for x in completion_checks(model.sim, data)), strict=True))

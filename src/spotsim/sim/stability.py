@@ -29,6 +29,7 @@ import numpy as np
 from ..contact.normal import hertz_potential
 from ..jit import njit_inline
 from ..tables import ADAPTIVE
+from .actuation import rotor_energy
 from .tree import kinetic_energy, spring_energy
 
 #: Pairs sharing the load in the estimate: the shipped runs peak at 20-100 pairs in contact
@@ -136,10 +137,11 @@ ENERGY_FLOOR_J = 1e-6
 @njit_inline
 def mechanical_energy(m, d, phi, s):
     """The kinetic energy of every moving body and rotor (from the kinematics of the state,
-    d.now), plus the energy stored in the joints' springs and in the contacts, J: Hertz 0.8 K
-    (phi/2)^2.5 per pair (`hertz_potential`) and 1/2 k_b |s|^2 per bristle (phi: the pairs'
-    penetrations, m; s: their bristle deflections, m)."""
-    E = kinetic_energy(m, d.now, d.v) + spring_energy(m, d.q)
+    d.now; the motor drives' rotors, `actuation.rotor_energy`), plus the energy stored in the
+    joints' springs and in the contacts, J: Hertz 0.8 K (phi/2)^2.5 per pair (`hertz_potential`)
+    and 1/2 k_b |s|^2 per bristle (phi: the pairs' penetrations, m; s: their bristle
+    deflections, m)."""
+    E = kinetic_energy(m, d.now, d.v) + spring_energy(m, d.q) + rotor_energy(m, d)
     K, k_b = m.law.K, m.law.bristle.k_b
     for i in range(phi.shape[0]):
         E += hertz_potential(phi[i], K)

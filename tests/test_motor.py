@@ -1,0 +1,162 @@
+"""The motor drive (`end_effector.drive: motor`): a current-limited motor behind a gearhead and a
+lead screw whose nut halves close both fingers alike (a mirror linkage), its transmission a
+stick-slip element (`sim.dynamics.transmissions`, `sim.actuation.transmission_events`)."""
+
+import math
+
+import numpy as np
+import pytest
+from conftest import CASE_I
+
+import spotsim
+from spotsim.assemble.model import motor_drive, screw_efficiencies
+from spotsim.run import Stepper
+from spotsim.sim.actuation import motor_closing, transmission_events
+from spotsim.sim.dynamics import accelerations
+from spotsim.sim.tree import kinematics
+from spotsim.tables import BACKWARD, FORWARD, STUCK
+
+LEAD, DIAMETER, FLANK = 0.7e-3, 3.545e-3, math.radians(30.0)
+
+
+def motor_model(*sets):
+    return spotsim.build_model(spotsim.load_scenario(CASE_I, ["end_effector.drive=motor", *sets]))
+
+
+def finger_dofs(model):
+    t = model.sim.tree
+    return [int(t.idx_v[j]) for j in model.sim.actuators.joint]
+
+
+def test_a_frictionless_screw_is_lossless_and_self_locking_starts_where_its_backward_efficiency_crosses_zero():
+    assert screw_efficiencies(LEAD, DIAMETER, FLANK, 0.0) == pytest.approx((1.0, 1.0), abs=1e-15)
+    lead_angle = math.atan(LEAD / (math.pi * DIAMETER))
+    k = math.cos(FLANK) * math.tan(lead_angle)  # cos(alpha) tan(lambda): eta_b = 0
+    forward, backward = screw_efficiencies(LEAD, DIAMETER, FLANK, k)
+    assert backward == pytest.approx(0.0, abs=1e-12)
+    assert forward < 0.5  # a self-locking screw wastes more than half the motor's work
+    assert screw_efficiencies(LEAD, DIAMETER, FLANK, 1.01 * k)[1] < 0.0 < screw_efficiencies(LEAD, DIAMETER, FLANK,
+                                                                                           0.99 * k)[1]
+
+
+def test_a_step_of_current_accelerates_both_fingers_alike_with_the_rotors_reflected_inertia():
+    """Case I's fixed hand, its fingers in free flight: at a constant current i the pair's
+    closing speed grows at eta_f rho K_t i / (eta_f J rho^2 + 2 m_f): the rotor's inertia J
+    reaches the fingers through the transmission's ratio rho and, the power flowing forward,
+    its efficiency eta_f."""
+    model = motor_model()
+    m = model.sim
+    stepper = Stepper(model)
+    d = stepper.data
+    current = 0.2
+    d.current[0] = current
+    d.assign(sample_t=math.inf)  # the speed loop never reads: the current stays
+    md = motor_drive(model.scenario.end_effector.motor)
+    finger_mass = model.pin_model.inertias[int(m.actuators.joint[0])].mass
+    rate = md.forward * md.ratio * md.torque_constant * current / (md.forward * md.reflected_inertia + 2 * finger_mass)
+    v0 = motor_closing(m, d, 0)
+    while d.t < 0.05:
+        stepper.step(min(1e-4, 0.05 - d.t))
+        assert d.transmission[0] == FORWARD
+        assert d.contacts.key.shape[0] == 0  # free flight
+    dofs = finger_dofs(model)
+    assert d.v[dofs[0]] == d.v[dofs[1]]  # the linkage: to the bit
+    assert motor_closing(m, d, 0) - v0 == pytest.approx(rate * d.t, rel=1e-3)
+
+
+def stuck_under(model, load):
+    """Case I's motor drive at rest, its transmission stuck at its current limit, its fingers
+    pushed open by `load` (N, in all, half on each): the transmission's state its events give,
+    and the fingers' closing acceleration then."""
+    m = model.sim
+    d = Stepper(model).data
+    dofs = finger_dofs(model)
+    d.v[:] = 0.0
+    d.transmission[0] = STUCK
+    d.current[0] = model.scenario.end_effector.motor.current_limit_A
+    for iv in dofs:
+        d.tau[iv] = 0.5 * load
+    kinematics(m, d)
+    accelerations(m, d)
+    assert d.screw_force[0] == pytest.approx(load, rel=1e-9)  # stuck: it holds the load
+    transmission_events(m, d, 0)
+    return int(d.transmission[0]), -d.a[dofs[0]]
+
+
+@pytest.mark.parametrize("friction", [0.13, 0.02])
+def test_a_stuck_transmission_holds_the_band_its_efficiencies_give_and_slides_beyond_it(friction):
+    """At the motor's force A = rho K_t i_max: below eta_f A the motor closes the fingers; a
+    self-locking screw (friction 0.13) holds any load above it; a back-drivable one (0.02)
+    holds up to A / eta_b and the load opens it beyond."""
+    model = motor_model(f"end_effector.motor.screw_friction={friction}")
+    md = motor_drive(model.scenario.end_effector.motor)
+    drive = md.ratio * md.torque_constant * model.scenario.end_effector.motor.current_limit_A
+    state, closing = stuck_under(model, 0.99 * md.forward * drive)
+    assert state == FORWARD and closing > 0.0
+    assert stuck_under(model, 1.01 * md.forward * drive)[0] == STUCK
+    if md.backward <= 0.0:
+        assert friction == 0.13
+        for load in (10 * drive, 1e3 * drive):
+            assert stuck_under(model, load)[0] == STUCK
+    else:
+        assert friction == 0.02
+        assert stuck_under(model, 0.99 * drive / md.backward)[0] == STUCK
+        state, closing = stuck_under(model, 1.01 * drive / md.backward)
+        assert state == BACKWARD and closing < 0.0
+
+
+def test_a_lossless_drive_closing_slowly_on_a_heavy_module_presses_with_its_stall_force():
+    """A lossless transmission (no screw friction, gearhead efficiency 1) closing at 0.2 mm/s
+    on a module 10^4 times heavier: the fingers come to rest against it, where a lossless
+    transmission's stuck band is one force, the motor's rho K_t i_max. The heavy module rings
+    on the contacts' springs for longer than the run (the grasp does not complete) and the
+    fingers follow it within 0.1 um, but over its last half second their mean load is half
+    that force each."""
+    s = spotsim.load_scenario(CASE_I, [
+        "end_effector.drive=motor", "end_effector.motor.screw_friction=0", "end_effector.motor.gear_efficiency=1",
+        "end_effector.closing_speed_m_s=0.0002", "end_effector.start_gap_mm=0.05", "module.initial_offset_mm=[0,0,0]",
+        "module.mass_kg=25000", "module.inertia_kg_m2.ixx=1000", "module.inertia_kg_m2.iyy=1000",
+        "module.inertia_kg_m2.izz=1000"])
+    r = spotsim.simulate(s)
+    md = motor_drive(s.end_effector.motor)
+    stall = md.ratio * md.torque_constant * s.end_effector.motor.current_limit_A
+    t = np.asarray(r.timeseries["t"])
+    load = np.asarray(r.timeseries["finger_load_N"])[t > t[-1] - 0.5]
+    opening = np.asarray(r.timeseries["finger_opening_mm"])[t > t[-1] - 0.5]
+    assert md.forward == 1.0 and md.backward == 1.0
+    assert np.ptp(opening) < 1e-4  # at rest against the module: within 0.1 um
+    assert load.mean() == pytest.approx(0.5 * stall, rel=1e-2)
+
+
+def test_the_motor_drive_keeps_the_free_floating_robots_momentum():
+    """The motor's forces act between the hand and its fingers, the linkage's between the
+    fingers, the stops' impulses on both: all internal. The dual arm's total linear momentum
+    holds to round-off."""
+    r = spotsim.simulate(spotsim.load_scenario(CASE_I.with_name("dual_arm_sequential.yaml"),
+                                               ["end_effector.drive=motor"]))
+    assert r.status == "completed"
+    assert r.summary["momentum"]["linear_drift_rel"] <= 1e-11
+
+
+def rattle_energy(substeps):
+    """Case I's module rattling between the fingers of an unpowered, back-drivable, lossless
+    motor drive (no current, no screw friction, gearhead efficiency 1), the pair law the
+    gradient of its Hertz potential, no damping (restitution 1) and no friction: a passive,
+    conservative system. The most its mechanical energy (the rotor's included) rises above
+    its lowest since the start, J, at symplectic Euler's step 1 ms / substeps, and its start."""
+    s = spotsim.load_scenario(CASE_I, [
+        "end_effector.drive=motor", "end_effector.motor.current_limit_A=0", "end_effector.motor.screw_friction=0",
+        "end_effector.motor.gear_efficiency=1", "contact.normal_direction=gradient", "contact.restitution=1",
+        "friction.mu_k=1e-12", "friction.mu_s=1e-12", "end_effector.start_gap_mm=4", "simulation.duration_s=0.5",
+        "simulation.integrator=symplectic_euler", f"simulation.substeps={substeps}"])
+    E = np.asarray(spotsim.simulate(s).timeseries["energy_J"])
+    return (E - np.minimum.accumulate(E)).max(), E[0]
+
+
+def test_a_module_rattling_in_an_unpowered_back_drivable_drive_gains_no_energy_as_the_step_is_refined():
+    """The drive's forces, its stops and its rotor's inertia add no energy: what the run gains
+    is the integrator's error, first order in the step, which shrinks towards zero."""
+    coarse, E0 = rattle_energy(100)
+    fine, _ = rattle_energy(400)
+    assert fine < 0.5 * coarse
+    assert fine < 0.01 * E0
