@@ -160,3 +160,14 @@ def test_a_module_rattling_in_an_unpowered_back_drivable_drive_gains_no_energy_a
     fine, _ = rattle_energy(400)
     assert fine < 0.5 * coarse
     assert fine < 0.01 * E0
+
+
+def test_a_current_limit_above_what_the_supply_drives_at_rest_still_completes():
+    """At rest the winding takes V / R (12 V / 19.8 ohm = 0.606 A) at most: a 1 A limit is not
+    reached there, and the grasp completes pressing with the supply's current (a little more
+    flows while the load drives the fingers open, the back-EMF then adding to the supply)."""
+    s = spotsim.load_scenario(CASE_I, ["end_effector.drive=motor", "end_effector.motor.current_limit_A=1.0"])
+    r = spotsim.simulate(s)
+    mo = s.end_effector.motor
+    assert r.status == "completed"
+    assert mo.supply_voltage_V / mo.terminal_resistance_ohm <= r.summary["grasps"][0]["motor_peak_current_A"] < 1.0

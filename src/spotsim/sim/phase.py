@@ -29,8 +29,10 @@ def completion_checks(m, d):
     the contact speeds and the net force on the module within their limits."""
     c = m.completion
     ee = m.grasps.ee[d.active]
-    if m.drives.law[ee] == MOTOR:  # stuck, the motor pressing at its current limit
-        pressing = d.transmission[ee] == STUCK and d.current[ee] >= m.drives.current_limit[ee]
+    p = m.drives
+    if p.law[ee] == MOTOR:  # stuck, the motor pressing at its current limit (or what the supply drives at rest)
+        pressing = d.transmission[ee] == STUCK and d.current[ee] >= min(p.current_limit[ee],
+                                                                        p.voltage[ee] / p.resistance[ee])
     else:
         pressing = current_speed(m, d) <= c.max_contact_speed
     return pressing, d.summary.max_speed <= c.max_contact_speed, net_force(m, d) <= c.max_net_force
