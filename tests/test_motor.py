@@ -171,3 +171,12 @@ def test_a_current_limit_above_what_the_supply_drives_at_rest_still_completes():
     mo = s.end_effector.motor
     assert r.status == "completed"
     assert mo.supply_voltage_V / mo.terminal_resistance_ohm <= r.summary["grasps"][0]["motor_peak_current_A"] < 1.0
+
+
+def test_the_motor_block_counts_in_a_scenarios_fingerprint_only_under_the_motor_drive():
+    from spotsim.scenario import fingerprint
+
+    def key(*sets):
+        return fingerprint(spotsim.load_scenario(CASE_I, list(sets)))
+    assert key() == key("end_effector.motor.gear_ratio=5")
+    assert key("end_effector.drive=motor") != key("end_effector.drive=motor", "end_effector.motor.gear_ratio=5")

@@ -780,9 +780,12 @@ def to_yaml(s: Scenario) -> str:
 
 
 def fingerprint(s) -> str:
-    """The scene a scenario runs, as a short hash of every value but its name and description:
-    equal for two scenarios that run the same physics at the same settings."""
+    """The scene a scenario runs, as a short hash of every value but its name and description,
+    and of the motor block unless its drive is the motor (no other drive reads it): equal for
+    two scenarios that run the same physics at the same settings."""
     raw = {k: v for k, v in to_dict(s).items() if k not in ("name", "description")}
+    if s.end_effector.drive != "motor":
+        raw["end_effector"] = {k: v for k, v in raw["end_effector"].items() if k != "motor"}
     return hashlib.sha256(json.dumps(raw, sort_keys=True).encode()).hexdigest()[:16]
 
 
