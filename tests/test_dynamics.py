@@ -9,7 +9,7 @@ from conftest import CONFIGS
 
 import spotsim
 from spotsim.errors import ModelError
-from spotsim.sim.bare import BareModel, bare
+from spotsim.sim.bare import bare
 from spotsim.sim.data import make_data
 from spotsim.sim.dynamics import accelerations, velocity_jump
 from spotsim.sim.tree import NEWTON_EULER, kinematic_tree, kinematics
@@ -159,12 +159,12 @@ def test_shipped_scenes_dynamics_is_pinocchios_aba(config, gravity):
     model = spotsim.build_model(spotsim.replace(s, simulation={"gravity_m_s2": gravity}))
     pm = model.pin_model
     tree, branches = kinematic_tree(pm, (), pm.gravity.linear)
-    m = BareModel(tree, branches, np.zeros(3))
+    empty, scratch = bare(pm)  # no drives
+    m = empty._replace(tree=tree, branches=branches)
     view = make_data(model).view()
-    _, scratch = bare(pm)
     d = scratch._replace(q=view.q, v=view.v)
     rng = np.random.default_rng(5)
-    run = BareModel(model.sim.tree, model.sim.branches, np.zeros(3))  # the fingers prescribed
+    run = empty._replace(tree=model.sim.tree, branches=model.sim.branches)  # the fingers prescribed
     P = [pm.idx_vs[f.joint] for f in model.fingers]
     F = [i for i in range(pm.nv) if i not in P]
     for _ in range(RANDOM_STATES):

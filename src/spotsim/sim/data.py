@@ -144,7 +144,7 @@ class DataFields(NamedTuple):
     fsal_dy: np.ndarray  # (`integrators.state_size`,) its state derivative
     # the last symplectic Euler update's (q, v), and each floating branch's offset from its root
     # then (`integrators.root_offset`: r, u), to start the next from if nothing moved since
-    placed: bool
+    placed: np.ndarray  # (1,) bool: they are set
     placed_q: np.ndarray  # (nq,)
     placed_v: np.ndarray  # (nv,)
     placed_offset: np.ndarray  # (nb, 6)
@@ -223,7 +223,7 @@ def make_data(model, rows: int = ROWS_PER_CALL, start: bool = True) -> Data:
         left=0, h=sim.h, t_end=0.0, flight=False, held=False,
         h_next=0.0, fsal=False, fsal_t=0.0,
         fsal_dy=np.zeros(state_size(sim.tree, sim.branches)), fsal_external=np.zeros(6),
-        placed=False, placed_q=np.zeros(model.pin_model.nq), placed_v=np.zeros(nv),
+        placed=np.zeros(1, dtype=np.bool_), placed_q=np.zeros(model.pin_model.nq), placed_v=np.zeros(nv),
         placed_offset=np.zeros((len(sim.branches.joint), 6)),
         rows=np.zeros((rows, sim.record.width)), n_rows=0, row_index=0,
         snapshots=Snapshots(row=ints(snap_cap), pairs=ints(snap_cap), force_W=np.zeros((snap_cap, n_mod, 3)),

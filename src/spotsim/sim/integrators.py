@@ -213,7 +213,7 @@ def _euler_update(m, d, h):
     t, br = m.tree, m.branches
     # a free-flying root's offset as the last update placed it, if nothing moved since: the
     # same numbers root_offset gives (its quaternion and spin are stored as they were given)
-    placed = d.placed and _unchanged(d.q, d.placed_q) and _unchanged(d.v, d.placed_v)
+    placed = d.placed[0] and _unchanged(d.q, d.placed_q) and _unchanged(d.v, d.placed_v)
     for b in range(br.joint.shape[0]):
         if not br.floating[b]:
             _advance_joints(m, d, b, h, 0)
@@ -238,7 +238,7 @@ def _euler_update(m, d, h):
             d.placed_offset[b, a], d.placed_offset[b, 3 + a] = r[a], u_off[a]
     d.placed_q[:] = d.q
     d.placed_v[:] = d.v
-    d.placed = True
+    d.placed[0] = True
 
 
 @njit_inline
