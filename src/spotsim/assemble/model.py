@@ -579,7 +579,7 @@ def motor_drive(mo) -> MotorDrive:
     rotor, kt = mo.rotor_inertia_g_cm2 * 1e-7, mo.torque_constant_mNm_A * 1e-3
     forward = mo.gear_efficiency * eta_f
     return MotorDrive(ratio=ratio, forward=forward, backward=mo.gear_efficiency * eta_b, rotor=rotor,
-                      torque_constant=kt, reflected_inertia=rotor * ratio ** 2,
+                      torque_constant=kt, reflected_inertia=rotor * ratio * ratio,  # inf, not OverflowError
                       stall_force=forward * ratio * kt * mo.current_limit_A)
 
 
@@ -594,6 +594,8 @@ def drives(ee, n: int, finger_mass: float) -> Drives:
     md = motor_drive(mo)
     omega = 2.0 * math.pi * mo.speed_loop_bandwidth_Hz
     inertia = md.forward * md.reflected_inertia + 2.0 * finger_mass
+    with np.errstate(all="ignore"):  # extreme keys give inf or nan here, which a run reports, not an exception
+        gain = np.divide(inertia * omega, md.forward * md.ratio * md.torque_constant)
     motor = law == MOTOR
     return Drives(law=row(law, np.int64), closing_speed=row(ee.closing_speed_m_s),
                   grasp_load=row(0.5 * md.stall_force if motor else ee.grasp_load_N),
@@ -603,7 +605,7 @@ def drives(ee, n: int, finger_mass: float) -> Drives:
                   ratio=row(md.ratio), forward=row(md.forward), backward=row(md.backward), rotor=row(md.rotor),
                   torque_constant=row(md.torque_constant), resistance=row(mo.terminal_resistance_ohm),
                   voltage=row(mo.supply_voltage_V), current_limit=row(mo.current_limit_A),
-                  gain=row(inertia * omega / (md.forward * md.ratio * md.torque_constant)),
+                  gain=row(gain),
                   integral_time=row(4.0 / omega))
 
 
