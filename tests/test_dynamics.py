@@ -75,6 +75,17 @@ def assert_close(actual, expected, rtol=ABA_RTOL):
 ROOTS = {"fixed": None, "free-flyer": pin.JointModelFreeFlyer(), "planar": pin.JointModelPlanar()}
 
 
+def assert_prescribed_solve(model, d, fext, P, F):
+    """With the joints P prescribed (accelerating as given: zero), the others' accelerations
+    d.a[F] solve the joint-space equations with `pin.crba`'s mass matrix and `pin.rnea`'s bias.
+    Returns that mass matrix."""
+    M = mass_matrix(model, d.q)
+    b = pin.rnea(model, model.createData(), d.q, d.v, np.zeros(model.nv), fext)
+    assert np.all(d.a[P] == 0.0)
+    assert_close(d.a[F], np.linalg.solve(M[np.ix_(F, F)], (d.tau - b)[F]))
+    return M
+
+
 @pytest.mark.parametrize("root", list(ROOTS))
 def test_articulated_dynamics_is_pinocchios_aba(root):
     """On random trees of revolute and prismatic joints (on the world, a free-flyer or a planar
@@ -127,10 +138,7 @@ def test_prescribed_joints_move_as_given_and_their_branch_responds(root):
             fext = random_state(model, rng, d)
             kinematics(m, d)
             accelerations(m, d)
-            M = mass_matrix(model, d.q)
-            b = pin.rnea(model, model.createData(), d.q, d.v, np.zeros(model.nv), fext)
-            assert np.all(d.a[P] == 0.0)
-            assert_close(d.a[F], np.linalg.solve(M[np.ix_(F, F)], (d.tau - b)[F]))
+            M = assert_prescribed_solve(model, d, fext, P, F)
             before = d.v.copy()
             change = rng.normal(size=len(P))
             velocity_jump(m, d, np.array(prescribed), before[P] + change)
@@ -174,10 +182,7 @@ def test_shipped_scenes_dynamics_is_pinocchios_aba(config, gravity):
         assert_close(d.a, pin.aba(pm, pm.createData(), d.q, d.v, d.tau, fext))
         kinematics(run, d)
         accelerations(run, d)
-        M = mass_matrix(pm, d.q)
-        b = pin.rnea(pm, pm.createData(), d.q, d.v, np.zeros(pm.nv), fext)
-        assert np.all(d.a[P] == 0.0)
-        assert_close(d.a[F], np.linalg.solve(M[np.ix_(F, F)], (d.tau - b)[F]))
+        assert_prescribed_solve(pm, d, fext, P, F)
     assert NEWTON_EULER in branches.mode  # the modules
 
 

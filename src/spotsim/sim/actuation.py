@@ -350,8 +350,8 @@ def transmission_events(m, d, ee):
         flows_back = d.screw_force[ee] * speed < 0.0
         if flows_back != (state == BACKWARD):
             state = BACKWARD if flows_back else FORWARD
-        x0, g = closing_response(m, d, r1, r2)
-        locks = state == BACKWARD and p.backward[ee] + p.rotor[ee] * p.ratio[ee] ** 2 * g <= 0.0
+        locks = state == BACKWARD and p.backward[ee] + p.rotor[ee] * p.ratio[ee] ** 2 * \
+            closing_response(m, d, r1, r2)[1] <= 0.0
         if speed * d.direction[ee] <= 0.0 or locks:
             kinematics(m, d)  # the impulse's frames, at the state as it is
             _set_closing(m, d, r1, r2, 0.0)

@@ -174,18 +174,13 @@ def _add_rigid(M, mass, c, I_G):
         M[a, a] += mass
         for k in range(3):
             M[3 + a, 3 + k] += I_G[a, k] + mass * ((cc if a == k else 0.0) - c[a] * c[k])
-    M[0, 4] += mass * c[2]
-    M[0, 5] -= mass * c[1]
-    M[1, 3] -= mass * c[2]
-    M[1, 5] += mass * c[0]
-    M[2, 3] += mass * c[1]
-    M[2, 4] -= mass * c[0]
-    M[4, 0] += mass * c[2]
-    M[5, 0] -= mass * c[1]
-    M[3, 1] -= mass * c[2]
-    M[5, 1] += mass * c[0]
-    M[3, 2] += mass * c[1]
-    M[4, 2] -= mass * c[0]
+    # m [c]x below the diagonal, its transpose above
+    cx = ((0.0, -c[2], c[1]), (c[2], 0.0, -c[0]), (-c[1], c[0], 0.0))
+    for a in range(3):
+        for k in range(3):
+            if a != k:
+                M[3 + a, k] += mass * cx[a][k]
+                M[k, 3 + a] += mass * cx[a][k]
 
 
 @njit_inline
