@@ -4,7 +4,8 @@
     python docs/generate.py ensembles # rerun only the ensemble accuracy studies (~25 min), then spreads
     python docs/generate.py spreads   # the studied configs' typical spreads over starts, from those
                                       # studies (package data: src/spotsim/studies/typical_spread.json)
-    python docs/generate.py drives    # rerun only the drive comparison's ensembles (~10 min)
+    python docs/generate.py drives [DRIVE ...]  # rerun only the drive comparison's ensembles
+                                      # (~40 min; only the named drives, if any)
     python docs/generate.py envelope  # rerun only Case I's capture envelopes (about a minute)
     python docs/generate.py runs      # rerun all but the ensemble studies (~2 min)
     python docs/generate.py pages     # docs/scenarios.md, and the generated blocks of README.md,
@@ -86,13 +87,39 @@ ENSEMBLE_STUDIES = [
 #: default integrator and at a fine fixed step (symplectic Euler at 3.125 us; the ensemble
 #: studies' reference is four times finer): `spotsim run CONFIG --ensemble 32 --set end_effector.drive=DRIVE ...`.
 DRIVE_CASES = ("single_arm_case_I", "single_arm_case_II", "single_arm_case_III", "dual_arm_sequential")
-#: The drives: their `--set`s, and the settings they run at. The relay read at every step (a
-#: controller period below any step: the model before the drive had a controller period) runs at
-#: the fine fixed step only: an adaptive step ends at each reading, so it could not grow.
-DRIVES = {"kinematic": (["end_effector.drive=kinematic"], ("default", "fine")),
-          "relay": (["end_effector.drive=relay"], ("default", "fine")),
-          "relay_every_step": (["end_effector.drive=relay", "end_effector.control_period_s=1.0e-9"], ("fine",))}
-DRIVE_SETTINGS = {"default": [], "fine": ["simulation.integrator.method=symplectic_euler", "simulation.substeps=320"]}
+
+
+class Drive(typing.NamedTuple):
+    """One drive of the comparison: its `--set`s, the settings (DRIVE_SETTINGS) and the start
+    families (`spotsim run --perturb`) it runs at."""
+
+    sets: list[str]
+    settings: tuple[str, ...]
+    families: tuple[str, ...] = ("all",)
+
+
+#: The drives. The relay and the kinematic drive read at every step (a controller period below
+#: any step: their continuous limits) run at the fine fixed step only: an adaptive step ends at
+#: each reading, so it could not grow. The motor runs on both start families, at its default
+#: speed-loop period and at a tenth of it, and at a step four times finer than `fine` (`finer`,
+#: the ensemble studies' reference step) to confirm its fine reference.
+DRIVES = {"kinematic": Drive(["end_effector.drive=kinematic"], ("default", "fine")),
+          "kinematic_every_step": Drive(["end_effector.drive=kinematic", "end_effector.control_period_s=1.0e-9"],
+                                        ("fine",)),
+          "relay": Drive(["end_effector.drive=relay"], ("default", "fine")),
+          "relay_every_step": Drive(["end_effector.drive=relay", "end_effector.control_period_s=1.0e-9"], ("fine",)),
+          "motor": Drive(["end_effector.drive=motor"], ("default", "fine", "finer"), ("all", "one_axis")),
+          "motor_loop_tenth": Drive(["end_effector.drive=motor", "end_effector.motor.speed_loop_period_s=4.0e-5"],
+                                    ("default",), ("all", "one_axis"))}
+DRIVE_SETTINGS = {"default": [], "fine": ["simulation.integrator.method=symplectic_euler", "simulation.substeps=320"],
+                  "finer": ["simulation.integrator.method=symplectic_euler", "simulation.substeps=1280"]}
+
+
+def drive_dir(drive: str, setting: str, family: str = "all") -> str:
+    """The drive comparison's directory name of one ensemble (under docs/results/drives/CASE/)."""
+    return f"{drive}_{setting}" + ("" if family == "all" else f"_{family}")
+
+
 #: The `spotsim study` verb of each kind of study.
 VERB = {"accuracy": "accuracy", "accuracy_ensemble": "accuracy", "stability": "stability", "estimate": "estimate"}
 #: Files of a study's output directory (and of its subdirectories) kept in docs/results/.
@@ -400,32 +427,39 @@ def spreads_command() -> None:
         print(f"  {entry['scenario']}: {entry['about']}")
 
 
-def drives_command(only: tuple[str, ...] = tuple(DRIVES)) -> None:
-    """Rerun the drive comparison (about 10 min on 2 cores): every case's ensemble with each
-    drive at each setting, into docs/results/drives/CASE/DRIVE_SETTING/ (ensemble.json and
-    members.csv), stamped in docs/results/meta.json."""
+def drives_command(only: tuple[str, ...] = ()) -> None:
+    """Rerun the drive comparison (about 40 min on 2 cores; `only` these drives, if given): every
+    case's ensemble with each drive at each setting and start family, into
+    docs/results/drives/CASE/`drive_dir`/ (ensemble.json and members.csv), stamped in
+    docs/results/meta.json."""
+    unknown = set(only) - set(DRIVES)
+    if unknown:
+        raise SystemExit(f"unknown drives {', '.join(sorted(unknown))}: choose from {', '.join(DRIVES)}")
     meta = json.loads((RESULTS / "meta.json").read_text())
     done = []
     for case in DRIVE_CASES:
-        for drive, (sets, settings) in DRIVES.items():
-            for setting in settings if drive in only else ():
-                out = RESULTS / "drives" / case / f"{drive}_{setting}"
-                shutil.rmtree(out, ignore_errors=True)
-                keys = [x for k in (*sets, *DRIVE_SETTINGS[setting]) for x in ("--set", k)]
-                args = [f"config/{case}.yaml", "--ensemble", "32", "--seed", "0", "--workers", "2", *keys,
-                        "--no-error-estimate"]
-                cmd = [sys.executable, "-m", "spotsim.cli", "run", *args, "--out", str(out.relative_to(ROOT)),
-                       "--quiet"]
-                t0 = time.perf_counter()
-                proc = subprocess.run(cmd, cwd=ROOT, stdout=subprocess.DEVNULL)
-                wall = time.perf_counter() - t0
-                if proc.returncode not in (0, 1):
-                    raise SystemExit(f"{' '.join(cmd)} exited {proc.returncode}")
-                (out / "scenario.yaml").unlink(missing_ok=True)
-                print(f"  drives {case} {drive} {setting}: {wall:.0f} s", flush=True)
-                done.append({"command": "spotsim run " + " ".join(args), "wall_time_s": round(wall, 1),
-                             "exit_code": proc.returncode, "out": str(out.relative_to(ROOT)),
-                             "commit": git("rev-parse", "--short", "HEAD")})
+        for drive, d in DRIVES.items():
+            if only and drive not in only:
+                continue
+            for family in d.families:
+                for setting in d.settings:
+                    out = RESULTS / "drives" / case / drive_dir(drive, setting, family)
+                    shutil.rmtree(out, ignore_errors=True)
+                    keys = [x for k in (*d.sets, *DRIVE_SETTINGS[setting]) for x in ("--set", k)]
+                    args = [f"config/{case}.yaml", "--ensemble", "32", "--seed", "0", "--workers", "2", *keys,
+                            *(["--perturb", family] if family != "all" else []), "--no-error-estimate"]
+                    cmd = [sys.executable, "-m", "spotsim.cli", "run", *args, "--out", str(out.relative_to(ROOT)),
+                           "--quiet"]
+                    t0 = time.perf_counter()
+                    proc = subprocess.run(cmd, cwd=ROOT, stdout=subprocess.DEVNULL)
+                    wall = time.perf_counter() - t0
+                    if proc.returncode not in (0, 1):
+                        raise SystemExit(f"{' '.join(cmd)} exited {proc.returncode}")
+                    (out / "scenario.yaml").unlink(missing_ok=True)
+                    print(f"  drives {case} {drive_dir(drive, setting, family)}: {wall:.0f} s", flush=True)
+                    done.append({"command": "spotsim run " + " ".join(args), "wall_time_s": round(wall, 1),
+                                 "exit_code": proc.returncode, "out": str(out.relative_to(ROOT)),
+                                 "commit": git("rev-parse", "--short", "HEAD")})
     outs = {d["out"] for d in done}
     meta["studies"] = [s for s in meta["studies"] if s.get("out") not in outs] + done
     write_json(RESULTS / "meta.json", meta)
@@ -1482,9 +1516,15 @@ def pages_command() -> None:
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("command", choices=["results", "runs", "ensembles", "spreads", "drives", "envelope", "pages"])
+    parser.add_argument("drives", nargs="*", metavar="DRIVE", help=f"drives: only these ({', '.join(DRIVES)})")
     args = parser.parse_args(argv)
+    if args.drives and args.command != "drives":
+        parser.error("DRIVE names: only with `drives`")
+    if args.command == "drives":
+        drives_command(tuple(args.drives))
+        return
     {"results": results_command, "runs": runs_command, "ensembles": ensembles_command, "spreads": spreads_command,
-     "drives": drives_command, "envelope": envelope_command, "pages": pages_command}[args.command]()
+     "envelope": envelope_command, "pages": pages_command}[args.command]()
 
 
 if __name__ == "__main__":

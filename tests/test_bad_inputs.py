@@ -280,6 +280,11 @@ CORPUS = {
                       ("spotsim sweep: argument --workers: 0: must be >= 1",)),
     "workers without an ensemble": Bad(lambda tmp: ["run", str(CASE_I), "--workers", "2"],
                                        ("--workers: only with --ensemble N",)),
+    "a start family without an ensemble": Bad(lambda tmp: ["run", str(CASE_I), "--perturb", "one_axis"],
+                                              ("--perturb: only with --ensemble N",)),
+    "unknown start family": Bad(lambda tmp: ["run", str(CASE_I), "--ensemble", "2", "--perturb", "diagonal"],
+                                ("spotsim run: argument --perturb: invalid choice: 'diagonal' (choose from 'all', "
+                                 "'one_axis')",)),
     "scheduler without a port": Bad(lambda tmp: ["sweep", str(CASE_I), "--vary", "contact.restitution=0.7,0.8",
                                                  "--scheduler", "nonsense", "--out", str(tmp / "out"), "--quiet"],
                                     ("--scheduler nonsense: cannot connect: missing port number in address "

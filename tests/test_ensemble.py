@@ -11,6 +11,7 @@ from conftest import CASE_I, ROOT
 import spotsim
 from spotsim.assemble.model import with_start
 from spotsim.cli import ensemble_exit, main
+from spotsim.errors import SpotsimError
 from spotsim.studies import ensemble as ens
 from spotsim.studies.ensemble import EnsembleResult, Member, Start, member_scenario, perturbed_starts, run_member
 
@@ -63,6 +64,23 @@ def test_starts_lie_within_the_tolerances(config):
         assert np.all(d_off.max(axis=0) > 0.005) and np.all(d_off.min(axis=0) < -0.005)
         assert np.all(d_rpy.max(axis=0) > 0.01) and np.all(d_rpy.min(axis=0) < -0.01)
 
+
+
+def test_the_one_axis_family_moves_one_coordinate_per_member_in_turn():
+    """In the one_axis family member i moves only coordinate (i - 1) mod 6 of each module, by
+    the draw the all-axes family gives it there; an unknown family is refused."""
+    s = spotsim.load_scenario(ROOT / "config" / "dual_arm_sequential.yaml")
+    every, one = perturbed_starts(s, 14, seed=5), perturbed_starts(s, 14, seed=5, family="one_axis")
+    assert one[0] == every[0]
+    for name, m in spotsim.scenario.modules_of(s).items():
+        nominal = np.array([*m.initial_offset_mm, *m.initial_rpy_deg])
+        for i in range(1, 14):
+            d_one = np.array([*one[i].offsets_mm[name], *one[i].rpy_deg[name]]) - nominal
+            d_all = np.array([*every[i].offsets_mm[name], *every[i].rpy_deg[name]]) - nominal
+            axis = (i - 1) % 6
+            assert np.flatnonzero(d_one).tolist() == [axis] and d_one[axis] == d_all[axis]
+    with pytest.raises(SpotsimError, match="family"):
+        perturbed_starts(s, 3, family="diagonal")
 
 @pytest.mark.parametrize("config", ["single_arm_case_I.yaml", "dual_arm_sequential.yaml"])
 def test_a_start_swapped_into_a_model_is_the_model_built_from_it(config):

@@ -17,6 +17,7 @@ from pathlib import Path
 
 from .errors import ScenarioError, SpotsimError
 from .measures import CAMERA_HZ
+from .studies.ensemble import ALL_AXES, FAMILIES
 
 DEFAULT_SCENARIO = "single_arm_case_I.yaml"
 EXIT = {"completed": 0, "incomplete": 3, "diverged": 4, "interrupted": 130}
@@ -82,6 +83,9 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--seed", type=SEED, default=0, metavar="S", help="with --ensemble: the perturbations' seed "
                                                                       "(default 0)")
     run.add_argument("--workers", type=COUNT, metavar="W", help="with --ensemble: processes (default: CPU count)")
+    run.add_argument("--perturb", choices=FAMILIES, default=ALL_AXES,
+                     help="with --ensemble: which start coordinates a member moves: all (default) or one_axis "
+                          "(member i only the (i-1) mod 6-th of x, y, z, roll, pitch, yaw)")
     run.add_argument("--sample-hz", type=_rate, default=CAMERA_HZ, metavar="HZ",
                      help=f"a dual-arm run's markers.csv: its bodies' displacements sampled at this rate, as a "
                           f"motion camera records them (default {CAMERA_HZ:g} Hz, the SPOT testbed's)")
@@ -528,8 +532,8 @@ def _ensemble(args, scenario, model, path: Path, out: Path) -> int:
         prepare(out, ENSEMBLE_JSON)
     except SpotsimError as err:
         return _bad_input(err)
-    e = ensemble(scenario, args.ensemble, seed=args.seed, workers=args.workers, progress=not args.quiet,
-                 model=model, source=str(path))
+    e = ensemble(scenario, args.ensemble, seed=args.seed, family=args.perturb, workers=args.workers,
+                 progress=not args.quiet, model=model, source=str(path))
     first = e.members[0] if e.members else None
     if not args.no_error_estimate and not e.interrupted and first is not None and first.summary:
         from .studies.estimate import estimate
@@ -544,8 +548,9 @@ def _ensemble(args, scenario, model, path: Path, out: Path) -> int:
         print(f"{out}: cannot write results: {err.strerror}", file=sys.stderr)
         return 2
     counts = ", ".join(f"{k} {v}" for k, v in sorted(e.statuses.items()))
+    family = "" if e.family == ALL_AXES else f", {e.family}"
     print(f"{scenario.name}: ensemble of {len(e.members)} (seed {e.seed}, +-{e.offset_tol_mm:g} mm, "
-          f"+-{e.rpy_tol_deg:g} deg): {counts}")
+          f"+-{e.rpy_tol_deg:g} deg{family}): {counts}")
     print("  median [p10, p90] over the completed members:")
     for line in report_lines(e):
         print(line)
@@ -641,7 +646,8 @@ def main(argv=None) -> int:
                 print(f"  grasp {e['grasp']} {e['column']}: {text} ({e['samples']} markers)")
         return 0
     if args.command == "run" and args.ensemble is None:
-        given = [o for o, v in (("--seed", args.seed != 0), ("--workers", args.workers is not None)) if v]
+        given = [o for o, v in (("--seed", args.seed != 0), ("--workers", args.workers is not None),
+                                ("--perturb", args.perturb != ALL_AXES)) if v]
         if given:
             print(f"{', '.join(given)}: only with --ensemble N", file=sys.stderr)
             return 2

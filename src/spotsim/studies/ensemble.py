@@ -36,6 +36,13 @@ from ..scenario import modules_of, replace
 #: far above the nanometres that already change the outcome.
 OFFSET_TOL_MM = 0.01
 RPY_TOL_DEG = 0.01
+#: Families of perturbed starts: which of a module's six start coordinates (x, y, z, roll,
+#: pitch, yaw) a member moves. `all`: every one; `one_axis`: member i only coordinate (i - 1)
+#: mod 6, so that a result converged over one family is tested on starts of another shape.
+ALL_AXES, ONE_AXIS = "all", "one_axis"
+FAMILIES = {ALL_AXES: "uniform in [-tol, tol] on each of x, y, z and roll, pitch, yaw of each module's start",
+            ONE_AXIS: "uniform in [-tol, tol] on one of x, y, z, roll, pitch, yaw of each module's start, "
+                      "member i on the (i - 1) mod 6-th"}
 
 #: The outcome of a completed grasp: `wedged` when its residual tilt max(|roll|, |pitch|)
 #: exceeds WEDGED_TILT_DEG or its residual offset exceeds WEDGED_OFFSET_MM; else `seated`.
@@ -74,13 +81,19 @@ class Start:
 
 
 def perturbed_starts(scenario, n: int, seed: int = 0, offset_tol_mm: float = OFFSET_TOL_MM,
-                     rpy_tol_deg: float = RPY_TOL_DEG) -> list[Start]:
+                     rpy_tol_deg: float = RPY_TOL_DEG, family: str = ALL_AXES) -> list[Start]:
     """The starts of an ensemble of n members: member 0 the scenario's own, the others each
     module's start plus a uniform draw in [-tol, tol] on each axis (6 draws per module, in the
-    order x, y, z, roll, pitch, yaw, modules in `modules_of` order, member after member)."""
+    order x, y, z, roll, pitch, yaw, modules in `modules_of` order, member after member); in
+    the `one_axis` family (`FAMILIES`) member i keeps only its draw on axis (i - 1) mod 6."""
+    if family not in FAMILIES:
+        raise SpotsimError(f"perturbation family {family!r}: must be one of {', '.join(FAMILIES)}")
     sections = modules_of(scenario)
     rng = np.random.default_rng(seed)
     draws = rng.uniform(-1.0, 1.0, size=(max(n - 1, 0), len(sections), 6))
+    if family == ONE_AXIS:
+        keep = np.arange(6)[None, :] == (np.arange(draws.shape[0]) % 6)[:, None]
+        draws *= keep[:, None, :]
     tol = np.array([offset_tol_mm] * 3 + [rpy_tol_deg] * 3)
     starts = []
     for i in range(n):
@@ -179,6 +192,7 @@ class EnsembleResult:
     interrupted: bool = False
     wall_time_s: float = math.nan
     workers: int = 1
+    family: str = ALL_AXES
     summary: dict = field(init=False)
     error_estimate: dict | None = None  # member 0's (`studies.estimate`), when one was made
 
@@ -199,10 +213,10 @@ class EnsembleResult:
 
 
 def ensemble(scenario, n: int, *, seed: int = 0, offset_tol_mm: float = OFFSET_TOL_MM,
-             rpy_tol_deg: float = RPY_TOL_DEG, workers: int | None = None, progress: bool = False,
-             model=None, source: str = "<scenario>") -> EnsembleResult:
+             rpy_tol_deg: float = RPY_TOL_DEG, family: str = ALL_AXES, workers: int | None = None,
+             progress: bool = False, model=None, source: str = "<scenario>") -> EnsembleResult:
     """Run `scenario` from n starts, member 0 unperturbed and the others perturbed within the
-    tolerances (`perturbed_starts`), in `workers` processes (default: os.cpu_count(); 1 runs
+    tolerances on the axes of `family` (`perturbed_starts`), in `workers` processes (default: os.cpu_count(); 1 runs
     them here, one after the other).
 
     model: the scenario's Model if already built (each worker process otherwise builds it once).
@@ -228,7 +242,7 @@ def ensemble(scenario, n: int, *, seed: int = 0, offset_tol_mm: float = OFFSET_T
         model = build_model(scenario, source)
     elif model.scenario != scenario:
         raise SpotsimError("ensemble: `model` was built from another scenario than `scenario`")
-    starts = perturbed_starts(scenario, n, seed, offset_tol_mm, rpy_tol_deg)
+    starts = perturbed_starts(scenario, n, seed, offset_tol_mm, rpy_tol_deg, family)
     members: list[Member | None] = [None] * n
     interrupted = False
     bar = progress_bar(n, progress, what="ensemble", unit="run")
@@ -251,7 +265,7 @@ def ensemble(scenario, n: int, *, seed: int = 0, offset_tol_mm: float = OFFSET_T
     for i, m in enumerate(members):
         if m is None:
             members[i] = Member(i, starts[i], "interrupted", "not run: the ensemble was interrupted")
-    return EnsembleResult(scenario, seed, offset_tol_mm, rpy_tol_deg, members, interrupted, wall, workers)
+    return EnsembleResult(scenario, seed, offset_tol_mm, rpy_tol_deg, members, interrupted, wall, workers, family)
 
 
 def _in_pool(scenario, source, model, starts, members, workers, bar, fork: bool) -> bool:
@@ -430,9 +444,8 @@ def ensemble_json(e: EnsembleResult) -> dict:
         "status": "interrupted" if e.interrupted else "completed",
         "members": len(e.members),
         "seed": e.seed,
-        "perturbation": {"offset_tol_mm": e.offset_tol_mm, "rpy_tol_deg": e.rpy_tol_deg,
-                         "distribution": "uniform in [-tol, tol] on each of x, y, z and roll, pitch, yaw of "
-                                         "each module's start; member 0 unperturbed"},
+        "perturbation": {"offset_tol_mm": e.offset_tol_mm, "rpy_tol_deg": e.rpy_tol_deg, "family": e.family,
+                         "distribution": f"{FAMILIES[e.family]}; member 0 unperturbed"},
         "classification": {"rule": classification_rule(), "wedged_tilt_deg": WEDGED_TILT_DEG,
                            "wedged_offset_mm": WEDGED_OFFSET_MM},
         "statistics_over": "per quantity, the members whose grasp completed (count); classes over the members "
