@@ -7,6 +7,7 @@
     python docs/generate.py drives [DRIVE ...]  # rerun only the drive comparison's ensembles
                                       # (~40 min; only the named drives, if any)
     python docs/generate.py envelope  # rerun only Case I's capture envelopes (about a minute)
+    python docs/generate.py sensitivity  # rerun only the motor-driven grasp's sensitivity study (~5 min)
     python docs/generate.py runs      # rerun all but the ensemble studies (~2 min)
     python docs/generate.py pages     # docs/scenarios.md, and the generated blocks of README.md,
                                       # docs/usage.md, docs/validation.md and docs/performance.md,
@@ -427,6 +428,27 @@ def spreads_command() -> None:
         print(f"  {entry['scenario']}: {entry['about']}")
 
 
+def timed_run(cmd: list[str], shown: str, out: Path, ok: tuple[int, ...] = (0,)) -> dict:
+    """Run cmd (from the checkout's root) and its meta.json entry: `shown` the command as a user
+    types it, out its results directory; an exit code outside `ok` stops the generation."""
+    t0 = time.perf_counter()
+    proc = subprocess.run(cmd, cwd=ROOT, stdout=subprocess.DEVNULL)
+    wall = time.perf_counter() - t0
+    if proc.returncode not in ok:
+        raise SystemExit(f"{' '.join(cmd)} exited {proc.returncode}")
+    return {"command": shown, "wall_time_s": round(wall, 1), "exit_code": proc.returncode,
+            "out": str(out.relative_to(ROOT)), "commit": git("rev-parse", "--short", "HEAD")}
+
+
+def record_studies(done: list[dict]) -> None:
+    """Replace the entries of docs/results/meta.json's studies that `done` reran."""
+    meta = json.loads((RESULTS / "meta.json").read_text())
+    outs = {d["out"] for d in done}
+    meta["studies"] = [s for s in meta["studies"] if s.get("out") not in outs] + done
+    write_json(RESULTS / "meta.json", meta)
+    print(f"results in {RESULTS.relative_to(ROOT)}; now run `{GENERATE} pages`")
+
+
 def drives_command(only: tuple[str, ...] = ()) -> None:
     """Rerun the drive comparison (about 40 min on 2 cores; `only` these drives, if given): every
     case's ensemble with each drive at each setting and start family, into
@@ -435,7 +457,6 @@ def drives_command(only: tuple[str, ...] = ()) -> None:
     unknown = set(only) - set(DRIVES)
     if unknown:
         raise SystemExit(f"unknown drives {', '.join(sorted(unknown))}: choose from {', '.join(DRIVES)}")
-    meta = json.loads((RESULTS / "meta.json").read_text())
     done = []
     for case in DRIVE_CASES:
         for drive, d in DRIVES.items():
@@ -450,20 +471,10 @@ def drives_command(only: tuple[str, ...] = ()) -> None:
                             *(["--perturb", family] if family != "all" else []), "--no-error-estimate"]
                     cmd = [sys.executable, "-m", "spotsim.cli", "run", *args, "--out", str(out.relative_to(ROOT)),
                            "--quiet"]
-                    t0 = time.perf_counter()
-                    proc = subprocess.run(cmd, cwd=ROOT, stdout=subprocess.DEVNULL)
-                    wall = time.perf_counter() - t0
-                    if proc.returncode not in (0, 1):
-                        raise SystemExit(f"{' '.join(cmd)} exited {proc.returncode}")
+                    done.append(timed_run(cmd, "spotsim run " + " ".join(args), out, ok=(0, 1)))
                     (out / "scenario.yaml").unlink(missing_ok=True)
-                    print(f"  drives {case} {drive_dir(drive, setting, family)}: {wall:.0f} s", flush=True)
-                    done.append({"command": "spotsim run " + " ".join(args), "wall_time_s": round(wall, 1),
-                                 "exit_code": proc.returncode, "out": str(out.relative_to(ROOT)),
-                                 "commit": git("rev-parse", "--short", "HEAD")})
-    outs = {d["out"] for d in done}
-    meta["studies"] = [s for s in meta["studies"] if s.get("out") not in outs] + done
-    write_json(RESULTS / "meta.json", meta)
-    print(f"results in {RESULTS.relative_to(ROOT)}; now run `{GENERATE} pages`")
+                    print(f"  drives {case} {out.name}: {done[-1]['wall_time_s']:.0f} s", flush=True)
+    record_studies(done)
 
 
 #: The capture envelope of the default geometry, Case I's scenario, every axis and plane: with
@@ -480,26 +491,35 @@ ENVELOPES = [
 def envelope_command() -> None:
     """Rerun Case I's capture envelopes into docs/results/envelope/NAME/ (envelope.csv and .md;
     the probes' points.jsonl is not kept), stamped in docs/results/meta.json."""
-    meta = json.loads((RESULTS / "meta.json").read_text())
     done = []
     for name, args in ENVELOPES:
         out = RESULTS / "envelope" / name
         shutil.rmtree(out, ignore_errors=True)
         cmd = [sys.executable, "-m", "spotsim.cli", "envelope", *args, "--out", str(out.relative_to(ROOT))]
-        t0 = time.perf_counter()
-        proc = subprocess.run(cmd, cwd=ROOT, stdout=subprocess.DEVNULL)
-        wall = time.perf_counter() - t0
-        if proc.returncode != 0:
-            raise SystemExit(f"{' '.join(cmd)} exited {proc.returncode}")
+        done.append(timed_run(cmd, "spotsim envelope " + " ".join(args), out))
         for f in ("points.jsonl", "envelope.png"):
             (out / f).unlink(missing_ok=True)
-        print(f"  envelope {name}: {wall:.0f} s", flush=True)
-        done.append({"command": "spotsim envelope " + " ".join(args), "wall_time_s": round(wall, 1), "exit_code": 0,
-                     "out": str(out.relative_to(ROOT)), "commit": git("rev-parse", "--short", "HEAD")})
-    outs = {d["out"] for d in done}
-    meta["studies"] = [s for s in meta["studies"] if s.get("out") not in outs] + done
-    write_json(RESULTS / "meta.json", meta)
-    print(f"results in {RESULTS.relative_to(ROOT)}; now run `{GENERATE} pages`")
+        print(f"  envelope {name}: {done[-1]['wall_time_s']:.0f} s", flush=True)
+    record_studies(done)
+
+
+#: The sensitivity study of the motor-driven grasp (examples/sensitivity.py): its results, and its
+#: tornado chart, which docs/validation.md shows.
+SENSITIVITY_ARGS = ["--members", "32", "--workers", "2"]
+SENSITIVITY_FIGURE = ROOT / "docs" / "images" / "sensitivity_tornado.png"
+
+
+def sensitivity_command() -> None:
+    """Rerun the sensitivity study (about 5 min on 2 cores) into docs/results/sensitivity/
+    (sensitivity.csv) and its chart into docs/images/, stamped in docs/results/meta.json."""
+    out = RESULTS / "sensitivity"
+    shutil.rmtree(out, ignore_errors=True)
+    args = [*SENSITIVITY_ARGS, "--out", str(out.relative_to(ROOT)),
+            "--figure", str(SENSITIVITY_FIGURE.relative_to(ROOT))]
+    script = "examples/sensitivity.py"
+    done = timed_run([sys.executable, script, *args], f"python {script} " + " ".join(args), out)
+    print(f"  sensitivity: {done['wall_time_s']:.0f} s", flush=True)
+    record_studies([done])
 
 
 # ------------------------------------------------------------------------------ reading results
@@ -539,6 +559,10 @@ class Results:
         self.accuracy_ensemble_md = {p.parent.name: p.read_text() for p in sorted(ens.glob("*/accuracy_ensemble.md"))}
         self.drives = {(p.parent.parent.name, p.parent.name): json.loads(p.read_text())
                        for p in sorted((root / "drives").glob("*/*/ensemble.json"))}
+        self.drive_members = {(p.parent.parent.name, p.parent.name): read_csv(p)
+                              for p in sorted((root / "drives").glob("*/*/members.csv"))}
+        sensitivity = root / "sensitivity" / "sensitivity.csv"
+        self.sensitivity = read_csv(sensitivity) if sensitivity.exists() else None
         speed = root / "speed.md"
         self.speed = speed.read_text() if speed.exists() else None
 
@@ -1116,7 +1140,7 @@ def drives_table(r: Results) -> str:
     for case in DRIVE_CASES:
         for setting in DRIVE_SETTINGS:
             for drive in DRIVES:
-                e = r.drives.get((case, f"{drive}_{setting}"))
+                e = r.drives.get((case, drive_dir(drive, setting)))
                 if e is None:
                     continue
                 for grasp, st in e["statistics"].items():
@@ -1135,6 +1159,135 @@ def drives_table(r: Results) -> str:
             "again at more than half its closing speed after it had stopped. Default: adaptive Euler at its "
             "default tolerance; fine: symplectic Euler at 3.125 µs. Relay every step: the relay reading the "
             "load at every integration step instead of every `control_period_s`.\n\n" + table(header, rows))
+
+
+#: The motor drive's convergence checks (issue 39's targets): (label, tested, reference, targets),
+#: each ensemble a (drive, setting). `period`: the speed loop's period divided by ten moves no
+#: median by more than PERIOD_MEDIAN_REL (peak force, residual, completion time, the robot's
+#: centroid displacement) and no seated share out of the other's 90 % interval; `reference`: the
+#: ensemble accuracy studies' targets (`studies.accuracy_ensemble.compare`).
+MOTOR_CHECKS = (("speed loop 0.4 → 0.04 ms", ("motor", "default"), ("motor_loop_tenth", "default"), "period"),
+                ("default against fine (3.125 µs)", ("motor", "default"), ("motor", "fine"), "reference"),
+                ("fine against finer (0.78 µs)", ("motor", "fine"), ("motor", "finer"), "reference"))
+PERIOD_MEDIAN_REL = 0.03
+
+
+def share_interval(k: int, n: int, level: float = 0.9) -> tuple[float, float]:
+    """The Clopper-Pearson interval of a share k/n at `level`."""
+    from scipy.stats import beta
+
+    a = (1.0 - level) / 2
+    return (0.0 if k == 0 else float(beta.ppf(a, k, n - k + 1)),
+            1.0 if k == n else float(beta.ppf(1.0 - a, k + 1, n - k)))
+
+
+def motor_check_rows(rows: list[dict], ref_rows: list[dict], dual: bool) -> list[dict]:
+    """Per grasp, the motor's tested ensemble (member rows) against its reference: the ensemble
+    accuracy studies' comparison (`compare`) with the completion time's median difference, the
+    peak force's KS p-value and the seated share's 90 % interval of the reference, and the
+    period check's verdicts."""
+    from spotsim.studies.accuracy_ensemble import compare, ks_pvalue, median_rel, median_rel_error
+    from spotsim.studies.ensemble import grasp_prefix
+
+    n_grasps = 2 if dual else 1
+    c = compare(rows, ref_rows, n_grasps, dual)
+    out = []
+    for g in range(n_grasps):
+        p = grasp_prefix(g, n_grasps)
+        x = {k[len(p):]: v for k, v in c.items() if k.startswith(p)} if p else dict(c)
+        members = {row["member"] for row in rows}
+        ref = [row for row in ref_rows if row["member"] in members]
+        x["completion_median_rel"] = median_rel([row[f"{p}completed_s"] for row in rows],
+                                                [row[f"{p}completed_s"] for row in ref])
+        x["completion_median_rel_error"] = median_rel_error([row[f"{p}completed_s"] for row in rows],
+                                                            [row[f"{p}completed_s"] for row in ref])
+        x["peak_force_ks_p"] = ks_pvalue([row[f"{p}peak_force_norm_N"] for row in rows],
+                                         [row[f"{p}peak_force_norm_N"] for row in ref])
+        ran = [row for row in ref if row["status"] != "interrupted"]
+        k = sum(row[f"{p}class"] == "seated" for row in ran)
+        x["seated_interval"] = share_interval(k, len(ran)) if ran else (math.nan, math.nan)
+        medians = [x["peak_force_median_rel"], x["residual_median_rel"], x["completion_median_rel"]]
+        if dual:
+            medians.append(x["centroid_median_rel"])
+        x["largest_median_rel"] = max(abs(m) for m in medians)
+        lo, hi = x["seated_interval"]
+        x["seated_within"] = lo <= x["seated"] <= hi
+        x["grasp"] = g + 1
+        out.append(x)
+    return out
+
+
+def motor_convergence_table(r: Results) -> str:
+    """The motor drive's convergence (issue 39): per case and start family, the speed loop's
+    period divided by ten, and the default and its fine reference against finer steps, from the
+    drive comparison's ensembles (docs/results/drives/)."""
+    rows = []
+    for case in DRIVE_CASES:
+        dual = case.startswith("dual")
+        for family in DRIVES["motor"].families:
+            for label, tested, reference, kind in MOTOR_CHECKS:
+                a = r.drive_members.get((case, drive_dir(*tested, family)))
+                b = r.drive_members.get((case, drive_dir(*reference, family)))
+                if a is None or b is None:
+                    continue
+                for x in motor_check_rows(a, b, dual):
+                    if kind == "period":
+                        within = x["largest_median_rel"] <= PERIOD_MEDIAN_REL
+                        verdict = (f"medians {'within' if within else 'NOT within'} 3 %; seated share "
+                                   f"{'within' if x['seated_within'] else 'NOT within'} the other's 90 % interval")
+                    else:
+                        verdict = "meets the targets" if x["meets_targets"] else "does NOT meet the targets"
+                    rows.append([case.replace("single_arm_", "").replace("_", " "), family.replace("_", " "), label,
+                                 str(x["grasp"]) if dual else "–",
+                                 f"{num(x['peak_force_median_N'])}: {rel_error(x, 'peak_force_median_rel')}",
+                                 rel_error(x, "peak_force_paired_rel"), num(x["peak_force_ks_p"], 2),
+                                 f"{num(x['residual_median_mm'])}: {rel_error(x, 'residual_median_rel')}",
+                                 num(x["residual_ks_p"], 2), rel_error(x, "completion_median_rel"),
+                                 rel_error(x, "centroid_median_rel") if dual else "–",
+                                 f"{x['seated'] * 100:.0f} % [{x['seated_interval'][0] * 100:.0f}, "
+                                 f"{x['seated_interval'][1] * 100:.0f}]", verdict])
+    if not rows:
+        return (f"No motor convergence ensembles in docs/results/drives/: run `{GENERATE} drives motor "
+                "motor_loop_tenth`.")
+    header = ["case", "starts", "compared", "grasp", "peak force (N): median, its difference", "member by member",
+              "peak force KS p", "residual e (mm): median, its difference", "residual KS p", "completion time",
+              "robot centroid displacement", "seated [the other's 90 % interval]", "verdict"]
+    return ("Each row: 32 members (seed 0) of the motor drive's first setting against the same starts of the "
+            "second; differences are relative, with their bootstrap sampling error. Starts: all (every start "
+            "coordinate perturbed) or one axis (member i only the (i − 1) mod 6-th). Targets: the speed loop's "
+            f"period divided by ten moves no median by more than {PERIOD_MEDIAN_REL * 100:.0f} %; against a finer "
+            "step, the ensemble accuracy studies' (peak forces member by member within 2 %, residual medians within "
+            "5 %, residual KS p > 0.05).\n\n" + table(header, rows))
+
+
+def sensitivity_table(r: Results) -> str:
+    """The motor-driven grasp's sensitivity (examples/sensitivity.py, docs/results/sensitivity/):
+    per parameter, each quantity's median at its low and high setting and the change from the
+    default's, next to the default's sampling error."""
+    if not r.sensitivity:
+        return f"No sensitivity study in docs/results/sensitivity/: run `{GENERATE} sensitivity`."
+    quantities = (("peak_force_norm_N", "peak force (N)", 3), ("residual_norm_mm", "residual e (mm)", 2),
+                  ("completed_s", "completion time (s)", 3))
+    base = next(x for x in r.sensitivity if x["side"] == "default")
+
+    def cell(x, q, digits):
+        return f"{num(x[f'{q}_median'], digits)} ({pct(x[f'{q}_median'], base[f'{q}_median'])})"
+
+    def error(q, digits):
+        return f"{num(base[f'{q}_median'], digits)} (± {rel(base[f'{q}_median_error'] / base[f'{q}_median'])})"
+
+    rows = [["default", "–", *(error(q, d) for q, _, d in quantities),
+             f"{int(base['completed'])} of {int(base['members'])}"]]
+    for x in r.sensitivity:
+        if x["side"] != "default":
+            rows.append([x["parameter"], x["side"], *(cell(x, q, d) for q, _, d in quantities),
+                         f"{int(x['completed'])} of {int(x['members'])}"])
+    return (f"Case I with the motor drive, {int(base['members'])} perturbed starts (seed 0) per setting, one "
+            "parameter moved at a time. Each cell: the median over the completed members, and in brackets its "
+            "change from the default's; the default's row gives its median's sampling error (one bootstrap "
+            "standard error): a change within about two of them is not resolved.\n\n"
+            + table(["parameter", "setting", *(label for _, label, _ in quantities), "completed"], rows)
+            + "\n\n![Tornado chart of the sensitivity study](images/sensitivity_tornado.png)")
 
 
 def envelope_table(r: Results) -> str:
@@ -1472,6 +1625,8 @@ RENDER = {
     "accuracy-dual-arm": lambda r: accuracy_table(r, "dual_arm_sequential"),
     "accuracy-ensembles": accuracy_ensembles_table,
     "drives-table": drives_table,
+    "motor-convergence-table": motor_convergence_table,
+    "sensitivity-table": sensitivity_table,
     "estimate-table": estimate_table,
     "typical-spreads": spreads_table,
     "stability-table": stability_table,
@@ -1515,7 +1670,8 @@ def pages_command() -> None:
 
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("command", choices=["results", "runs", "ensembles", "spreads", "drives", "envelope", "pages"])
+    parser.add_argument("command", choices=["results", "runs", "ensembles", "spreads", "drives", "envelope",
+                                            "sensitivity", "pages"])
     parser.add_argument("drives", nargs="*", metavar="DRIVE", help=f"drives: only these ({', '.join(DRIVES)})")
     args = parser.parse_args(argv)
     if args.drives and args.command != "drives":
@@ -1524,7 +1680,7 @@ def main(argv=None) -> None:
         drives_command(tuple(args.drives))
         return
     {"results": results_command, "runs": runs_command, "ensembles": ensembles_command, "spreads": spreads_command,
-     "envelope": envelope_command, "pages": pages_command}[args.command]()
+     "envelope": envelope_command, "sensitivity": sensitivity_command, "pages": pages_command}[args.command]()
 
 
 if __name__ == "__main__":
