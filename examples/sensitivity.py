@@ -1,7 +1,7 @@
 """What a motor-driven grasp depends on: one parameter at a time, Case I's peak force, residual
 offset and completion time, as a tornado chart.
 
-    python examples/sensitivity.py [--members N] [--out DIR] [--workers W] [--figure PNG]
+    python examples/sensitivity.py [--members N] [--out DIR] [--workers W] [--figure PNG] [--quick]
 
 Case I with the motor drive (`end_effector.drive: motor`) at the default integrator, each
 parameter set to a low and a high value with every other at its default: the drive's reflected
@@ -12,9 +12,11 @@ Young's modulus of both parts). Each setting is an ensemble of N perturbed start
 same starts for every setting): a grasp's peak force and residual offset are distributions
 over microscopic start perturbations, not numbers. Writes sensitivity.csv (per setting, each
 quantity's median, 10th and 90th percentiles and the median's bootstrap sampling error) and the
-tornado chart (the medians' change from the default's, per cent, the default's sampling error
+tornado chart (each median over the default's, on a log scale, the default's sampling error
 shaded). An interrupted study keeps the settings it finished; started again over the same
 --out it runs only those it lacks.
+
+--quick: the current limit and the restitution only, from the unperturbed start alone (seconds).
 """
 
 from __future__ import annotations
@@ -53,10 +55,13 @@ COLUMNS = ["parameter", "side", "sets", "members", "completed"] + [
     f"{q}_{s}" for q, _, _ in QUANTITIES for s in ("median", "p10", "p90", "median_error")]
 
 
-def settings() -> list[tuple[str, str, list[str]]]:
-    """(parameter, side, --sets) of every setting, the default first."""
+QUICK = ("current limit ±50 %", "restitution 0.5, 0.95")
+
+
+def settings(parameters=PARAMETERS) -> list[tuple[str, str, list[str]]]:
+    """(parameter, side, --sets) of every setting of `parameters`, the default first."""
     out = [("default", "default", [])]
-    for label, keys in PARAMETERS:
+    for label, keys in parameters:
         for side, i in (("low", 1), ("high", 2)):
             out.append((label, side, [f"{k[0]}={k[i]!r}" for k in keys]))
     return out
@@ -82,7 +87,7 @@ def row(parameter: str, side: str, sets: list[str], e) -> dict:
     return out
 
 
-def run(out: Path, members: int, workers: int | None) -> list[dict]:
+def run(out: Path, members: int, workers: int | None, parameters=PARAMETERS) -> list[dict]:
     """Every setting's ensemble, resuming over out/sensitivity.csv."""
     path = out / "sensitivity.csv"
     done = {}
@@ -91,7 +96,7 @@ def run(out: Path, members: int, workers: int | None) -> list[dict]:
             done = {(r["parameter"], r["side"]): r for r in csv.DictReader(f)}
     out.mkdir(parents=True, exist_ok=True)
     rows = []
-    for parameter, side, sets in settings():
+    for parameter, side, sets in settings(parameters):
         if (parameter, side) in done and int(done[(parameter, side)]["members"]) == members:
             rows.append({k: (v if k in ("parameter", "side", "sets") else float(v))
                          for k, v in done[(parameter, side)].items()})
@@ -111,35 +116,40 @@ def run(out: Path, members: int, workers: int | None) -> list[dict]:
     return rows
 
 
-def tornado(rows: list[dict], path: Path) -> None:
-    """Per quantity, each parameter's low and high medians as a change from the default's
-    median (per cent), the default's sampling error (two standard errors) shaded."""
+def tornado(rows: list[dict], path: Path, parameters=PARAMETERS) -> None:
+    """Per quantity, each parameter's low and high medians over the default's median (a log
+    scale: a factor either way reads alike), the default's sampling error (two standard
+    errors) shaded."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     base = next(r for r in rows if r["side"] == "default")
-    labels = [p for p, _ in PARAMETERS]
-    fig, panels = plt.subplots(1, len(QUANTITIES), figsize=(5.2 * len(QUANTITIES), 0.5 * len(labels) + 1.6),
+    labels = [p for p, _ in parameters]
+    fig, panels = plt.subplots(1, len(QUANTITIES), figsize=(5.2 * len(QUANTITIES), 0.55 * len(labels) + 1.6),
                                sharey=True)
     for ax, (q, name, unit) in zip(panels, QUANTITIES):
         b = base[f"{q}_median"]
         for i, label in enumerate(labels):
-            for side, colour in (("low", "tab:blue"), ("high", "tab:red")):
+            for side, colour, dy in (("low", "tab:blue", -0.2), ("high", "tab:red", 0.2)):
                 r = next(x for x in rows if x["parameter"] == label and x["side"] == side)
-                change = 100 * (r[f"{q}_median"] / b - 1)
-                ax.barh(i, change, color=colour, alpha=0.75, label=side if i == 0 else None)
-        noise = 200 * base[f"{q}_median_error"] / b
-        ax.axvspan(-noise, noise, color="0.85", zorder=0, label="default ± 2 sampling errors")
-        ax.axvline(0, color="k", lw=0.8)
+                ratio = r[f"{q}_median"] / b
+                ax.barh(i + dy, ratio - 1.0, left=1.0, height=0.4, color=colour, alpha=0.8,
+                        label=side if i == 0 else None)
+        noise = 2 * base[f"{q}_median_error"] / b
+        if math.isfinite(noise):  # one member has no sampling error
+            ax.axvspan(max(1 - noise, 1e-3), 1 + noise, color="0.85", zorder=0, label="default ± 2 sampling errors")
+        ax.axvline(1.0, color="k", lw=0.8)
+        ax.set_xscale("log")
         ax.set_title(f"{name}: default {b:.3g} {unit}")
-        ax.set_xlabel("change of the median (%)")
+        ax.set_xlabel("median / the default's median")
         ax.set_yticks(range(len(labels)), labels)
     panels[0].invert_yaxis()
-    panels[0].legend(loc="lower left", fontsize=8)
+    handles, names = panels[0].get_legend_handles_labels()
+    fig.legend(handles, names, loc="lower center", ncol=3, fontsize=9)
     fig.suptitle(f"Case I, motor drive: one parameter at a time, {int(base['members'])} perturbed starts each")
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0.06, 1, 1))
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -147,14 +157,17 @@ def tornado(rows: list[dict], path: Path) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--members", type=int, default=32)
+    ap.add_argument("--members", type=int, help="perturbed starts per setting (default 32; --quick: 1)")
     ap.add_argument("--out", type=Path, default=Path("results/sensitivity"))
     ap.add_argument("--workers", type=int)
     ap.add_argument("--figure", type=Path, help="the tornado chart (default OUT/sensitivity.png)")
+    ap.add_argument("--quick", action="store_true")
     args = ap.parse_args()
-    rows = run(args.out, args.members, args.workers)
+    parameters = [p for p in PARAMETERS if p[0] in QUICK] if args.quick else PARAMETERS
+    members = args.members or (1 if args.quick else 32)
+    rows = run(args.out, members, args.workers, parameters)
     figure = args.figure or args.out / "sensitivity.png"
-    tornado(rows, figure)
+    tornado(rows, figure, parameters)
     print(f"{args.out / 'sensitivity.csv'}\n{figure}")
 
 

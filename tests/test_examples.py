@@ -32,7 +32,7 @@ def numbers(text):
 def test_every_example_is_tested():
     """Each example has a test below that runs it (and opens with a docstring saying how)."""
     tested = {"case_I_from_python.py", "compare_searches.py", "design_sweep.py", "dual_arm_sequential.py",
-              "sphere_layers.py"}
+              "sensitivity.py", "sphere_layers.py"}
     assert {p.name for p in EXAMPLES} == tested
     for path in EXAMPLES:
         assert path.read_text().startswith('"""'), path.name
@@ -105,3 +105,27 @@ def test_design_sweep_example_prints_each_geometrys_envelope_and_run(tmp_path):
         grasp = spotsim.simulate(spotsim.load_scenario(CASE_I, sets)).grasp
         residual = float(re.search(r"residual ([\d.]+) mm", line).group(1))
         assert residual == pytest.approx(grasp["residual_offset_norm_mm"], abs=PRINTED["mm4"])
+
+
+def test_sensitivity_example_writes_each_settings_run_and_its_chart(tmp_path):
+    """The quick sensitivity study: from the unperturbed start alone, each setting's row is the
+    motor-driven Case I run with that parameter moved, simulated here; started again over the
+    same directory it runs nothing."""
+    import csv
+
+    out = run(ROOT / "examples" / "sensitivity.py", "--quick", "--out", str(tmp_path), "--workers", "1")
+    with (tmp_path / "sensitivity.csv").open(newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert [(r["parameter"], r["side"]) for r in rows] == [
+        ("default", "default"), ("current limit ±50 %", "low"), ("current limit ±50 %", "high"),
+        ("restitution 0.5, 0.95", "low"), ("restitution 0.5, 0.95", "high")]
+    assert (tmp_path / "sensitivity.png").exists() and len(out.splitlines()) == 7
+    for r in rows[::2]:
+        sets = ["end_effector.drive=motor", *r["sets"].split()]
+        summary = spotsim.simulate(spotsim.load_scenario(CASE_I, sets)).summary
+        grasp = summary["grasps"][0]
+        assert float(r["peak_force_norm_N_median"]) == grasp["peak_force_norm_N"]
+        assert float(r["residual_norm_mm_median"]) == grasp["residual_offset_norm_mm"]
+        assert float(r["completed_s_median"]) == grasp["completed_s"]
+    again = run(ROOT / "examples" / "sensitivity.py", "--quick", "--out", str(tmp_path), "--workers", "1")
+    assert len(again.splitlines()) == 2  # the CSV and the chart: no setting ran
