@@ -250,14 +250,18 @@ def _root_columns(kind, R, p, X):
 
 
 @njit
-def _articulated(m, d, b, bias, out):
+def _articulated(m, d, b, bias, out, inertias=True):
     """Branch b by the articulated-body algorithm in the world frame, at the kinematics of the
     last `kinematics` (d.R_W ...): its joints' accelerations into out (nv,).
 
     bias: the velocity products, gravity, the contact wrenches and the joint forces act, and
     prescribed joints accelerate as w_given (zero); else none acts, and out is the branch's
     response to prescribed velocity changes w_given (an impulse: M dv = S^T lambda on the
-    prescribed joints) and to the joint forces d.work.unit on the others."""
+    prescribed joints) and to the joint forces d.work.unit on the others.
+
+    inertias=False (not with bias): the articulated inertias, the subspaces and U, D are those
+    the last pass over branch b left in d.work, which must have been made at the same
+    kinematics; they depend on no force, so only the forces' recursion runs again."""
     t, br, w = m.tree, m.branches, d.work
     q, v, f_local = d.q, d.v, d.loads.f_local
     R_W, p_W, w_W, vo_W = d.R_W, d.p_W, d.w_W, d.vo_W
@@ -268,6 +272,11 @@ def _articulated(m, d, b, bias, out):
     # pass 1, root to leaves: each body's inertia and bias force, each joint's subspace
     for i in range(br.first[b], br.stop[b]):
         j = br.members[i]
+        for a in range(6):
+            w_c[j, a] = 0.0
+            w_pA[j, a] = 0.0
+        if not inertias:
+            continue
         R = R_W[j]
         p = (p_W[j, 0], p_W[j, 1], p_W[j, 2])
         c = add3(p, mv3(R, t.lever[j]))
@@ -281,9 +290,6 @@ def _articulated(m, d, b, bias, out):
             lin, ang = (ax, (0.0, 0.0, 0.0)) if t.kind[j] == PRISMATIC else (cross3(p, ax), ax)
             for a in range(3):
                 w_S[j, a], w_S[j, 3 + a] = lin[a], ang[a]
-        for a in range(6):
-            w_c[j, a] = 0.0
-            w_pA[j, a] = 0.0
         if not (t.prescribed[j] and t.leaf[j]):
             for a in range(6):
                 for k in range(6):
@@ -324,7 +330,8 @@ def _articulated(m, d, b, bias, out):
             acc_a = (w_c[j, 3] + g * w_S[j, 3], w_c[j, 4] + g * w_S[j, 4], w_c[j, 5] + g * w_S[j, 5])
             if t.leaf[j]:  # a rigid body
                 f, tau = _rigid_times(t.mass[j], w_centroid_W[j], w_inertia_W[j], acc_l, acc_a)
-                _add_rigid(w_IA[par], t.mass[j], w_centroid_W[j], w_inertia_W[j])
+                if inertias:
+                    _add_rigid(w_IA[par], t.mass[j], w_centroid_W[j], w_inertia_W[j])
                 for a in range(3):
                     w_pA[par, a] += w_pA[j, a] + f[a]
                     w_pA[par, 3 + a] += w_pA[j, 3 + a] + tau[a]
@@ -334,30 +341,33 @@ def _articulated(m, d, b, bias, out):
                 for k in range(3):
                     x += w_IA[j, a, k] * acc_l[k] + w_IA[j, a, 3 + k] * acc_a[k]
                 w_pA[par, a] += x
-                for k in range(6):
-                    w_IA[par, a, k] += w_IA[j, a, k]
+                if inertias:
+                    for k in range(6):
+                        w_IA[par, a, k] += w_IA[j, a, k]
             continue
-        for a in range(6):
-            x = 0.0
-            for k in range(6):
-                x += w_IA[j, a, k] * w_S[j, k]
-            w_U[j, a] = x
-        D = _dot6(w_S[j], w_U[j]) + t.armature[iv]
+        if inertias:
+            for a in range(6):
+                x = 0.0
+                for k in range(6):
+                    x += w_IA[j, a, k] * w_S[j, k]
+                w_U[j, a] = x
+            w_D[j] = _dot6(w_S[j], w_U[j]) + t.armature[iv]
+        D = w_D[j]
         if bias:
             tau = d.tau[iv] - t.stiffness[iv] * (q[t.idx_q[j]] - t.rest[iv]) - t.damping[iv] * v[iv]
         else:
             tau = w.unit[iv]
-        w_D[j] = D
         w_u[j] = tau - _dot6(w_S[j], w_pA[j])
         if par == 0:
             continue
-        # to the parent: IA - U U^T / D, and pA + Ia c + U u / D
+        # to the parent: IA - U U^T / D, and pA + Ia c + U u / D (without inertias, c is zero)
         for a in range(6):
             x = w_pA[j, a] + w_U[j, a] * w_u[j] / D
-            for k in range(6):
-                Ia = w_IA[j, a, k] - w_U[j, a] * w_U[j, k] / D
-                x += Ia * w_c[j, k]
-                w_IA[par, a, k] += Ia
+            if inertias:
+                for k in range(6):
+                    Ia = w_IA[j, a, k] - w_U[j, a] * w_U[j, k] / D
+                    x += Ia * w_c[j, k]
+                    w_IA[par, a, k] += Ia
             w_pA[par, a] += x
     # pass 3, root to leaves: accelerations
     for i in range(br.first[b], br.stop[b]):
@@ -567,7 +577,8 @@ def apply_screw(m, d, ee, r1, r2, force):
 def transmissions(m, d):
     """The motor drives' forces on their fingers, by their transmissions' states, added to the
     accelerations d.a of the articulated-body algorithm (which left them out), with the finger
-    joints' responses (d.response) that their controllers' events use."""
+    joints' responses (d.response) that their controllers' events use. Called right after the
+    articulated-body pass over the fingers' branch, whose inertias the responses reuse."""
     p = m.drives
     for ee in range(p.law.shape[0]):
         if p.law[ee] != MOTOR:
@@ -579,20 +590,22 @@ def transmissions(m, d):
             j = m.actuators.joint[r]
             d.drive_free[r] = d.a[m.tree.idx_v[j]]
             d.drive_force[r] = 0.0
-            joint_response(m, d, j, d.response[r])
+            joint_response(m, d, j, d.response[r], False)  # the same frames as the pass just made
         apply_screw(m, d, ee, r1, r2, screw_force(m, d, ee, r1, r2))
 
 
 @njit
-def joint_response(m, d, j, out):
+def joint_response(m, d, j, out, inertias=True):
     """out (nv,): M^-1 e_j, the accelerations that a unit force on one-dof joint j gives its
     branch (zero elsewhere), or the velocity change a unit impulse on it gives; at the frames
-    of the last `kinematics`. Its rows for two joints are the joints' block of M^-1."""
+    of the last `kinematics`. Its rows for two joints are the joints' block of M^-1.
+    inertias=False: reuse the articulated inertias of the last pass over j's branch, made at
+    those frames (`_articulated`)."""
     t = m.tree
     iv = t.idx_v[j]
     out[:] = 0.0
     d.work.unit[iv] = 1.0
-    _articulated(m, d, t.branch[j], False, out)
+    _articulated(m, d, t.branch[j], False, out, inertias)
     d.work.unit[iv] = 0.0
 
 
