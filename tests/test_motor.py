@@ -6,13 +6,13 @@ import math
 
 import numpy as np
 import pytest
-from conftest import CASE_I
+from conftest import CASE_I, ROOT
 
 import spotsim
 from spotsim.assemble.model import motor_drive, screw_efficiencies
 from spotsim.run import Stepper
 from spotsim.sim.actuation import motor_closing, transmission_events
-from spotsim.sim.dynamics import accelerations
+from spotsim.sim.dynamics import accelerations, joint_response
 from spotsim.sim.tree import kinematics
 from spotsim.tables import BACKWARD, FORWARD, STUCK
 
@@ -180,3 +180,26 @@ def test_the_motor_block_counts_in_a_scenarios_fingerprint_only_under_the_motor_
         return fingerprint(spotsim.load_scenario(CASE_I, list(sets)))
     assert key() == key("end_effector.motor.gear_ratio=5")
     assert key("end_effector.drive=motor") != key("end_effector.drive=motor", "end_effector.motor.gear_ratio=5")
+
+
+@pytest.mark.parametrize("config", ["single_arm_case_I.yaml", "dual_arm_sequential.yaml"])
+def test_the_fingers_responses_reusing_the_last_pass_are_those_of_a_whole_pass(config):
+    """A finger joint's response to a unit force (M^-1's column) taken from the articulated
+    inertias of the pass `accelerations` just made is, to the bit, that of a whole pass of
+    its own, in contact and with the fingers moving."""
+    model = spotsim.build_model(spotsim.load_scenario(ROOT / "config" / config, ["end_effector.drive=motor"]))
+    stepper = Stepper(model)
+    d, m = stepper.data, model.sim
+    while not len(d.contacts.key) and d.t < 2.0:
+        stepper.step(1e-4)
+    for _ in range(50):
+        stepper.step(1e-5)
+    assert len(d.contacts.key) and np.any(d.v[finger_dofs(model)] != 0.0)
+    kinematics(m, d)
+    accelerations(m, d)
+    for j in m.actuators.joint:
+        reused, whole = np.empty(len(d.v)), np.empty(len(d.v))
+        joint_response(m, d, j, reused, False)
+        joint_response(m, d, j, whole)
+        assert np.array_equal(reused, whole)
+        assert reused[m.tree.idx_v[j]] > 0.0
