@@ -2,7 +2,7 @@
 comparison with another revision alternating in one process.
 
     python benchmarks/speed.py [--cases I II III dual] [--repeat N] [--window STEPS]
-                               [--ensemble N] [--against REV [--rounds N]]
+                               [--ensemble N] [--against REV [--rounds N]] [--set KEY=VALUE ...]
 
 In one run of this script, for each scenario:
 
@@ -20,6 +20,9 @@ In one run of this script, for each scenario:
 4. with --against REV: the whole default runs of this checkout and of revision REV (its
    src/spotsim imported as `spotsim_base`), alternating, ROUNDS pairs: the median of the
    paired ratios REV / this (above 1: this checkout is faster) and their quartiles.
+
+--set overrides a key of every scenario run (both revisions' with --against), as `spotsim run
+--set` does: `--set end_effector.drive=motor` times the motor drive.
 
 Wall times are those of a machine that may be busy: the ratios of item 4 are what holds.
 """
@@ -143,9 +146,9 @@ def import_revision(rev: str):
     return spotsim_base
 
 
-def alternate(base, config: Path, rounds: int) -> dict:
+def alternate(base, config: Path, rounds: int, sets: list[str] = ()) -> dict:
     """Whole default runs of `base` and of this checkout, alternating: the ratios base / this."""
-    sb, sn = base.load_scenario(config), spotsim.load_scenario(config)
+    sb, sn = base.load_scenario(config, list(sets)), spotsim.load_scenario(config, list(sets))
     mb, mn = base.build_model(sb), spotsim.build_model(sn)
     for _ in range(2):
         base.simulate(sb, model=mb), spotsim.simulate(sn, model=mn)
@@ -168,13 +171,17 @@ def main() -> None:
     parser.add_argument("--ensemble", type=int, default=32, metavar="N", help="members of the timed Case I ensemble")
     parser.add_argument("--against", metavar="REV", help="also alternate whole runs with this git revision")
     parser.add_argument("--rounds", type=int, default=15, metavar="N", help="pairs of alternating runs")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                        help="override a key of every scenario run (repeatable)")
     args = parser.parse_args()
+    sets = args.set
 
     print(f"machine: {cpu_name()}, {len(os.sched_getaffinity(0))} cores; Python {platform.python_version()}, "
-          f"Pinocchio {pin.__version__}, numba {__import__('numba').__version__}; spotsim at {head_commit()}")
+          f"Pinocchio {pin.__version__}, numba {__import__('numba').__version__}; spotsim at {head_commit()}"
+          + (f"; --set {' '.join(sets)}" if sets else ""))
     rows = []
     for name in args.cases:
-        scenario = spotsim.load_scenario(ROOT / "config" / CASES[name])
+        scenario = spotsim.load_scenario(ROOT / "config" / CASES[name], sets)
         best = fastest(scenario, spotsim.build_model(scenario), args.repeat)
         window = contact_window(scenario, args.window)
         step_us = best["wall_time_s"] / best["steps"] * 1e6
@@ -199,7 +206,7 @@ def main() -> None:
               f"{r['literal_us'] / r['step_us']:.0f} |")
 
     if "I" in args.cases:
-        table = integrators(spotsim.load_scenario(ROOT / "config" / CASES["I"]))
+        table = integrators(spotsim.load_scenario(ROOT / "config" / CASES["I"], sets))
         se = table[0]["us_per_evaluation"]
         print("\nCase I at 0.1 ms by integrator (fastest of 3):\n")
         print("| integrator | status | wall s | steps | force evaluations | us per evaluation | per evaluation / "
@@ -212,7 +219,7 @@ def main() -> None:
     if "I" in args.cases and args.ensemble:
         from spotsim.studies.ensemble import ensemble
 
-        scenario = spotsim.load_scenario(ROOT / "config" / CASES["I"])
+        scenario = spotsim.load_scenario(ROOT / "config" / CASES["I"], sets)
         walls = [ensemble(scenario, args.ensemble).wall_time_s for _ in range(3)]
         print(f"\nCase I ensemble of {args.ensemble} on {len(os.sched_getaffinity(0))} cores (fastest of 3): "
               f"{min(walls):.2f} s wall ({', '.join(f'{w:.2f}' for w in sorted(walls))})")
@@ -223,7 +230,7 @@ def main() -> None:
         print("| case | median ratio (base / this) | quartiles | base fastest s | this fastest s |")
         print("| --- | --- | --- | --- | --- |")
         for name in args.cases:
-            a = alternate(base, ROOT / "config" / CASES[name], args.rounds)
+            a = alternate(base, ROOT / "config" / CASES[name], args.rounds, sets)
             print(f"| {name} | {a['median']:.3f} | {a['q1']:.3f}-{a['q3']:.3f} | {a['base_s']:.4f} | "
                   f"{a['this_s']:.4f} |")
 
