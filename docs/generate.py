@@ -1237,12 +1237,12 @@ def motor_check_rows(rows: list[dict], ref_rows: list[dict], dual: bool) -> list
 
     n_grasps = 2 if dual else 1
     c = compare(rows, ref_rows, n_grasps, dual)
+    members = {row["member"] for row in rows}
+    ref = [row for row in ref_rows if row["member"] in members]  # the same starts, as `compare` takes them
     out = []
     for g in range(n_grasps):
         p = grasp_prefix(g, n_grasps)
         x = {k[len(p):]: v for k, v in c.items() if k.startswith(p)} if p else dict(c)
-        members = {row["member"] for row in rows}
-        ref = [row for row in ref_rows if row["member"] in members]
         x["completion_median_rel"] = median_rel([row[f"{p}completed_s"] for row in rows],
                                                 [row[f"{p}completed_s"] for row in ref])
         x["completion_median_rel_error"] = median_rel_error([row[f"{p}completed_s"] for row in rows],

@@ -29,7 +29,8 @@ from pathlib import Path
 import numpy as np
 
 import spotsim
-from spotsim.studies.ensemble import ensemble
+from spotsim.studies.accuracy_ensemble import BOOTSTRAP
+from spotsim.studies.ensemble import SEATED, WEDGED, ensemble, finite
 
 CONFIG = Path(__file__).resolve().parents[1] / "config" / "single_arm_case_I.yaml"
 BASE = ["end_effector.drive=motor"]
@@ -50,7 +51,6 @@ PARAMETERS = [
 #: (members-table column, label, unit) of the quantities charted.
 QUANTITIES = [("peak_force_norm_N", "peak force", "N"), ("residual_norm_mm", "residual offset e", "mm"),
               ("completed_s", "completion time", "s")]
-BOOTSTRAP = 2000
 COLUMNS = ["parameter", "side", "sets", "members", "completed"] + [
     f"{q}_{s}" for q, _, _ in QUANTITIES for s in ("median", "p10", "p90", "median_error")]
 
@@ -76,14 +76,15 @@ def median_error(values: np.ndarray, seed: int = 0) -> float:
 
 
 def row(parameter: str, side: str, sets: list[str], e) -> dict:
-    """The CSV row of one setting's ensemble."""
-    rows = [r for r in e.summary["rows"] if r["class"] in ("seated", "wedged")]
+    """The CSV row of one setting's ensemble: its statistics over the completed members, and
+    each median's sampling error."""
+    rows = [r for r in e.summary["rows"] if r["class"] in (SEATED, WEDGED)]
     out = {"parameter": parameter, "side": side, "sets": " ".join(sets), "members": len(e.members),
            "completed": len(rows)}
     for q, _, _ in QUANTITIES:
-        x = np.array([r[q] for r in rows if r.get(q) is not None and math.isfinite(r[q])], dtype=float)
-        p10, med, p90 = np.percentile(x, (10, 50, 90)) if x.size else (math.nan,) * 3
-        out.update({f"{q}_median": med, f"{q}_p10": p10, f"{q}_p90": p90, f"{q}_median_error": median_error(x)})
+        st = e.statistics["grasp"][q]
+        out.update({f"{q}_{k}": math.nan if st[k] is None else st[k] for k in ("median", "p10", "p90")})
+        out[f"{q}_median_error"] = median_error(finite(r.get(q) for r in rows))
     return out
 
 

@@ -216,8 +216,8 @@ def ensemble(scenario, n: int, *, seed: int = 0, offset_tol_mm: float = OFFSET_T
              rpy_tol_deg: float = RPY_TOL_DEG, family: str = ALL_AXES, workers: int | None = None,
              progress: bool = False, model=None, source: str = "<scenario>") -> EnsembleResult:
     """Run `scenario` from n starts, member 0 unperturbed and the others perturbed within the
-    tolerances on the axes of `family` (`perturbed_starts`), in `workers` processes (default: os.cpu_count(); 1 runs
-    them here, one after the other).
+    tolerances on the axes of `family` (`perturbed_starts`), in `workers` processes (default:
+    os.cpu_count(); 1 runs them here, one after the other).
 
     model: the scenario's Model if already built (each worker process otherwise builds it once).
     Never raises on a member's physics or failure: each is counted with its status. Ctrl-C
