@@ -149,6 +149,13 @@ class DataFields(NamedTuple):
     placed_v: np.ndarray  # (nv,)
     placed_offset: np.ndarray  # (nb, 6)
     fsal_external: np.ndarray  # (6,) its external wrench (force, moment about the origin)
+    # an adaptive Euler step's start, put back after a rejected try, and its tries' rates
+    # (`integrators.adaptive_euler`): kept here, not allocated at every step
+    start_q: np.ndarray  # (nq,)
+    start_v: np.ndarray  # (nv,)
+    start_a: np.ndarray  # (nv,)
+    start_external: np.ndarray  # (6,) the start's external wrench (force, moment about the origin)
+    rates: np.ndarray  # (2, rows of `integrators.error_rates`, 6) at a try's start and end
     # the record rows and replay snapshots of one call of the loop
     rows: np.ndarray  # (ROWS_PER_CALL, width)
     n_rows: int
@@ -225,6 +232,8 @@ def make_data(model, rows: int = ROWS_PER_CALL, start: bool = True) -> Data:
         fsal_dy=np.zeros(state_size(sim.tree, sim.branches)), fsal_external=np.zeros(6),
         placed=np.zeros(1, dtype=np.bool_), placed_q=np.zeros(model.pin_model.nq), placed_v=np.zeros(nv),
         placed_offset=np.zeros((len(sim.branches.joint), 6)),
+        start_q=np.zeros(model.pin_model.nq), start_v=np.zeros(nv), start_a=np.zeros(nv), start_external=np.zeros(6),
+        rates=np.zeros((2, len(sim.integrator.lever), 6)),
         rows=np.zeros((rows, sim.record.width)), n_rows=0, row_index=0,
         snapshots=Snapshots(row=ints(snap_cap), pairs=ints(snap_cap), force_W=np.zeros((snap_cap, n_mod, 3)),
                             master=ints(64), slave=ints(64), state=ints(64)),

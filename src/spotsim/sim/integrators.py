@@ -378,10 +378,10 @@ def adaptive_euler(m, d, h):
     here = d.fsal and d.fsal_t == d.t  # the last evaluation was made at this state
     changed = d.jumped
     fresh = not here or changed
-    acc = np.empty((2, p.lever.shape[0], 6))
-    q0, v0, a0 = d.q.copy(), d.v.copy(), d.a.copy()
+    acc, external = d.rates, d.start_external
+    q0, v0, a0 = d.start_q, d.start_v, d.start_a
+    q0[:], v0[:], a0[:] = d.q, d.v, d.a
     start = (d.candidates, d.contacts, d.loads, d.summary)  # put back after a rejection (a fresh start: its pairs)
-    external = np.empty(6)
     rejected = False
     h_free = 0.0  # the step the error control alone took, before a switch cut it
     while True:
