@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ..jit import njit
@@ -54,10 +56,10 @@ def normal_law(delta, delta_dot, delta_dot_minus, K, factor):
     delta_dot_minus: the indentation rate at the pair's contact onset (`onset_rate`), m/s.
     lambda = factor K / delta_dot_minus.
     """
-    elastic = K * delta ** HERTZ_EXPONENT
     rate = 1.0 + factor * delta_dot / delta_dot_minus
     if rate <= 0.0 or delta <= 0.0:
         return 0.0, 0.0, 0.0
+    elastic = K * delta * math.sqrt(delta)  # K delta^HERTZ_EXPONENT: a square root is a fraction of pow's cost
     return elastic * rate, HERTZ_EXPONENT * elastic / delta * rate, elastic * factor / delta_dot_minus
 
 
