@@ -325,6 +325,7 @@ def speed_loop(m, d, ee, t):
     if current == wanted:
         d.integral[ee] = integral
     d.current[ee] = current
+    d.saturated[ee] = wanted >= hi  # pressing as hard as the current limit and the supply let it
 
 
 @njit

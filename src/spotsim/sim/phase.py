@@ -30,9 +30,11 @@ def completion_checks(m, d):
     c = m.completion
     ee = m.grasps.ee[d.active]
     p = m.drives
-    if p.law[ee] == MOTOR:  # stuck, the motor pressing at its current limit (or what the supply drives at rest)
-        pressing = d.transmission[ee] == STUCK and d.current[ee] >= min(p.current_limit[ee],
-                                                                        p.voltage[ee] / p.resistance[ee])
+    if p.law[ee] == MOTOR:
+        # stuck, the motor pressing at its current limit (or at what the supply drives at rest): the
+        # speed loop's own clamp, not a current compared with V / R, which the back-EMF of a finger
+        # speed left by round-off puts an ulp either side of
+        pressing = d.transmission[ee] == STUCK and d.saturated[ee]
     else:
         pressing = current_speed(m, d) <= c.max_contact_speed
     return pressing, d.summary.max_speed <= c.max_contact_speed, net_force(m, d) <= c.max_net_force
