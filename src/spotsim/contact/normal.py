@@ -8,7 +8,8 @@ import numpy as np
 
 from ..jit import njit
 
-#: Power of the Hertz law for sphere contact (paper: alpha = 1.5).
+#: Power of the Hertz law for sphere contact (paper: alpha = 1.5). `normal_law` evaluates
+#: delta^1.5 as delta sqrt(delta): this value is fixed by the sphere-on-sphere geometry, not a setting.
 HERTZ_EXPONENT = 1.5
 
 
@@ -59,7 +60,7 @@ def normal_law(delta, delta_dot, delta_dot_minus, K, factor):
     rate = 1.0 + factor * delta_dot / delta_dot_minus
     if rate <= 0.0 or delta <= 0.0:
         return 0.0, 0.0, 0.0
-    elastic = K * delta * math.sqrt(delta)  # K delta^HERTZ_EXPONENT: a square root is a fraction of pow's cost
+    elastic = K * delta * math.sqrt(delta)  # K delta^HERTZ_EXPONENT, without pow's cost
     return elastic * rate, HERTZ_EXPONENT * elastic / delta * rate, elastic * factor / delta_dot_minus
 
 
