@@ -415,18 +415,22 @@ def numeric_keys(raw: dict, prefix: str = ""):
 EXTREMES = ("1e300", "-1e300", "1e-300", "123456789012345678901234567890")
 
 
+@pytest.mark.parametrize("drive", ["kinematic", "motor"])
 @pytest.mark.parametrize("value", EXTREMES)
-def test_an_extreme_number_in_any_key_ends_in_an_exit_code_never_an_exception(value, tmp_path, capsys):
-    """Each numeric key of Case I set to an extreme value: refused (2), or run for 50 ms to a
-    status (0, 3, 4); no exception escapes (a closing speed of 1e300 m/s raised OverflowError
-    in the stable-step prediction, 1e30 substeps in the compiled loop)."""
+def test_an_extreme_number_in_any_key_ends_in_an_exit_code_never_an_exception(value, drive, tmp_path, capsys):
+    """Each numeric key of Case I set to an extreme value, under each finger drive that reads
+    its own keys: refused (2), or run for 50 ms to a status (0, 3, 4); no exception escapes (a
+    closing speed of 1e300 m/s raised OverflowError in the stable-step prediction, 1e30
+    substeps in the compiled loop, fingers of 1e300 kg ZeroDivisionError in the motor's first
+    impulse)."""
     from spotsim.scenario import to_dict
 
     codes = {}
+    chosen = ["--set", f"end_effector.drive={drive}"]
     for key in numeric_keys(to_dict(spotsim.load_scenario(CASE_I))):
         duration = [] if key == "simulation.duration_s" else ["--set", "simulation.duration_s=0.05"]
-        codes[key] = main(["run", str(CASE_I), "--set", f"{key}={value}", *duration, "--out", str(tmp_path / "out"),
-                           "--quiet", "--no-figures", "--no-error-estimate"])
+        codes[key] = main(["run", str(CASE_I), *chosen, "--set", f"{key}={value}", *duration,
+                           "--out", str(tmp_path / "out"), "--quiet", "--no-figures", "--no-error-estimate"])
     capsys.readouterr()
     assert set(codes.values()) <= {0, 2, 3, 4}, codes
 

@@ -263,9 +263,11 @@ def _set_closing(m, d, r1, r2, speed):
     joint_response(m, d, j1, d.response[r1])
     joint_response(m, d, j2, d.response[r2])
     iv1, iv2 = t.idx_v[j1], t.idx_v[j2]
-    g11, g12, g22 = d.response[r1, iv1], d.response[r2, iv1], d.response[r2, iv2]
+    # the responses scaled to order one: their determinant must not underflow (heavy fingers)
+    scale = max(d.response[r1, iv1], d.response[r2, iv2])
+    g11, g12, g22 = d.response[r1, iv1] / scale, d.response[r2, iv1] / scale, d.response[r2, iv2] / scale
     dv1, dv2 = -speed - d.v[iv1], -speed - d.v[iv2]
-    det = g11 * g22 - g12 * g12
+    det = (g11 * g22 - g12 * g12) * scale
     p1, p2 = (g22 * dv1 - g12 * dv2) / det, (g11 * dv2 - g12 * dv1) / det
     for k in range(d.v.shape[0]):
         d.v[k] += p1 * d.response[r1, k] + p2 * d.response[r2, k]
