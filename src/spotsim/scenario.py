@@ -168,7 +168,7 @@ class EndEffector:
     closing_speed_m_s: float = key(rule=_positive, doc="finger closing speed (Table 3), the drive's speed limit")
     grasp_load_N: float = key(20.0, _positive, "mean finger load at which the drive stalls (not in the paper)")
     start_gap_mm: float = key(9.0, _positive, "finger travel from start to touching a centred groove")
-    drive: str = key("kinematic", _choice(*DRIVES, renamed={"actuator": "kinematic"}),
+    drive: str = key("motor", _choice(*DRIVES, renamed={"actuator": "kinematic"}),
                      "kinematic and relay prescribe the fingers' speed at each controller reading: kinematic (a "
                      "current-limited, self-locking motor's law: slows down along its torque-speed line and presses "
                      "at the grasp load) or relay (stops dead at the grasp load, resumes at full speed below "

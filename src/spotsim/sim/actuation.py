@@ -14,7 +14,7 @@ whatever the load, so the drive's force is the constraint force the dynamics nee
 nowhere it is not reported), and a new speed is an impulse on the robot (`dynamics.velocity_jump`),
 which keeps its momentum.
 
-- `kinematic` (the default), a current-limited DC motor with a speed limit: its torque-speed
+- `kinematic`, a current-limited DC motor with a speed limit: its torque-speed
   line v0 (1 - F / F_g) runs from the no-load speed v0 to the stall force, the grasp load F_g
   (the current limit, through the transmission), and a speed loop caps it at the closing speed
   v_c. The fingers close at v_c while F <= slowdown F_g (v0 = v_c / (1 - slowdown)), slow down
@@ -22,6 +22,10 @@ which keeps its momentum.
   is carried by the self-locking transmission. The speed is a continuous function of the load.
 - `relay`, the earlier model, kept for comparison: the fingers close at v_c until F reaches
   F_g, then stop dead, and close again at v_c once F falls below `resume_fraction` of F_g.
+- `motor` (the default) prescribes nothing: a motor's torque pushes the fingers through a
+  gearhead and a self-locking lead screw (`dynamics.transmissions`); its digital speed loop
+  reads their speed every `speed_loop_period_s` and sets the current (`speed_loop`), and its
+  transmission sticks and slides at the steps' boundaries (`transmission_events`).
 
 Only the active grasp's drive moves; the others hold.
 """
