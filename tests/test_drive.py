@@ -27,7 +27,9 @@ HELD_ROWS = 500
 STOP_TOLERANCE = 0.01
 
 #: Case I's drive, one end-effector's row (the finger mass only sets a motor's speed-loop gain)
-DRIVES = drives(spotsim.load_scenario(CASE_I).end_effector, 1, finger_mass=0.0)
+#: This file tests the kinematic drive (the default is the motor, tests/test_motor.py)
+KINEMATIC = ["end_effector.drive=kinematic"]
+DRIVES = drives(spotsim.load_scenario(CASE_I, KINEMATIC).end_effector, 1, finger_mass=0.0)
 F_G, V_C, V_0 = DRIVES.grasp_load[0], DRIVES.closing_speed[0], DRIVES.no_load_speed[0]
 
 
@@ -94,7 +96,7 @@ def test_kinematic_drive_closes_at_full_speed_until_the_slowdown_and_stops_at_th
 def rigid_stop():
     """Case I's fingers closing on a centred module 10^12 kg heavy: a rigid stop (the net
     force its grooves' asymmetry leaves, a few N, moves it by picometres in a second)."""
-    s = spotsim.load_scenario(CASE_I)
+    s = spotsim.load_scenario(CASE_I, KINEMATIC)
     s = spotsim.replace(s, simulation={"duration_s": 1.5},
                         module={"mass_kg": 1e12, "initial_offset_mm": (0.0, 0.0, 0.0),
                                 "inertia_kg_m2": {"ixx": 1e10, "iyy": 1e10, "izz": 1e10, "ixy": 0.0,
@@ -116,10 +118,11 @@ def test_finger_on_a_rigid_stop_reaches_the_grasp_load_and_holds_it(rigid_stop):
     assert np.all(np.diff(ts["finger_opening_mm"], axis=0) <= 0.0)
 
 
-def test_a_run_never_opens_the_fingers_and_its_drive_never_jumps_to_full_speed(case_I):
+def test_a_run_never_opens_the_fingers_and_its_drive_never_jumps_to_full_speed():
     """Case I with the kinematic drive: the recorded openings never grow, the speed is never
     negative nor above the closing speed, and the drive never stops dead and resumes at
     full speed as the relay does."""
+    case_I = spotsim.load_scenario(CASE_I, KINEMATIC)
     r = spotsim.simulate(case_I)
     assert r.status == "completed"
     speed = r.timeseries["drive_speed_mm_s"]

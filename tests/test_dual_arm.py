@@ -57,8 +57,9 @@ def test_both_grasps_complete_with_sub_millimetre_offsets(run):
 @pytest.mark.slow
 def test_total_linear_momentum_is_conserved(run):
     """Contact forces are pairwise and the centroids advance in world: momentum stays put,
-    with the default drive (the kinematic drive, whose force on the fingers is internal)."""
-    assert run.summary["drive"] == "kinematic"
+    with the default drive (the motor, whose screw's force and stopping impulses on the fingers
+    are internal)."""
+    assert run.summary["drive"] == "motor"
     assert run.summary["momentum"]["linear_drift_rel"] <= LINEAR_MOMENTUM_BOUND
 
 

@@ -157,11 +157,12 @@ def test_shipped_scenes_dynamics_is_pinocchios_aba(config, gravity):
     floating), random states and wrenches: with the fingers' motion free, the compiled
     accelerations are `pin.aba`'s, each branch solved by its mode (one free body by
     Newton-Euler, the robot and its fingers by the articulated-body algorithm); with them
-    prescribed, as the runs' tree has them (the robot's branch solved as one rigid body), they
-    solve the joint-space equations with `pin.crba`'s mass matrix."""
+    prescribed, as the tree of a run with a drive that prescribes them (kinematic) has them
+    (the robot's branch solved as one rigid body), they solve the joint-space equations with
+    `pin.crba`'s mass matrix."""
     from conftest import ROOT
 
-    s = spotsim.load_scenario(ROOT / "config" / config)
+    s = spotsim.load_scenario(ROOT / "config" / config, ["end_effector.drive=kinematic"])
     if "testbed" in config:  # the table carries gravity along its normal: compared in space
         gravity = (0.0, 0.0, 0.0)
     model = spotsim.build_model(spotsim.replace(s, simulation={"gravity_m_s2": gravity}))

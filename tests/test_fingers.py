@@ -86,7 +86,7 @@ def test_a_finger_on_its_joint_gives_the_side_channels_contact_forces(config):
     fingers on the floating robot, moving with it), every pair's force on the finger is the
     side channel's: the finger's pose and velocity from its joint are its parent's with the
     opening slid in."""
-    model, states = contact_states(config)
+    model, states = contact_states(config, n=12)
     pairs = 0
     for state in states:
         d = state.copy()
@@ -96,7 +96,7 @@ def test_a_finger_on_its_joint_gives_the_side_channels_contact_forces(config):
             expected, tolerance = side_channel_force(model, v, k)
             np.testing.assert_allclose(v.contacts.force_W[k], expected, rtol=0, atol=tolerance)
         pairs += len(v.contacts.key)
-    assert pairs >= 30  # the states are in multi-point contact
+    assert pairs >= 30  # enough pair forces checked, the states in multi-point contact
 
 
 def test_each_fingers_load_is_the_generalized_force_on_its_joint(model_I, recorded_states):

@@ -178,8 +178,9 @@ def test_the_motor_block_counts_in_a_scenarios_fingerprint_only_under_the_motor_
 
     def key(*sets):
         return fingerprint(spotsim.load_scenario(CASE_I, list(sets)))
-    assert key() == key("end_effector.motor.gear_ratio=5")
-    assert key("end_effector.drive=motor") != key("end_effector.drive=motor", "end_effector.motor.gear_ratio=5")
+    kinematic = "end_effector.drive=kinematic"
+    assert key(kinematic) == key(kinematic, "end_effector.motor.gear_ratio=5")
+    assert key() != key("end_effector.motor.gear_ratio=5")  # the default drive is the motor
 
 
 @pytest.mark.parametrize("config", ["single_arm_case_I.yaml", "dual_arm_sequential.yaml"])

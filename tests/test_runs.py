@@ -168,7 +168,7 @@ def test_converged_runs_keep_within_the_energy_the_drives_put_in(case_I):
     Case I."""
     r = spotsim.simulate(case_I)
     ts = r.timeseries
-    assert r.status == "completed" and len(ts["t"]) > 1000
+    assert r.status == "completed" and len(ts["t"]) > 900  # ~0.96 s of records, ~0.53 s of it in contact
     assert ts["drive_work_J"][-1] > 0.0
     assert np.all(ts["energy_J"] < ts["energy_J"][0] + ts["drive_work_J"] + ENERGY_FLOOR_J)
 

@@ -200,11 +200,18 @@ def next_event(m, d):
 
 @njit
 def drive_power(m, d):
-    """A bound on the power the drives put in at d's speeds, W: each actuator's load times
+    """A bound on the power the drives put in at d's speeds, W: a motor drive's shaft power,
+    its torque K_t i at the rotor's speed rho x' (the screw's friction takes its share before
+    the fingers get it); a drive that prescribes its fingers' speed, each finger's load times
     its joint's speed."""
+    p = m.drives
     power = 0.0
     for i in range(m.actuators.joint.shape[0]):
-        power += d.load[i] * abs(d.v[m.tree.idx_v[m.actuators.joint[i]]])
+        if p.law[m.actuators.drive[i]] != MOTOR:
+            power += d.load[i] * abs(d.v[m.tree.idx_v[m.actuators.joint[i]]])
+    for ee in range(p.law.shape[0]):
+        if p.law[ee] == MOTOR and drive_fingers(m, ee)[1] >= 0:
+            power += abs(p.torque_constant[ee] * d.current[ee] * p.ratio[ee] * motor_closing(m, d, ee))
     return power
 
 
