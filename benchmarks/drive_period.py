@@ -1,18 +1,16 @@
-"""How the finger drive's controller period sets the default's error: its ensembles against
-converged ensembles with the same starts, at the default period and at shorter ones.
+"""How the kinematic drive's controller period sets the default's error: its ensembles against
+converged ensembles with the same starts, at its default period and at shorter ones.
 
     python benchmarks/drive_period.py [--members 32] [--periods 1e-4,1e-5]
 
-Cases I-III and the dual-arm run, each as an ensemble of MEMBERS starts (spotsim's default
-perturbation, seed 0), at each `end_effector.control_period_s` in PERIODS: the default
-integrator against symplectic Euler at 0.78125 us from the same starts (at the scenario's own
-period, the accuracy study's reference, read from docs/results/accuracy_ensemble/<case>/members/;
-at any other, run here). Compared by the ensemble accuracy study's own comparison
+Cases I-III and the dual-arm run with `end_effector.drive: kinematic`, each as an ensemble of
+MEMBERS starts (spotsim's default perturbation, seed 0), at each `end_effector.control_period_s`
+in PERIODS: the default integrator against symplectic Euler at 0.78125 us from the same starts,
+run here. Compared by the ensemble accuracy study's own comparison
 (`studies.accuracy_ensemble.compare`): printed per case, period and grasp, the reference's
 median peak force and residual offset, the default's median force against the reference's
 (with its sampling error), the median of the members' own differences (the study's target), the
-residual's median and KS p-value, and the wall time per member of both (the stored
-reference's: as recorded when the study made it).
+residual's median and KS p-value, and the wall time per member of both.
 """
 
 from __future__ import annotations
@@ -20,7 +18,7 @@ from __future__ import annotations
 import argparse
 
 import numpy as np
-from bristle_switches import CASES, pct, reference_rows
+from bristle_switches import CASES, pct
 from speed import ROOT, measured_at
 
 import spotsim
@@ -56,15 +54,11 @@ def main() -> None:
           "| wall per member, default / reference (s) |")
     print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
     for title, name in CASES:
-        base = spotsim.load_scenario(ROOT / "config" / f"{name}.yaml")
+        base = spotsim.load_scenario(ROOT / "config" / f"{name}.yaml", ["end_effector.drive=kinematic"])
         for period in periods:
             s = spotsim.replace(base, end_effector={"control_period_s": period})
-            if period == base.end_effector.control_period_s:
-                ref = reference_rows(name)[:args.members]
-                ref_wall = float(np.median([r["wall_time_s"] for r in ref]))
-            else:
-                ref, ref_wall, _ = rows_of(spotsim.replace(s, simulation={"substeps": FINE_SUBSTEPS,
-                                                                          "integrator": FINE}), args.members)
+            ref, ref_wall, _ = rows_of(spotsim.replace(s, simulation={"substeps": FINE_SUBSTEPS, "integrator": FINE}),
+                                       args.members)
             rows, wall, n_grasps = rows_of(s, args.members)
             c = compare(rows, ref, n_grasps, n_grasps > 1)
             for g in range(n_grasps):
