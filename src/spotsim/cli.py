@@ -705,8 +705,13 @@ def main(argv=None) -> int:
             x, y, z = g["residual_offset_mm"]
             print(f"    residual offset [{x:.4f}, {y:.4f}, {z:.4f}] mm, e = {g['residual_offset_norm_mm']:.4f} mm")
         print(f"    peak force {json.dumps([round(f, 3) for f in g['peak_force_N']])} N")
-        print(f"    finger drive ({s['drive']}): {g['drive_resumes']} resumes, largest speed step "
-              f"{g['drive_largest_speed_step_mm_s']:.2f} mm/s")
+        if "motor_peak_current_A" in g:
+            states = ", ".join(f"{k} {v:.3f} s" for k, v in g["transmission_time_s"].items())
+            print(f"    finger drive (motor): peak current {g['motor_peak_current_A']:.3f} A, transmission "
+                  f"{states}, {g['transmission_stops']} stops")
+        else:
+            print(f"    finger drive ({s['drive']}): {g['drive_resumes']} resumes, largest speed step "
+                  f"{g['drive_largest_speed_step_mm_s']:.2f} mm/s")
         if "robot_centroid_displacement_mm" in g:
             print(f"    robot centroid displacement "
                   f"{json.dumps([round(d, 4) for d in g['robot_centroid_displacement_mm']])} mm")
