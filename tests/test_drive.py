@@ -26,9 +26,9 @@ HELD_ROWS = 500
 #: law's last period may press a little past it. The stop's reaction is held to 1 %.
 STOP_TOLERANCE = 0.01
 
-#: Case I's drive, one end-effector's row (the finger mass only sets a motor's speed-loop gain)
 #: This file tests the kinematic drive (the default is the motor, tests/test_motor.py)
 KINEMATIC = ["end_effector.drive=kinematic"]
+#: Case I's drive, one end-effector's row (the finger mass only sets a motor's speed-loop gain)
 DRIVES = drives(spotsim.load_scenario(CASE_I, KINEMATIC).end_effector, 1, finger_mass=0.0)
 F_G, V_C, V_0 = DRIVES.grasp_load[0], DRIVES.closing_speed[0], DRIVES.no_load_speed[0]
 

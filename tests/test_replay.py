@@ -18,7 +18,7 @@ from spotsim.cli import main
 from spotsim.contact.friction import SLIPPING, STICKING
 
 DUAL = ROOT / "config" / "dual_arm_sequential.yaml"
-#: Case I touches at 0.43 s, has sticking pairs from 0.71 s and completes at 1.03 s: 1 s
+#: Case I touches at 0.43 s, has sticking pairs from 0.51 s and completes at 0.96 s: 0.9 s
 #: holds the approach and self-centring with pairs in both states.
 SINGLE_S = 0.9
 #: The dual-arm run welds TM-1 at 2.32 s and EE-2 touches TM-2 at 2.89 s: 3.2 s holds both.

@@ -705,7 +705,7 @@ def main(argv=None) -> int:
             x, y, z = g["residual_offset_mm"]
             print(f"    residual offset [{x:.4f}, {y:.4f}, {z:.4f}] mm, e = {g['residual_offset_norm_mm']:.4f} mm")
         print(f"    peak force {json.dumps([round(f, 3) for f in g['peak_force_N']])} N")
-        if "motor_peak_current_A" in g:
+        if s["drive"] == "motor":  # its records (run summary), not a prescribed speed's
             states = ", ".join(f"{k} {v:.3f} s" for k, v in g["transmission_time_s"].items())
             print(f"    finger drive (motor): peak current {g['motor_peak_current_A']:.3f} A, transmission "
                   f"{states}, {g['transmission_stops']} stops")
