@@ -11,7 +11,7 @@ from conftest import CASE_I, ROOT
 import spotsim
 from spotsim.assemble.model import motor_drive, screw_efficiencies
 from spotsim.run import Stepper
-from spotsim.sim.actuation import motor_closing, transmission_events
+from spotsim.sim.actuation import motor_closing, motor_opening, transmission_events
 from spotsim.sim.dynamics import accelerations, joint_response
 from spotsim.sim.tree import kinematics
 from spotsim.tables import BACKWARD, FORWARD, STUCK
@@ -62,6 +62,31 @@ def test_a_step_of_current_accelerates_both_fingers_alike_with_the_rotors_reflec
     dofs = finger_dofs(model)
     assert d.v[dofs[0]] == d.v[dofs[1]]  # the linkage: to the bit
     assert motor_closing(m, d, 0) - v0 == pytest.approx(rate * d.t, rel=1e-3)
+
+
+@pytest.mark.parametrize("period", [4e-4, 4e-5])
+def test_the_speed_loops_integral_is_the_fingers_lag_behind_their_set_travel_whatever_its_period(period):
+    """The speed loop reads an encoder (the travel since its last reading over the time
+    between): the sum of its errors is the lag itself. Case I's fingers in free flight,
+    slowed to 0.9 of the set speed after the drive's first reading, catch up without reaching
+    the clamp; at every reading the integral is the gain over the integral time times the
+    set speed's travel less the fingers' own."""
+    model = motor_model(f"end_effector.motor.speed_loop_period_s={period}")
+    m = model.sim
+    stepper = Stepper(model)
+    d = stepper.data
+    p, vc = m.drives, model.scenario.end_effector.closing_speed_m_s
+    start = motor_opening(m, d, 0)
+    for k in finger_dofs(model):
+        d.v[k] = -0.9 * vc
+    largest = 0.0
+    while d.t < 0.02:
+        stepper.step(min(1e-4, 0.02 - d.t))
+        assert not d.saturated[0] and abs(d.current[0]) < p.current_limit[0]
+        lag = vc * d.encoder_t[0] - (start - d.encoder_opening[0])
+        assert d.integral[0] == pytest.approx(p.gain[0] / p.integral_time[0] * lag, rel=1e-9, abs=1e-15)
+        largest = max(largest, lag)
+    assert largest > 0.1 * vc * period  # the fingers did lag: the identity was not 0 = 0
 
 
 def stuck_under(model, load):

@@ -158,7 +158,8 @@ class Motor:
                                        "15 for trapezoidal")
     screw_friction: float = key(0.13, _non_negative, "the friction coefficient of the screw's thread in its nut")
     speed_loop_period_s: float = key(4e-4, _positive, "the digital speed loop (PI, anti-windup) reads the fingers' "
-                                     "speed and sets the current this often; the current loop is ideal")
+                                     "speed (an encoder's: the travel since its last reading over the period) and "
+                                     "sets the current this often; the current loop is ideal")
     speed_loop_bandwidth_Hz: float = key(50.0, _positive, "the speed loop's design bandwidth, Hz: its gains follow "
                                          "from it and the drive's inertia")
 

@@ -24,7 +24,8 @@ which keeps its momentum.
   F_g, then stop dead, and close again at v_c once F falls below `resume_fraction` of F_g.
 - `motor` (the default) prescribes nothing: a motor's torque pushes the fingers through a
   gearhead and a self-locking lead screw (`dynamics.transmissions`); its digital speed loop
-  reads their speed every `speed_loop_period_s` and sets the current (`speed_loop`), and its
+  reads their speed by an encoder every `speed_loop_period_s` and sets the current
+  (`speed_loop`), and its
   transmission sticks and slides at the steps' boundaries (`transmission_events`).
 
 Only the active grasp's drive moves; the others hold.
@@ -247,7 +248,8 @@ def sample_controllers(m, d, t, h):
 def start_drive(m, d):
     """The active drive's first reading, now (a run's or a weld's start, its kinematics made
     here): its start, not a change of speed, so nothing is counted. A motor drive starts
-    closing at its set speed, its transmission forward, its speed loop at rest."""
+    closing at its set speed, its transmission forward, its speed loop at rest, its encoder
+    unread."""
     kinematics(m, d)
     ee = m.grasps.ee[d.active]
     if m.drives.law[ee] != MOTOR:
@@ -257,6 +259,7 @@ def start_drive(m, d):
     _set_closing(m, d, r1, r2, m.drives.closing_speed[ee])
     d.transmission[ee] = FORWARD
     d.integral[ee] = 0.0
+    d.encoder_t[ee] = np.nan  # no reading yet
     d.direction[ee] = 1.0
     speed_loop(m, d, ee, d.t)
 
@@ -319,17 +322,37 @@ def rotor_energy(m, d):
 
 
 @njit
+def motor_opening(m, d, ee):
+    """A motor drive's opening (m): its fingers' mean."""
+    r1, r2 = drive_fingers(m, ee)
+    t = m.tree
+    return 0.5 * (d.q[t.idx_q[m.actuators.joint[r1]]] + d.q[t.idx_q[m.actuators.joint[r2]]])
+
+
+@njit
 def speed_loop(m, d, ee, t):
     """The motor drive's digital speed loop at time t (s): a PI on the closing speed's error
     from its set speed, the current it asks for clamped by the current limit and by what the
     supply voltage drives through the winding against the back-EMF at this speed, held until
     the next reading; the integral stops while the clamp holds (anti-windup). The current
-    loop is ideal: the motor's current is the one asked for."""
+    loop is ideal: the motor's current is the one asked for.
+
+    The speed it reads is an encoder's: the travel since its last reading over the time
+    between (at its first reading, the speed itself), and the integral takes each reading's
+    error over that time. The integral's sum is then the fingers' lag behind their set
+    speed's travel (times the gain over the integral time) whatever the period, and a bounce
+    shorter than a period counts by the travel it cost, not by the speed a reading happens
+    to catch."""
     p = m.drives
     d.sample_t = t + p.period[ee]
-    speed = motor_closing(m, d, ee)
-    error = p.closing_speed[ee] - speed
-    integral = d.integral[ee] + p.gain[ee] * p.period[ee] / p.integral_time[ee] * error
+    speed, opening = motor_closing(m, d, ee), motor_opening(m, d, ee)
+    elapsed, read = p.period[ee], speed
+    if t > d.encoder_t[ee]:
+        elapsed = t - d.encoder_t[ee]
+        read = (d.encoder_opening[ee] - opening) / elapsed
+    d.encoder_opening[ee], d.encoder_t[ee] = opening, t
+    error = p.closing_speed[ee] - read
+    integral = d.integral[ee] + p.gain[ee] * elapsed / p.integral_time[ee] * error
     wanted = p.gain[ee] * error + integral
     emf = p.torque_constant[ee] * p.ratio[ee] * speed
     hi = min(p.current_limit[ee], (p.voltage[ee] - emf) / p.resistance[ee])

@@ -64,6 +64,8 @@ class DataFields(NamedTuple):
     screw_force: np.ndarray  # (n_ee,) the screw's total closing force on the fingers, N
     current: np.ndarray  # (n_ee,) the motor's current, A (the speed loop's last reading)
     integral: np.ndarray  # (n_ee,) the speed loop's integral, A
+    encoder_opening: np.ndarray  # (n_ee,) the fingers' mean opening at the speed loop's last reading, m
+    encoder_t: np.ndarray  # (n_ee,) the time of that reading, s (nan: none yet)
     saturated: np.ndarray  # (n_ee,) bool: the speed loop's last reading asked for its upper clamp or more
     direction: np.ndarray  # (n_ee,) the way its transmission slides: +1 closing, -1 opening (0: stuck)
     # the kinematics of the last force evaluation, rows by joint (the universe: identity)
@@ -208,8 +210,8 @@ def make_data(model, rows: int = ROWS_PER_CALL, start: bool = True) -> Data:
         load=np.zeros(len(sim.actuators.joint)),
         drive_force=np.zeros(len(sim.actuators.joint)), drive_free=np.zeros(len(sim.actuators.joint)),
         response=np.zeros((len(sim.actuators.joint), nv)), transmission=ints(n_ee), screw_force=np.zeros(n_ee),
-        current=np.zeros(n_ee), integral=np.zeros(n_ee), saturated=np.zeros(n_ee, dtype=np.bool_),
-        direction=np.zeros(n_ee),
+        current=np.zeros(n_ee), integral=np.zeros(n_ee), encoder_opening=np.zeros(n_ee),
+        encoder_t=np.full(n_ee, np.nan), saturated=np.zeros(n_ee, dtype=np.bool_), direction=np.zeros(n_ee),
         R_W=frames.R_W, p_W=frames.p_W, w_W=frames.w_W, vo_W=frames.vo_W, now=new_frames(nj),
         work=new_articulation(nj, nv),
         near=ints(0), travel=math.inf, pair_list=empty_pair_list(len(sim.faces.master_start)),
