@@ -134,10 +134,21 @@ class Simulation:
 
 
 @dataclass(frozen=True, kw_only=True)
+class Compliance:
+    joints: str = key("rigid", _choice("rigid", "compliant"),
+                      "rigid (the joints locked and reduced away) or compliant (each joint's gearbox a torsional "
+                      "spring and damper to its brake, held at its angle: docs/model.md)")
+    stiffness_scale: float = key(1.0, _positive, "a factor on every joint's catalogue stiffness (compliant joints)")
+    damping_ratio: float = key(0.05, _non_negative, "each compliant joint's damping as a share of critical, on the "
+                               "link-side inertia it turns at the start (the mass matrix's diagonal)")
+
+
+@dataclass(frozen=True, kw_only=True)
 class Arm:
     model: str = key("z1", _choice("z1"), "6-DOF arm from example-robot-data")
     joint_angles_rad: tuple[float, float, float, float, float, float] = key(
         doc="the arm's self-locked joint angles during the grasp")
+    compliance: Compliance = key(Compliance(), doc="how its joints hold: rigid or compliant")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -308,6 +319,7 @@ class Robot:
         TABLE6_ARM1, doc="arm 1 locked at Table 6's joint states")
     arm2_joint_angles_rad: tuple[float, float, float, float, float, float] = key(
         TABLE6_ARM2, doc="arm 2 locked at Table 6's joint states")
+    compliance: Compliance = key(Compliance(), doc="how both arms' joints hold: rigid or compliant")
 
 
 def _direction(x):
@@ -782,11 +794,15 @@ def to_yaml(s: Scenario) -> str:
 
 def fingerprint(s) -> str:
     """The scene a scenario runs, as a short hash of every value but its name and description,
-    and of the motor block unless its drive is the motor (no other drive reads it): equal for
-    two scenarios that run the same physics at the same settings."""
+    of the motor block unless its drive is the motor (no other drive reads it), and of the arms'
+    compliance block unless their joints are compliant (rigid joints read nothing of it): equal
+    for two scenarios that run the same physics at the same settings."""
     raw = {k: v for k, v in to_dict(s).items() if k not in ("name", "description")}
     if s.end_effector.drive != "motor":
         raw["end_effector"] = {k: v for k, v in raw["end_effector"].items() if k != "motor"}
+    arms = "arm" if "arm" in raw else "robot"
+    if raw[arms]["compliance"]["joints"] == "rigid":
+        raw[arms] = {k: v for k, v in raw[arms].items() if k != "compliance"}
     return hashlib.sha256(json.dumps(raw, sort_keys=True).encode()).hexdigest()[:16]
 
 

@@ -42,6 +42,7 @@ from ..sim.record import REPLAY_RATE_HZ, Layout
 from ..sim.tree import joint_axis, kinematic_tree
 from ..tables import ADAPTIVE, DRIVES, METHODS, MOTOR
 from . import assets
+from .compliance import compliance_of, joint_springs, spring_arrays
 from .faces import INSET_KINDS, TOUCHING_KINDS, contact_faces, inset, sphere_layer
 from .scene import FINGER_NAMES, SceneSpec, check_inertials, check_inertias, frame, lock_joints, scene_spec, weld_urdf
 from .table import mount_on_table
@@ -105,6 +106,7 @@ class Model:
     faces: tuple  # every contact face of the URDF, active or not (`faces.contact_faces`); a weld keeps them
     layout: Layout  # the time series a run of this scene records (fixed by the unwelded scene)
     sim: SimModel
+    springs: dict  # the compliant arm joints' springs, by joint name (`compliance.joint_springs`)
 
     @property
     def law(self) -> ContactLaw:
@@ -174,7 +176,7 @@ def scene_fingers(spec: SceneSpec) -> list[str]:
 
 
 def build_model(s, source: str = "<scenario>", welded: dict | None = None, urdf: str | None = None,
-                faces: tuple | None = None, held: dict | None = None) -> Model:
+                faces: tuple | None = None, held: dict | None = None, springs: dict | None = None) -> Model:
     """Build the immutable Model of a validated scenario (raises ModelError, ScenarioError).
 
     welded: modules already grasped and welded, and held: the openings their end-effectors'
@@ -183,7 +185,8 @@ def build_model(s, source: str = "<scenario>", welded: dict | None = None, urdf:
     too, so that each phase's model carries only the joints that move in it. urdf: the scene's compiled URDF
     (`Model.urdf`, any earlier welds in it), to weld into (`scene.weld_urdf`) instead of
     compiling the XACRO again; faces: its contact faces (`Model.faces`), which a weld does not
-    change (they are given in their links' frames), instead of parsing them again.
+    change (they are given in their links' frames), instead of parsing them again; springs:
+    the compliant joints' (`Model.springs`), which a weld does not change either.
     """
     spec = scene_spec(s, welded, held)
     if urdf is None:
@@ -237,18 +240,21 @@ def build_model(s, source: str = "<scenario>", welded: dict | None = None, urdf:
     active_ee = next(e for e, k in spec.grasps if k not in spec.welded_modules)
     idle = {f.name: f.opening_start for f in fingers if f.drive != active_ee}
     if idle:  # the next grasp's fingers stay at their start until it begins: locked there
-        return build_model(s, source, welded, urdf=urdf, faces=faces, held={**(held or {}), **idle})
+        return build_model(s, source, welded, urdf=urdf, faces=faces, held={**(held or {}), **idle}, springs=springs)
     q0 = with_openings(model, q0, fingers)
+    if springs is None:
+        springs = joint_springs(model, q0, spec.compliant, compliance_of(s))
     layout = Layout(scene_fingers(spec), bool(robot_joint), [m.name for m in modules], [e.name for e in end_effectors])
     parts = _Parts(scenario=s, pin_model=model, end_effectors=end_effectors, modules=modules, grasps=spec.grasps,
                    robot_joint=robot_joint, fingers=tuple(fingers), free_joints=free, layers=layers, law=law,
-                   layout=layout, held={name: spec.locked[name] for name in scene_fingers(spec) if name in spec.locked})
+                   layout=layout, held={name: spec.locked[name] for name in scene_fingers(spec) if name in spec.locked},
+                   springs=springs)
     return Model(scenario=s, spec=spec, urdf=urdf, pin_model=model, geom_model=layers.geom,
                  end_effectors=tuple(end_effectors), modules=tuple(modules), grasps=spec.grasps,
                  robot_joint=robot_joint,
                  fingers=tuple(fingers), master_geoms=layers.master_geoms, contact_joints=layers.contact_joints, q0=q0,
                  v0=np.zeros(model.nv), free_joints=free, faces=faces, layout=layout,
-                 sim=sim_model(model_fields(parts)))
+                 sim=sim_model(model_fields(parts)), springs=springs)
 
 
 def _scene_frames(model: pin.Model, spec: SceneSpec) -> tuple[list[EndEffector], list[ModuleBody]]:
@@ -272,10 +278,12 @@ def on_table(s) -> bool:
 
 
 def start_configuration(model: pin.Model, spec: SceneSpec, end_effectors, modules) -> np.ndarray:
-    """The configuration at the start (nq,): the arms' joints neutral (the locked ones are
-    reduced away) and each active module at its `initial_offset_mm` and `initial_rpy_deg`
+    """The configuration at the start (nq,): the compliant arms' joints at their brakes' angles
+    (locked ones are reduced away) and each active module at its `initial_offset_mm` and `initial_rpy_deg`
     from its end-effector's grasp frame O_a."""
     q0 = pin.neutral(model)
+    for name, angle, _, _ in spec.compliant:
+        q0[model.idx_qs[model.getJointId(name)]] = angle
     data = model.createData()
     pin.forwardKinematics(model, data, q0)
     for k, (_, _, m, e) in enumerate(spec.modules):
@@ -492,6 +500,7 @@ class _Parts:
     law: ContactLaw
     layout: Layout
     held: dict  # the locked fingers' openings, by name (`scene.scene_spec`)
+    springs: dict  # the compliant arm joints' springs, by name (`compliance.joint_springs`)
 
 
 def model_fields(p: _Parts) -> ModelFields:
@@ -511,8 +520,10 @@ def model_fields(p: _Parts) -> ModelFields:
     spheres += [(j, layers.slave.centre_J[layers.slave.joint == j], 0.0) for j in np.unique(layers.slave.joint)]
     # a kinematic or relay drive prescribes its fingers' motion; a motor pushes them
     prescribed = [] if s.end_effector.drive == "motor" else [f.joint for f in p.fingers]
+    stiffness, damping, rest = spring_arrays(model, p.springs)
     tree, branches = kinematic_tree(model, prescribed=prescribed, gravity_W=model.gravity.linear,
-                                    table_normal=table if table.any() else None, spheres=spheres)
+                                    table_normal=table if table.any() else None, stiffness=stiffness, rest=rest,
+                                    damping=damping, spheres=spheres)
     ees, mods = [ee for ee, _ in p.grasps], [k for _, k in p.grasps]
     grasps = Grasps(ee=np.array(ees, dtype=np.int64), module=np.array(mods, dtype=np.int64),
                     ee_joint=np.array([p.end_effectors[e].joint for e in ees], dtype=np.int64),

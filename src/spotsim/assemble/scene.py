@@ -39,6 +39,9 @@ class SceneSpec:
     welded: tuple[tuple[int, tuple, tuple], ...] = ()
     # the arm fragments the XACRO includes (`assets.prefixed_arm`): (arm model, prefix)
     arms: tuple[tuple[str, str], ...] = ()
+    # the arms' compliant joints, kept (not locked): (joint name, the brake's angle (rad), arm
+    # model, the joint's index in its arm), `compliance.joint_springs`; limit-checked as `checked` says
+    compliant: tuple[tuple[str, float, str, int], ...] = ()
 
     @property
     def welded_modules(self) -> set[int]:
@@ -68,11 +71,14 @@ def scene_spec(s, welded: dict | None = None, held: dict | None = None) -> Scene
     if isinstance(s, Scenario):
         args = {**geometry_args(s.geometry), **module_args("module_", s.module)}
         arm = [f"joint{i}" for i in range(1, 7)]
-        locked = {**dict(zip(arm, s.arm.joint_angles_rad, strict=True)), "jointGripper": 0.0,
-                  **{name: float(x) for name, x in held.items()}}
+        joints = dict(zip(arm, s.arm.joint_angles_rad, strict=True))
+        compliant = s.arm.compliance.joints == "compliant"
+        locked = {**({} if compliant else joints), "jointGripper": 0.0, **{name: float(x) for name, x in held.items()}}
         checked = {name: f"arm.joint_angles_rad[{i}]" for i, name in enumerate(arm)}
         return SceneSpec(assets.URDF_DIR / "single_arm_scene.urdf.xacro", args, locked, checked,
-                         (("EE", "ee_"),), (("TM", "tm_", s.module, 0),), ((0, 0),))
+                         (("EE", "ee_"),), (("TM", "tm_", s.module, 0),), ((0, 0),),
+                         compliant=tuple((name, joints[name], s.arm.model, i) for i, name in enumerate(arm)
+                                         if compliant))
     if isinstance(s, DualArmScenario):
         args = {**geometry_args(s.geometry), **module_args("tm1_", s.tm1), **module_args("tm2_", s.tm2),
                 **robot.LAYOUTS[s.robot.layout]}
@@ -81,10 +87,13 @@ def scene_spec(s, welded: dict | None = None, held: dict | None = None) -> Scene
             args.update({f"{prefix}joint_type": "fixed", f"{prefix}parent": f"ee{k + 1}_grasp",
                          f"{prefix}xyz": " ".join(repr(float(x)) for x in xyz),
                          f"{prefix}rpy": " ".join(repr(float(x)) for x in rpy)})
-        locked, checked = {}, {}
+        locked, checked, compliant = {}, {}, []
         for arm, angles in (("arm1_", s.robot.arm1_joint_angles_rad), ("arm2_", s.robot.arm2_joint_angles_rad)):
             for i, (name, angle) in enumerate(zip(robot.ARM_JOINTS, angles, strict=True)):
-                locked[arm + name] = angle
+                if s.robot.compliance.joints == "compliant":
+                    compliant.append((arm + name, angle, s.robot.arm_model, i))
+                else:
+                    locked[arm + name] = angle
                 checked[arm + name] = f"robot.{arm}joint_angles_rad[{i}]"
             for finger in FINGER_NAMES:
                 name = f"ee{arm[3]}_{finger}"
@@ -96,7 +105,7 @@ def scene_spec(s, welded: dict | None = None, held: dict | None = None) -> Scene
                          ((0, 0), (1, 1)), robot_joint="fdr_free_flyer",
                          welded=tuple((k, tuple(map(float, xyz)), tuple(map(float, rpy)))
                                       for k, (xyz, rpy) in sorted(welded.items())),
-                         arms=((s.robot.arm_model, "arm1_"), (s.robot.arm_model, "arm2_")))
+                         arms=((s.robot.arm_model, "arm1_"), (s.robot.arm_model, "arm2_")), compliant=tuple(compliant))
     raise TypeError(f"not a scenario: {type(s).__name__}")
 
 
@@ -168,17 +177,21 @@ def check_inertias(model: pin.Model, joints=None) -> None:
 
 def lock_joints(full: pin.Model, spec: SceneSpec) -> tuple[pin.Model, list[str]]:
     """Reduce away the locked joints (arms at the scenario's angles, a welded end-effector's
-    fingers at their openings)."""
+    fingers at their openings); the compliant arms' joints stay. Every arm joint's angle is
+    checked against its limits."""
     q_ref = pin.neutral(full)
     problems, lock = [], []
-    for name, angle in spec.locked.items():
+    held = [(name, angle, True) for name, angle in spec.locked.items()]
+    held += [(name, angle, False) for name, angle, _, _ in spec.compliant]
+    for name, angle, locked in held:
         j = full.getJointId(name)
         lo, hi = full.lowerPositionLimit[full.idx_qs[j]], full.upperPositionLimit[full.idx_qs[j]]
         if name in spec.checked and not lo <= angle <= hi:
             problems.append(f"{spec.checked[name]} = {angle}: must be within the {name} limits "
                             f"[{lo:.4f}, {hi:.4f}] rad")
-        q_ref[full.idx_qs[j]] = angle
-        lock.append(j)
+        if locked:
+            q_ref[full.idx_qs[j]] = angle
+            lock.append(j)
     return pin.buildReducedModel(full, lock, q_ref), problems
 
 

@@ -80,8 +80,9 @@ def weld(model: Model, data, source: str = "<scenario>") -> tuple[Model, object]
     held = {name: model.spec.locked[name] for name in model.layout.fingers
             if name in model.spec.locked and any(name.startswith(prefix) for prefix in holding)}
     held.update({f.name: float(old.q[pm.idx_qs[f.joint]]) for f in model.fingers if f.drive == ee})
-    # the XACRO is not compiled again, nor the contact faces parsed again
-    new = build_model(model.scenario, source, welded=welded, urdf=model.urdf, faces=model.faces, held=held)
+    # the XACRO is not compiled again, nor the contact faces parsed again; the joints' springs are kept
+    new = build_model(model.scenario, source, welded=welded, urdf=model.urdf, faces=model.faces, held=held,
+                      springs=model.springs)
     nm = new.pin_model
     q, v = new.q0.copy(), new.v0.copy()
     # configurations and velocities by joint name (the next grasp's fingers, locked until now,

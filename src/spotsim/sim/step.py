@@ -46,7 +46,12 @@ def free_flight(m, d):
     """Whether no sphere pair can come into contact within the next record interval, so that
     one step of it (no contact forces, zero gravity) is exact for the centroids: coal's face
     pairs are all beyond its margin and the travel bound over the interval keeps within the
-    skin. Never with the literal search or gravity."""
+    skin. Never with the literal search, gravity or the joints' springs and dampers (compliant
+    arms), whose forces act in flight too."""
     if m.literal or m.gravity_W[0] != 0.0 or m.gravity_W[1] != 0.0 or m.gravity_W[2] != 0.0:
         return False
+    t = m.tree
+    for k in range(t.stiffness.shape[0]):
+        if t.stiffness[k] != 0.0 or t.damping[k] != 0.0:
+            return False
     return d.near.shape[0] == 0 and d.travel + FREE_FLIGHT_SAFETY * m.dt * travel_rate(m, d) <= m.limits.skin

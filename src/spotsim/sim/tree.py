@@ -175,12 +175,13 @@ def joint_axis(model: pin.Model, j: int) -> np.ndarray:
 
 
 def kinematic_tree(model: pin.Model, prescribed=(), gravity_W=(0.0, 0.0, 0.0), table_normal=None,
-                   stiffness=None, rest=None, spheres=()) -> tuple[TreeStruct, BranchesStruct]:
+                   stiffness=None, rest=None, damping=None, spheres=()) -> tuple[TreeStruct, BranchesStruct]:
     """The compiled tree and branches of a reduced Pinocchio model.
 
     prescribed: joints whose actuator prescribes their motion. gravity_W: (3,), m/s^2.
     table_normal: the air-bearing table's normal (world), whose component of gravity the
-    bearings carry on planar branches. stiffness, rest: (nv,) passive springs (default none).
+    bearings carry on planar branches. stiffness, rest: (nv,) passive springs (default none);
+    damping: (nv,) their dampers (default the model's `damping`).
     spheres: (joint, (n, 3) centres in its frame, travel (m) of the prismatic joints above
     them) of each contact layer, for the integrators' levers and the motion bound.
     """
@@ -224,7 +225,7 @@ def kinematic_tree(model: pin.Model, prescribed=(), gravity_W=(0.0, 0.0, 0.0), t
         branch=np.full(nj, -1, dtype=np.int64), free=np.zeros(nj, dtype=np.bool_),
         armature=np.array(model.armature, dtype=float).reshape(nv),
         stiffness=np.zeros(nv) if stiffness is None else np.asarray(stiffness, dtype=float).reshape(nv),
-        damping=np.array(model.damping, dtype=float).reshape(nv),
+        damping=np.array(model.damping if damping is None else damping, dtype=float).reshape(nv),
         rest=np.zeros(nv) if rest is None else np.asarray(rest, dtype=float).reshape(nv),
         internal=ints([j for j in range(1, nj) if kinds[j] in (REVOLUTE, PRISMATIC)]),
         reach=tree_reach)

@@ -1,0 +1,120 @@
+"""Compliant arm joints (`arm.compliance`, `robot.compliance`): each arm joint a torsional spring
+and damper to its brake (`assemble.compliance`), the closed forms a linear flexible joint obeys."""
+
+import math
+
+import numpy as np
+import pinocchio as pin
+import pytest
+import scipy.linalg
+from conftest import CASE_I, ROOT
+
+import spotsim
+from spotsim.run import Stepper
+
+#: The module out of the fingers' reach: 3 m along y_a, where nothing it does touches the arm.
+AWAY = "module.initial_offset_mm=[0,3000,0]"
+COMPLIANT = ["arm.compliance.joints=compliant", "end_effector.drive=kinematic", AWAY]
+
+
+def arm_joints(model):
+    """The compliant joints' (configuration index, velocity index, stiffness, the brake's angle)."""
+    pm = model.pin_model
+    return [(pm.idx_qs[pm.getJointId(name)], pm.idx_vs[pm.getJointId(name)], k, angle)
+            for name, (k, _, angle) in model.springs.items()]
+
+
+def test_rigid_arms_have_no_joint_springs_and_compliant_ones_one_per_joint():
+    rigid = spotsim.build_model(spotsim.load_scenario(CASE_I))
+    assert rigid.springs == {} and not rigid.sim.tree.stiffness.any()
+    model = spotsim.build_model(spotsim.load_scenario(CASE_I, COMPLIANT))
+    assert len(model.springs) == 6
+    angles = model.scenario.arm.joint_angles_rad
+    for (iq, _, k, angle), expected in zip(arm_joints(model), angles, strict=True):
+        assert angle == expected and model.q0[iq] == expected and k > 0
+
+
+def test_a_compliant_arm_under_its_own_weight_settles_where_its_springs_balance_the_weight():
+    """Gravity on, each joint damped at critical on its own inertia: the arm sags and comes to
+    rest where K (q - q_b) + G(q) = 0 on its joints (G: Pinocchio's generalized gravity), the
+    static deflection of a linear flexible joint under its end load, solved here by fixed-point
+    iteration."""
+    s = spotsim.load_scenario(CASE_I, [*COMPLIANT, "arm.compliance.damping_ratio=1",
+                                       "simulation.gravity_m_s2=[0,0,-9.81]"])
+    model = spotsim.build_model(s)
+    stepper = Stepper(model)
+    d = stepper.data
+    while d.t < 0.4:
+        stepper.step(min(1e-4, 0.4 - d.t))
+    joints = arm_joints(model)
+    iq = [j[0] for j in joints]
+    iv = [j[1] for j in joints]
+    k = np.array([j[2] for j in joints])
+    brake = np.array([j[3] for j in joints])
+    pm = model.pin_model
+    q = np.array(d.q)
+    for _ in range(50):
+        g = pin.computeGeneralizedGravity(pm, pm.createData(), q)
+        q[iq] = brake - g[iv] / k
+    sag = q[iq] - brake
+    assert np.abs(sag).max() > 1e-4  # the weight bends the arm measurably
+    assert np.abs(np.asarray(d.v)[iv]).max() < 1e-6  # at rest
+    assert np.asarray(d.q)[iq] - brake == pytest.approx(sag, rel=1e-3, abs=1e-3 * np.abs(sag).max())
+
+
+@pytest.mark.parametrize("mode", [0, 5], ids=["lowest", "highest"])
+def test_an_undamped_compliant_arm_rings_at_its_joint_springs_natural_frequencies(mode):
+    """No damping, no gravity: started along one of its modes (K phi = omega^2 M phi, M the
+    arm joints' block of the mass matrix; the fingers move at the drive's constant speed, so
+    they ride on the arm), the arm swings in that mode alone at its omega: the modal
+    coordinate's zero crossings over five periods give it within 1 %."""
+    s = spotsim.load_scenario(CASE_I, [*COMPLIANT, "arm.compliance.damping_ratio=0"])
+    model = spotsim.build_model(s)
+    joints = arm_joints(model)
+    iq = [j[0] for j in joints]
+    iv = [j[1] for j in joints]
+    K = np.diag([j[2] for j in joints])
+    pm = model.pin_model
+    M = pin.crba(pm, pm.createData(), model.q0)
+    M = np.triu(M) + np.triu(M, 1).T
+    M = M[np.ix_(iv, iv)]
+    w2, phi = scipy.linalg.eigh(K, M)
+    omega, shape = math.sqrt(w2[mode]), phi[:, mode] / np.abs(phi[:, mode]).max()
+    stepper = Stepper(model)
+    d = stepper.data
+    brake = np.asarray(d.q)[iq].copy()
+    d.q[iq] = brake + 1e-4 * shape
+    period = 2 * math.pi / omega
+    h = period / 400
+    t, y = [], []
+    while d.t < 5.2 * period:
+        stepper.step(h)
+        t.append(d.t)
+        y.append(shape @ M @ (np.asarray(d.q)[iq] - brake))
+    t, y = np.array(t), np.array(y)
+    up = np.nonzero((y[:-1] < 0) & (y[1:] >= 0))[0]
+    crossings = t[up] - y[up] * (t[up + 1] - t[up]) / (y[up + 1] - y[up])
+    assert len(crossings) >= 4
+    assert np.diff(crossings).mean() == pytest.approx(period, rel=1e-2)
+
+
+@pytest.mark.slow
+def test_the_free_floating_robot_with_compliant_arms_keeps_its_linear_momentum():
+    """The joints' springs and dampers act between the links they join: internal. The dual arm
+    with compliant arms through TM-1's first impacts keeps its linear momentum to round-off."""
+    s = spotsim.load_scenario(ROOT / "config" / "dual_arm_sequential.yaml",
+                              ["robot.compliance.joints=compliant", "simulation.duration_s=0.6"])
+    r = spotsim.simulate(s)
+    assert len(r.summary["grasps"]) >= 1 and r.summary["grasps"][0]["peak_force_norm_N"] > 0
+    assert r.summary["momentum"]["linear_drift_rel"] <= 1e-9
+
+
+def test_the_compliance_block_counts_in_a_scenarios_fingerprint_only_for_compliant_joints():
+    from spotsim.scenario import fingerprint
+
+    def key(config, *sets):
+        return fingerprint(spotsim.load_scenario(ROOT / "config" / config, list(sets)))
+    for config, block in (("single_arm_case_I.yaml", "arm"), ("dual_arm_sequential.yaml", "robot")):
+        assert key(config) == key(config, f"{block}.compliance.stiffness_scale=2")
+        compliant = f"{block}.compliance.joints=compliant"
+        assert key(config) != key(config, compliant) != key(config, compliant, f"{block}.compliance.stiffness_scale=2")
