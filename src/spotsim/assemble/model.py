@@ -244,7 +244,8 @@ def build_model(s, source: str = "<scenario>", welded: dict | None = None, urdf:
     q0 = with_openings(model, q0, fingers)
     if springs is None:
         springs = joint_springs(model, q0, spec.compliant, compliance_of(s))
-    layout = Layout(scene_fingers(spec), bool(robot_joint), [m.name for m in modules], [e.name for e in end_effectors])
+    layout = Layout(scene_fingers(spec), bool(robot_joint), [m.name for m in modules], [e.name for e in end_effectors],
+                    tuple(name for name, _, _, _ in spec.compliant))
     parts = _Parts(scenario=s, pin_model=model, end_effectors=end_effectors, modules=modules, grasps=spec.grasps,
                    robot_joint=robot_joint, fingers=tuple(fingers), free_joints=free, layers=layers, law=law,
                    layout=layout, held={name: spec.locked[name] for name in scene_fingers(spec) if name in spec.locked},
@@ -622,7 +623,8 @@ def drives(ee, n: int, finger_mass: float) -> Drives:
 
 def _record_frames(p: _Parts, tree, branches) -> RecordFrames:
     """What a record row reads: the modules' groove frames, the end-effectors' grasp frames and
-    the robot's base, each on its joint (0: fixed); the fingers' openings and loads."""
+    the robot's base, each on its joint (0: fixed); the fingers' openings and loads; the compliant
+    arms' joint angles."""
     frames = [groove_placement(p.pin_model, m) for m in p.modules]
     frames += [(e.joint, e.placement) for e in p.end_effectors]
     frames.append((p.robot_joint, None))
@@ -648,6 +650,7 @@ def _record_frames(p: _Parts, tree, branches) -> RecordFrames:
         module_joint=np.array([m.joint for m in p.modules], dtype=np.int64),
         finger_q=np.array(finger_q, dtype=np.int64), locked_opening=np.array(locked, dtype=float),
         finger_actuator=np.array(actuator, dtype=np.int64),
+        arm_q=np.array([model.idx_qs[model.getJointId(name)] for name in p.layout.arm_joints], dtype=np.int64),
         all_branches=np.flatnonzero(branches.floating).astype(np.int64),
         robot_branches=of([p.robot_joint] if p.robot_joint else []),
         system_branches=of(p.free_joints),

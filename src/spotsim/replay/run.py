@@ -113,6 +113,7 @@ class Kinematics:
                 self.q_ref[m.idx_qs[m.getJointId(name)]] = angle
         self.fingers = [(m.idx_qs[m.getJointId(f)], i) for i, f in enumerate(run.summary["fingers"])
                         if m.existJointName(f)]
+        self.arm = [(m.idx_qs[m.getJointId(name)], i) for i, (name, _, _, _) in enumerate(model.spec.compliant)]
         self.free = []  # (joint, placement^-1 of the recorded frame in it, ("module", k) or ("base", 0))
         for k, (_, prefix, _, _) in enumerate(model.spec.modules):
             f = m.frames[m.getFrameId(f"{prefix}module", pin.BODY)]
@@ -123,23 +124,27 @@ class Kinematics:
             if m.parents[j] != 0 or m.nqs[j] != 7:
                 raise SpotsimError(f"joint {m.names[j]} is not a free-flyer on the world")
 
-    def q(self, modules_W, base_W, opening_m) -> np.ndarray:
+    def q(self, modules_W, base_W, opening_m, arm_rad=None) -> np.ndarray:
         m, q = self.pin_model, self.q_ref.copy()
         for j, frame_inv, (kind, k) in self.free:
             oMi = (modules_W[k] if kind == "module" else base_W) * frame_inv
             q[m.idx_qs[j]:m.idx_qs[j] + 7] = pin.SE3ToXYZQUAT(m.jointPlacements[j].inverse() * oMi)
         for iq, i in self.fingers:
             q[iq] = opening_m[i]
+        for iq, i in self.arm:
+            q[iq] = arm_rad[i]
         return q
 
-    def place(self, modules_W, base_W, opening_m) -> pin.Data:
-        pin.forwardKinematics(self.pin_model, self.data, self.q(modules_W, base_W, opening_m))
+    def place(self, modules_W, base_W, opening_m, arm_rad=None) -> pin.Data:
+        pin.forwardKinematics(self.pin_model, self.data, self.q(modules_W, base_W, opening_m, arm_rad))
         return self.data
 
 
 def recorded_state(run: Run, row: int):
-    """World poses of the modules' groove frames and of the robot base, and finger openings (m)."""
+    """World poses of the modules' groove frames and of the robot base, finger openings (m) and
+    the compliant arms' joint angles (rad; None for rigid arms)."""
     ts = run.ts
     modules = [_se3(ts[p][row], ts[q][row]) for p, q in module_pose_keys(run)]
     base = _se3(ts["base_pos_m"][row], ts["base_quat_xyzw"][row]) if "base_pos_m" in ts else None
-    return modules, base, ts["finger_opening_mm"][row] * 1e-3
+    arm = np.atleast_1d(ts["arm_joint_angles_rad"][row]) if "arm_joint_angles_rad" in ts else None
+    return modules, base, ts["finger_opening_mm"][row] * 1e-3, arm

@@ -359,7 +359,7 @@ def _force_arrows(run, frames, keys, states, scale, commands) -> list[Clip]:
         norm = np.linalg.norm(F, axis=1)
         L, shown = norm * scale, norm > 0
         poses = []
-        for (modules_W, _, _), f, n in zip(states, F, norm):
+        for (modules_W, *_), f, n in zip(states, F, norm):
             R = pin.Quaternion.FromTwoVectors(np.array([0.0, 1.0, 0.0]), f / n).matrix() if n > 0 else np.eye(3)
             poses.append(pin.SE3(R, modules_W[k].translation))
         tree = ObjectTree()

@@ -67,6 +67,7 @@ class RecordFrames(NamedTuple):
     finger_q: np.ndarray  # (n_f,)
     locked_opening: np.ndarray  # (n_f,)
     finger_actuator: np.ndarray  # (n_f,)
+    arm_q: np.ndarray  # (n_arm,) the index in q of each compliant arm joint (`Layout.arm_joints`)
     all_branches: np.ndarray  # every floating branch
     robot_branches: np.ndarray  # the robot's branch (none on a fixed base)
     system_branches: np.ndarray  # the floating branches the system centroid is taken over

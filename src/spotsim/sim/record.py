@@ -35,11 +35,13 @@ class Layout:
     """The time series of a run and their columns in a row, fixed by its unwelded scene.
 
     fingers: the scene's finger names; free_robot: the robot floats; modules, end_effectors:
-    their names. columns: {name: (first column, width)}; a width-1 series is a 1-D array, the
-    others (n, width).
+    their names; arm_joints: the compliant arms' joints (none: rigid arms), whose angles
+    `arm_joint_angles_rad` records. columns: {name: (first column, width)}; a width-1 series is
+    a 1-D array, the others (n, width).
     """
 
-    def __init__(self, fingers: list[str], free_robot: bool, modules: list[str], end_effectors: list[str]):
+    def __init__(self, fingers: list[str], free_robot: bool, modules: list[str], end_effectors: list[str],
+                 arm_joints: tuple[str, ...] = ()):
         n_f = len(fingers)
         spec = [("t", 1), ("module_pos_m", 3), ("module_quat_xyzw", 4), ("offset_mm", 3), ("rpy_deg", 3),
                 ("module_vel_m_s", 3), ("module_omega_rad_s", 3), ("force_N", 3), ("torque_Nm", 3),
@@ -52,12 +54,15 @@ class Layout:
             for name in modules:
                 spec += [(f"{name}_pos_m", 3), (f"{name}_quat_xyzw", 4)]
             spec += [(f"{name}_pos_m", 3) for name in end_effectors]
+        if arm_joints:
+            spec.append(("arm_joint_angles_rad", len(arm_joints)))
         self.columns, start = {}, 0
         for name, width in spec:
             self.columns[name] = (start, width)
             start += width
         self.width = start
         self.fingers = list(fingers)
+        self.arm_joints = tuple(arm_joints)
 
     def split(self, rows: np.ndarray) -> dict[str, np.ndarray]:
         """The named series of stacked rows (n, width)."""
@@ -132,8 +137,8 @@ def _put(row, at, x, scale=1.0):
 def sample(m, d, row):
     """Write one row of the time series (`Layout`) into row, from the state's kinematics
     (made here, into d.now): the active grasp's module, its offset in the grasp frame, the
-    last step's contact wrench and pairs, the fingers, and for a free-flying robot its
-    centroids and frames."""
+    last step's contact wrench and pairs, the fingers, for a free-flying robot its centroids
+    and frames, and the compliant arms' joint angles."""
     current_frames(m, d)
     g = d.active
     ee, k = m.grasps.ee[g], m.grasps.module[g]
@@ -192,6 +197,8 @@ def sample(m, d, row):
         for i in range(n_ee):
             p = _frame(m, d, n_mod + i, R_b)
             at = _put(row, at, p)
+    for i in range(m.record.arm_q.shape[0]):
+        row[at + i] = d.q[m.record.arm_q[i]]
 
 
 @njit
