@@ -194,3 +194,27 @@ def test_a_bad_marker_record_is_one_clear_line(tmp_path, capsys, text, message):
     assert main(["plot", str(out), "--markers", str(bad)]) == 2
     err = capsys.readouterr().err.strip()
     assert message in err and "\n" not in err
+
+
+def test_the_replay_places_the_floating_bodies_on_their_planar_joints_where_the_run_had_them(tmp_path):
+    """On the table the base and the modules float on planar joints: the replay's kinematics
+    sets each from its recorded world pose, and every end-effector and module lands on the
+    run's own record of it (1 nm) through TM-1's first impacts."""
+    from spotsim.replay.run import Kinematics, load_run, recorded_state
+
+    out = tmp_path / "testbed"
+    assert main(["run", str(THREE_MM), "--out", str(out), "--quiet", "--no-figures", "--no-error-estimate",
+                 "--set", "simulation.duration_s=0.7"]) in (0, 3)
+    run = load_run(out)
+    kin = Kinematics(run, run.model.pin_model)
+    pm = run.model.pin_model
+    for row in range(0, len(run.ts["t"]), 50):
+        modules, base, opening, arm = recorded_state(run, row)
+        data = kin.place(modules, base, opening, arm)
+        for ee in run.model.end_effectors:
+            placed = (data.oMi[ee.joint] * ee.placement).translation
+            assert np.abs(placed - run.ts[f"{ee.name}_pos_m"][row]).max() < 1e-9
+        for k, mod in enumerate(run.model.modules):
+            placed = data.oMi[mod.joint] * mod.placement
+            assert np.abs(placed.translation - modules[k].translation).max() < 1e-9
+            assert pm.nqs[mod.joint] == 4  # a planar joint

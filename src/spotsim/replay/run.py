@@ -101,8 +101,9 @@ def module_pose_keys(run: Run) -> list[tuple[str, str]]:
 
 
 class Kinematics:
-    """Places a scene's joints from recorded poses: the free-flyers (robot base, modules) from
-    their world poses, the fingers at their openings, the locked arm joints at their angles."""
+    """Places a scene's joints from recorded poses: the free-flyers (robot base, modules), or
+    their planar joints on the air-bearing table, from their world poses, the fingers at their
+    openings, the locked arm joints at their angles and the compliant ones at theirs."""
 
     def __init__(self, run: Run, pin_model: pin.Model):
         m, model = pin_model, run.model
@@ -121,14 +122,19 @@ class Kinematics:
         if model.spec.robot_joint:
             self.free.append((m.getJointId(model.spec.robot_joint), pin.SE3.Identity(), ("base", 0)))
         for j, _, _ in self.free:
-            if m.parents[j] != 0 or m.nqs[j] != 7:
-                raise SpotsimError(f"joint {m.names[j]} is not a free-flyer on the world")
+            if m.parents[j] != 0 or m.nqs[j] not in (7, 4):
+                raise SpotsimError(f"joint {m.names[j]} is neither a free-flyer nor a planar joint on the world")
 
     def q(self, modules_W, base_W, opening_m, arm_rad=None) -> np.ndarray:
         m, q = self.pin_model, self.q_ref.copy()
         for j, frame_inv, (kind, k) in self.free:
             oMi = (modules_W[k] if kind == "module" else base_W) * frame_inv
-            q[m.idx_qs[j]:m.idx_qs[j] + 7] = pin.SE3ToXYZQUAT(m.jointPlacements[j].inverse() * oMi)
+            M = m.jointPlacements[j].inverse() * oMi
+            if m.nqs[j] == 7:
+                q[m.idx_qs[j]:m.idx_qs[j] + 7] = pin.SE3ToXYZQUAT(M)
+            else:  # planar (the air-bearing table): x, y in its plane, the turn about its normal
+                theta = np.arctan2(M.rotation[1, 0], M.rotation[0, 0])
+                q[m.idx_qs[j]:m.idx_qs[j] + 4] = (M.translation[0], M.translation[1], np.cos(theta), np.sin(theta))
         for iq, i in self.fingers:
             q[iq] = opening_m[i]
         for iq, i in self.arm:
