@@ -160,35 +160,3 @@ def test_stiff_compliant_joints_give_the_rigid_arms_results():
     stiff = members("arm.compliance.joints=compliant", "arm.compliance.stiffness_scale=1e4")
     change = np.median(stiff / rigid - 1, axis=0)
     assert np.abs(change).max() < 0.02, change
-
-
-@pytest.mark.parametrize("config, block", [("single_arm_case_I.yaml", "arm"), ("dual_arm_sequential.yaml", "robot"),
-                                           ("spot_testbed_3mm.yaml", "robot")])
-def test_a_point_of_any_body_accelerates_as_pinocchio_says(config, block):
-    """`tree.point_acceleration` (the hand's acceleration the completion rule reads) against
-    Pinocchio's forward kinematics with accelerations, at a random state of a compliant scene
-    (revolute arms on a fixed base, on a free-flyer, on a planar joint; prismatic fingers; a
-    free module): the classical acceleration of a point on each body, to 1e-9 relative."""
-    from spotsim.sim.data import make_data
-    from spotsim.sim.tree import kinematics, point_acceleration
-
-    model = spotsim.build_model(spotsim.load_scenario(ROOT / "config" / config,
-                                                      [f"{block}.compliance.joints=compliant"]))
-    pm = model.pin_model
-    rng = np.random.default_rng(3)
-    d = make_data(model)
-    q = pin.integrate(pm, model.q0, 0.1 * rng.standard_normal(pm.nv))
-    v, a = rng.standard_normal(pm.nv), rng.standard_normal(pm.nv)
-    d.q[:], d.v[:] = q, v
-    kinematics(model.sim, d)
-    d.a[:] = a
-    data = pm.createData()
-    pin.forwardKinematics(pm, data, q, v, a)
-    for j in range(pm.njoints):
-        c = data.oMi[j].translation + rng.standard_normal(3) * 0.1
-        at_c = pin.SE3(data.oMi[j].rotation, c)
-        X = at_c.actInv(data.oMi[j])  # the body's frame seen from a frame at c with its axes
-        vel, acc = X.act(data.v[j]), X.act(data.a[j])
-        expected = data.oMi[j].rotation @ (acc.linear + np.cross(vel.angular, vel.linear))
-        got = np.array(point_acceleration(model.sim, d, j, tuple(c)))
-        assert got == pytest.approx(expected, rel=1e-9, abs=1e-9 * (1 + np.abs(expected).max())), pm.names[j]

@@ -111,7 +111,7 @@ def body_wrenches(m, d):
 
 
 @njit_inline
-def grasp_axis(m, d, g, a):
+def _grasp_axis(m, d, g, a):
     """Axis a of grasp g's frame O_a in world: column a of R_W[ee joint] R_ee, a 3-tuple."""
     j = m.grasps.ee_joint[g]
     return (d.R_W[j, 0, 0] * m.grasps.R_ee[g, 0, a] + d.R_W[j, 0, 1] * m.grasps.R_ee[g, 1, a] +
@@ -133,7 +133,7 @@ def contact_summary(m, d):
     T = (d.loads.torque_O_W[j, 0], d.loads.torque_O_W[j, 1], d.loads.torque_O_W[j, 2])
     tau = (T[0] - (r_G[1] * f[2] - r_G[2] * f[1]), T[1] - (r_G[2] * f[0] - r_G[0] * f[2]),
            T[2] - (r_G[0] * f[1] - r_G[1] * f[0]))
-    x, y, z = grasp_axis(m, d, g, 0), grasp_axis(m, d, g, 1), grasp_axis(m, d, g, 2)
+    x, y, z = _grasp_axis(m, d, g, 0), _grasp_axis(m, d, g, 1), _grasp_axis(m, d, g, 2)
     fastest = deepest = 0.0
     if d.contacts.speed.shape[0]:
         fastest, deepest = d.contacts.speed.max(), d.contacts.phi.max()
@@ -143,15 +143,16 @@ def contact_summary(m, d):
 
 
 @njit_inline
-def net_force(m, d, f):
-    """|f|, a force on the active grasp's module in its grasp frame O_a (3-tuple, N), as far as
-    it can move the module: all of it in space; on the air-bearing table its part in the
-    table's plane (the table reacts the rest)."""
+def net_force(m, d):
+    """|the combined contact force on the active grasp's module| that can move it, N: all of
+    it in space; on the air-bearing table its part in the table's plane (the table reacts the
+    rest)."""
+    f = d.summary.force_A
     total = f[0] * f[0] + f[1] * f[1] + f[2] * f[2]
     n_W = m.table_normal
     if n_W[0] == 0.0 and n_W[1] == 0.0 and n_W[2] == 0.0:
         return math.sqrt(total)
     g = d.active
-    along = (dot3(grasp_axis(m, d, g, 0), n_W) * f[0] + dot3(grasp_axis(m, d, g, 1), n_W) * f[1]
-             + dot3(grasp_axis(m, d, g, 2), n_W) * f[2])
+    along = (dot3(_grasp_axis(m, d, g, 0), n_W) * f[0] + dot3(_grasp_axis(m, d, g, 1), n_W) * f[1]
+             + dot3(_grasp_axis(m, d, g, 2), n_W) * f[2])
     return math.sqrt(max(0.0, total - along * along))

@@ -7,47 +7,20 @@ stalled; a motor drive's transmission stuck with its motor at its current limit)
 active contact's relative speed is below the contact speed limit, and the net contact force
 on the module is below the net force limit: the paper's rule (Sec. 3.2 step 3, Sec. 5.1;
 model.md Sec. 6). On the air-bearing table the net force is its part in the table's
-plane: the table reacts the rest. A compliant arm's hand rings on its joints' springs, and
-the contacts carry the module along: the net force is then taken in the hand's motion
-relative to the arm's base (`held_force`), the force that moves the module in the hand.
+plane: the table reacts the rest.
 """
 
 from __future__ import annotations
 
 import math
 
-from ..contact.wrenches import grasp_axis, net_force
+from ..contact.wrenches import net_force
 from ..jit import njit
-from ..linalg import add3, dot3, mv3, sub3
 from ..tables import APPROACH, COMPLETE, MOTOR, SELF_CENTRING, STUCK
 from .actuation import current_speed
-from .tree import point_acceleration
 
 #: The hold is complete within this of hold_s, s: the steps' times carry round-off.
 HOLD_ROUND_OFF_S = 1e-12
-
-
-@njit
-def held_force(m, d):
-    """The combined contact force on the active grasp's module in O_a (d.summary's), less what
-    carries it along with its hand's motion on the arm's joints: its mass times its hand's
-    acceleration at its centroid relative to the arm's base (the fixed world, or the
-    free-flying robot's root body). With rigid arms the hand is the base's own body: the
-    force as it is."""
-    g = d.active
-    f = d.summary.force_A
-    hand = m.grasps.ee_joint[g]
-    b = m.tree.branch[hand]
-    base = m.branches.joint[b] if hand and m.branches.floating[b] else 0
-    if hand == base:
-        return f
-    j = m.grasps.module_joint[g]
-    c = add3(mv3(d.R_W[j], (m.tree.lever[j, 0], m.tree.lever[j, 1], m.tree.lever[j, 2])),
-             (d.p_W[j, 0], d.p_W[j, 1], d.p_W[j, 2]))
-    a = sub3(point_acceleration(m, d, hand, c), point_acceleration(m, d, base, c))
-    mass = m.tree.mass[j]
-    return (f[0] - mass * dot3(grasp_axis(m, d, g, 0), a), f[1] - mass * dot3(grasp_axis(m, d, g, 1), a),
-            f[2] - mass * dot3(grasp_axis(m, d, g, 2), a))
 
 
 @njit
@@ -64,7 +37,7 @@ def completion_checks(m, d):
         pressing = d.transmission[ee] == STUCK and d.saturated[ee]
     else:
         pressing = current_speed(m, d) <= c.max_contact_speed
-    return pressing, d.summary.max_speed <= c.max_contact_speed, net_force(m, d, held_force(m, d)) <= c.max_net_force
+    return pressing, d.summary.max_speed <= c.max_contact_speed, net_force(m, d) <= c.max_net_force
 
 
 @njit

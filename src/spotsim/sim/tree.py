@@ -447,52 +447,6 @@ def current_frames(m, d):
         frame_of(m.tree, j, d.q, d.v, d.now.R_W, d.now.p_W, d.now.w_W, d.now.vo_W)
 
 
-@njit
-def point_acceleration(m, d, j, c):
-    """The acceleration (world, m/s^2, a 3-tuple) of the point of joint j's body at c (world,
-    3-tuple), at the last force evaluation: its frames (d.R_W, d.p_W, d.w_W, d.vo_W) and
-    accelerations d.a. The spatial accelerations (world, at its origin) run down the path from
-    j's branch root, a_k = a_parent + S_k q''_k + v_parent x (S_k q'_k) (a floating root's is
-    its own, carried to the world); the point's is then a + alpha x c + omega x v_c. Zero on
-    the universe."""
-    t = m.tree
-    path = np.empty(t.parent.shape[0], dtype=np.int64)
-    n, k = 0, j
-    while k:
-        path[n] = k
-        n += 1
-        k = t.parent[k]
-    A_lin, A_ang = (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
-    for i in range(n - 1, -1, -1):
-        k = path[i]
-        p = t.parent[k]
-        o = (d.p_W[k, 0], d.p_W[k, 1], d.p_W[k, 2])
-        if t.kind[k] == FREE_FLYER or t.kind[k] == PLANAR:  # a root: S constant in its own frame
-            lin, ang = joint_twist(t, k, d.a)
-            A_ang = mv3(d.R_W[k], ang)
-            A_lin = add3(mv3(d.R_W[k], lin), cross3(o, A_ang))
-            continue
-        s = mv3(d.R_W[k], (t.axis[k, 0], t.axis[k, 1], t.axis[k, 2]))
-        qdd = d.a[t.idx_v[k]]
-        w_k = (d.w_W[k, 0], d.w_W[k, 1], d.w_W[k, 2])
-        V_k = sub3((d.vo_W[k, 0], d.vo_W[k, 1], d.vo_W[k, 2]), cross3(w_k, o))
-        if p:
-            w_p = (d.w_W[p, 0], d.w_W[p, 1], d.w_W[p, 2])
-            V_p = sub3((d.vo_W[p, 0], d.vo_W[p, 1], d.vo_W[p, 2]),
-                       cross3(w_p, (d.p_W[p, 0], d.p_W[p, 1], d.p_W[p, 2])))
-        else:
-            w_p, V_p = (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
-        v_j, w_j = sub3(V_k, V_p), sub3(w_k, w_p)  # the joint's own twist, S q'
-        S_lin, S_ang = (cross3(o, s), s) if t.kind[k] == REVOLUTE else (s, (0.0, 0.0, 0.0))
-        A_lin = add3(add3(A_lin, (S_lin[0] * qdd, S_lin[1] * qdd, S_lin[2] * qdd)),
-                     add3(cross3(w_p, v_j), cross3(V_p, w_j)))
-        A_ang = add3(add3(A_ang, (S_ang[0] * qdd, S_ang[1] * qdd, S_ang[2] * qdd)), cross3(w_p, w_j))
-    w = (d.w_W[j, 0], d.w_W[j, 1], d.w_W[j, 2])
-    v_c = add3(sub3((d.vo_W[j, 0], d.vo_W[j, 1], d.vo_W[j, 2]), cross3(w, (d.p_W[j, 0], d.p_W[j, 1], d.p_W[j, 2]))),
-               cross3(w, c))
-    return add3(add3(A_lin, cross3(A_ang, c)), cross3(w, v_c))
-
-
 # ------------------------------------------------------------------------------- centroids
 
 
