@@ -32,7 +32,7 @@ import numpy as np
 from ..contact.forces import commit_memory
 from ..jit import njit, njit_inline
 from ..linalg import add3, axpy3, cross3, mv3, mv9, put3, quat_times_exp4, sub3
-from ..tables import ADAPTIVE_EULER, FREE_FLYER, METHODS, SYMPLECTIC_EULER
+from ..tables import ADAPTIVE_EULER, FREE_FLYER, METHODS, MOTOR, SYMPLECTIC_EULER
 from .actuation import sample_controllers
 from .dynamics import accelerations
 from .forces import contact_forces, forces
@@ -254,14 +254,21 @@ def _unchanged(x, before):
 def symplectic_euler(m, d, h):
     """Semi-implicit Euler, the paper's fixed-step explicit scheme: forces and accelerations
     at the step's start, velocities first, then positions with the new velocities. Velocity
-    first also for the controllers: those due at the step's end read the start's loads and
-    set the speeds the step's position update uses (`actuation.sample_controllers`)."""
+    first also for the controllers that prescribe their fingers' speed: those due at the
+    step's end read the start's loads and set the speeds the step's position update uses
+    (`actuation.sample_controllers`). A motor drive prescribes nothing: it reads the step's
+    end, as after any other integrator's step (its encoder reads the opening at its reading's
+    time)."""
     forces(m, d, h, d.jumped)
     d.jumped = False
     commit_memory(d)
     accelerations(m, d)
-    sample_controllers(m, d, d.t + h, h)
+    motor = m.drives.law[m.grasps.ee[d.active]] == MOTOR
+    if not motor:
+        sample_controllers(m, d, d.t + h, h)
     _euler_update(m, d, h)
+    if motor:
+        sample_controllers(m, d, d.t + h, h)
     d.external_force_W[:] = d.loads.external_force_W
     d.external_torque_O_W[:] = d.loads.external_torque_O_W
     d.evaluations += 1
