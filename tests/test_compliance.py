@@ -15,6 +15,21 @@ from spotsim.run import Stepper
 #: The module out of the fingers' reach: 3 m along y_a, where nothing it does touches the arm.
 AWAY = "module.initial_offset_mm=[0,3000,0]"
 COMPLIANT = ["arm.compliance.joints=compliant", "end_effector.drive=kinematic", AWAY]
+#: The sag settles to this share of itself: each joint critically damped on its own inertia, the
+#: slowest mode (17.7 Hz) has decayed by far more over 0.4 s; what is left is the fingers'
+#: closing (0.05 kg moving 6 mm) and the integrator's first-order error at 0.1 ms steps.
+SAG_SHARE = 1e-3
+#: The issue's bound on the ringing frequency against the closed form.
+FREQUENCY_REL = 1e-2
+#: Momentum drift relative to the largest body momentum: round-off over the run, as
+#: test_dual_arm holds the rigid robot to.
+LINEAR_MOMENTUM_BOUND = 1e-9
+#: The replay's placement against the run's record: both are the same kinematics of the same
+#: recorded state, so round-off on metre-sized positions.
+PLACEMENT_M = 1e-9
+#: The ensemble accuracy studies' target on peak forces member by member, here for the stiff
+#: limit against the rigid arm.
+RIGID_LIMIT_REL = 0.02
 
 
 def arm_joints(model):
@@ -59,7 +74,7 @@ def test_a_compliant_arm_under_its_own_weight_settles_where_its_springs_balance_
     sag = q[iq] - brake
     assert np.abs(sag).max() > 1e-4  # the weight bends the arm measurably
     assert np.abs(np.asarray(d.v)[iv]).max() < 1e-6  # at rest
-    assert np.asarray(d.q)[iq] - brake == pytest.approx(sag, rel=1e-3, abs=1e-3 * np.abs(sag).max())
+    assert np.asarray(d.q)[iq] - brake == pytest.approx(sag, rel=SAG_SHARE, abs=SAG_SHARE * np.abs(sag).max())
 
 
 @pytest.mark.parametrize("mode", [0, 5], ids=["lowest", "highest"])
@@ -95,7 +110,7 @@ def test_an_undamped_compliant_arm_rings_at_its_joint_springs_natural_frequencie
     up = np.nonzero((y[:-1] < 0) & (y[1:] >= 0))[0]
     crossings = t[up] - y[up] * (t[up + 1] - t[up]) / (y[up + 1] - y[up])
     assert len(crossings) >= 4
-    assert np.diff(crossings).mean() == pytest.approx(period, rel=1e-2)
+    assert np.diff(crossings).mean() == pytest.approx(period, rel=FREQUENCY_REL)
 
 
 @pytest.mark.slow
@@ -106,7 +121,7 @@ def test_the_free_floating_robot_with_compliant_arms_keeps_its_linear_momentum()
                               ["robot.compliance.joints=compliant", "simulation.duration_s=0.6"])
     r = spotsim.simulate(s)
     assert len(r.summary["grasps"]) >= 1 and r.summary["grasps"][0]["peak_force_norm_N"] > 0
-    assert r.summary["momentum"]["linear_drift_rel"] <= 1e-9
+    assert r.summary["momentum"]["linear_drift_rel"] <= LINEAR_MOMENTUM_BOUND
 
 
 def test_the_compliance_block_counts_in_a_scenarios_fingerprint_only_for_compliant_joints():
@@ -140,7 +155,7 @@ def test_the_replay_places_the_compliant_arms_where_the_run_had_them(tmp_path):
         data = kin.place(*recorded_state(run, row))
         for ee in run.model.end_effectors:
             placed = (data.oMi[ee.joint] * ee.placement).translation
-            assert np.abs(placed - run.ts[f"{ee.name}_pos_m"][row]).max() < 1e-9
+            assert np.abs(placed - run.ts[f"{ee.name}_pos_m"][row]).max() < PLACEMENT_M
 
 
 @pytest.mark.slow
@@ -159,4 +174,4 @@ def test_stiff_compliant_joints_give_the_rigid_arms_results():
     rigid = members()
     stiff = members("arm.compliance.joints=compliant", "arm.compliance.stiffness_scale=1e4")
     change = np.median(stiff / rigid - 1, axis=0)
-    assert np.abs(change).max() < 0.02, change
+    assert np.abs(change).max() < RIGID_LIMIT_REL, change
