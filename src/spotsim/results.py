@@ -10,7 +10,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from . import measures
+from . import instrument, measures
 from .errors import SpotsimError
 from .files import atomic, atomic_write, prepare, save_figure
 from .run import RESULTS_FORMAT, Result
@@ -143,6 +143,27 @@ def plot_figures(ts: dict, fig_dir: Path, title: str, summary: dict | None = Non
         fig.tight_layout()
         save_figure(fig, fig_dir / f"{name}.png")
         plt.close(fig)
+    if "dynamometer_force_N" in ts and "dynamometer" in (summary or {}):
+        _dynamometer_figure(ts, summary["dynamometer"], fig_dir, title, plt)
+
+
+def _dynamometer_figure(ts: dict, setting: dict, fig_dir: Path, title: str, plt) -> None:
+    """The contact force on the fingers (the reverse of the module's) against what the
+    dynamometer under the arm reads (`instrument`), per axis of O_a (the paper's Fig. 18)."""
+    samples = instrument.reading(ts, setting)
+    fig, axes = plt.subplots(3, 1, sharex=True, figsize=(7, 6))
+    for i, ax in enumerate(axes):
+        ax.plot(ts["t"], -ts["force_N"][:, i], lw=0.8, color="tab:red", label="contact force on the fingers")
+        ax.plot(samples["t"], samples["force_N"][:, i], lw=1, color="tab:blue",
+                label=f"dynamometer ({setting['filter_cutoff_Hz']:g} Hz low-pass, {setting['sampling_Hz']:g} Hz)")
+        ax.set_ylabel(f"{'xyz'[i]}_a (N)")
+        ax.grid(alpha=0.3)
+    axes[0].set_title(f"{title}: contact force and the dynamometer's reading (Fig. 18)")
+    axes[0].legend(fontsize=7)
+    axes[-1].set_xlabel("time (s)")
+    fig.tight_layout()
+    save_figure(fig, fig_dir / "dynamometer.png")
+    plt.close(fig)
 
 
 def _dual_arm_figures(ts: dict, fig_dir: Path, title: str, plt) -> None:

@@ -13,9 +13,10 @@ from dataclasses import dataclass, field
 
 import numba
 import numpy as np
+import pinocchio as pin
 
-from . import measures
-from .assemble.model import Model, build_model, on_table
+from . import instrument, measures
+from .assemble.model import Model, build_model, grasp_frame, on_table
 from .assemble.weld import weld
 from .contact.search import literal_search
 from .errors import ScenarioError
@@ -291,6 +292,19 @@ def _summary(s, model, v, rec, series, status, message, wall, welds) -> dict:
             heights = {"base": series["base_pos_m"][0]}
             heights.update({m.name: series[f"{m.name}_pos_m"][0] for m in model.modules})
             testbed["testbed"]["heights_mm"] = {k: float(p @ n * 1e3) for k, p in heights.items()}
+    # the momentum the floating bodies' weight alone would give them over the run: a scale of
+    # the balance where gravity is on and what it holds up stays still (a module on a bungee)
+    br = model.sim.branches
+    weight_impulse = v.t * sum(br.mass[b] * np.linalg.norm(br.gravity_W[b]) for b in range(len(br.joint))
+                               if br.floating[b])
+    rig = {}
+    if model.spec.dynamometer:
+        # what the plate under the arm reads, beside the contact force (`instrument`)
+        data = model.pin_model.createData()
+        pin.forwardKinematics(model.pin_model, data, model.q0)
+        setting = instrument.settings(s, grasp_frame(model, data, 0).rotation)
+        rig["dynamometer"] = {**setting, **(instrument.peaks(instrument.reading(series, setting))
+                                            if len(series["t"]) > 1 else {})}
     return {
         "scenario": s.name,
         "spotsim_version": __version__,
@@ -314,8 +328,9 @@ def _summary(s, model, v, rec, series, status, message, wall, welds) -> dict:
         "welds_s": welds,
         "grasps": grasps,
         **testbed,
+        **rig,
         "momentum": {
-            "linear_drift_rel": v.momentum_drift / max(v.momentum_max, 1e-300),
+            "linear_drift_rel": v.momentum_drift / max(v.momentum_max, weight_impulse, 1e-300),
             "angular_drift_rel": v.angular_momentum_drift / max(v.angular_momentum_max, 1e-300),
             "definition": (
                 "max over the run of |total momentum of the floating bodies - initial|, relative to "
@@ -325,9 +340,10 @@ def _summary(s, model, v, rec, series, status, message, wall, welds) -> dict:
                 "angular momentum about the table's normal - initial|, relative to the largest single "
                 "body's momentum (angular about the world origin); the bodies float on the air-bearing "
                 "table, which reacts the rest, so these are conserved" if free else
-                "max over the run of |momentum - initial - impulse of the contact forces and "
-                "gravity| of the module, relative to its largest momentum (angular about the "
-                "world origin); the base is fixed, so momentum is not conserved"),
+                "max over the run of |momentum - initial - impulse of the contact forces, the "
+                "bungee's pull and gravity| of the module, relative to its largest momentum (angular "
+                "about the world origin) or, if larger, the linear momentum its weight alone would give "
+                "it over the run; the base is fixed, so momentum is not conserved"),
         },
         "spheres": {"finger": int(len(model.master.centre_J)), "groove": int(len(model.slave.centre_J))},
         "fingers": rec.layout.fingers,

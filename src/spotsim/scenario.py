@@ -149,6 +149,49 @@ class Arm:
     joint_angles_rad: tuple[float, float, float, float, float, float] = key(
         doc="the arm's self-locked joint angles during the grasp")
     compliance: Compliance = key(Compliance(), doc="how its joints hold: rigid or compliant")
+    base: str = key("fixed", _choice("fixed", "dynamometer"),
+                    "fixed (the arm's base on the world) or dynamometer (on the dynamometer block's six-axis "
+                    "force plate, which records what it reads: docs/model.md)")
+
+
+def _all_positive(x):
+    return None if all(v > 0 for v in x) else "every value must be > 0"
+
+
+@dataclass(frozen=True, kw_only=True)
+class Dynamometer:
+    """A six-axis piezoelectric force plate under the arm's base (paper Sec. 4.2), and the
+    charge amplifier and recorder that read it (arm.base: dynamometer)."""
+
+    stiffness_N_um: tuple[float, float, float] = key(
+        (1.0, 1.0, 2.0), _all_positive, "the plate's rigidity along its x, y, z, kN/um (= 1e9 N/m per unit)")
+    sensor_half_spacing_mm: tuple[float, float] = key(
+        (65.0, 30.0), _all_positive, "its four three-component sensors sit at (+-a, +-b) mm in its top plate: "
+        "its tilting stiffnesses are k_z b^2 and k_z a^2, its twisting stiffness k_x (a^2 + b^2)")
+    top_mass_kg: float = key(4.1, _positive, "the mass above its sensors (its top plate), kg: the bare plate's "
+                             "natural frequency along z, f_z = sqrt(k_z / m) / 2 pi")
+    top_size_mm: tuple[float, float, float] = key((170.0, 100.0, 25.0), _all_positive,
+                                                  "its top plate's length, width and height, mm (its inertia)")
+    adapter_mass_kg: float = key(1.6, _non_negative, "the adapter plate between it and the arm's base, kg")
+    damping_ratio: float = key(0.03, _non_negative, "each of its six axes' damping as a share of critical, on "
+                               "the inertia that axis carries at the start")
+    filter_cutoff_Hz: float = key(300.0, _positive, "the charge amplifier's low-pass (anti-alias) filter, Hz")
+    filter_order: int = key(2, _substeps, "... its order (a Butterworth)")
+    sampling_Hz: float = key(1000.0, _positive, "the recorder's sampling rate, Hz")
+
+
+@dataclass(frozen=True, kw_only=True)
+class Suspension:
+    """The module hung on a bungee from a fixed point (paper Sec. 4.2), or free."""
+
+    kind: str = key("none", _choice("none", "bungee"),
+                    "none (the module floats free) or bungee (hung from a fixed point straight above its "
+                    "centroid, against gravity: simulation.gravity_m_s2 must not be zero)")
+    loaded_length_m: float = key(0.636, _positive, "the bungee's length with the module hanging at rest, m: a "
+                                 "pendulum of this length swings with a period of 2 pi sqrt(L / g)")
+    stiffness_N_m: float = key(90.5, _positive, "its axial stiffness, N/m: the module bounces on it at "
+                               "sqrt(k / m) / 2 pi")
+    damping_ratio: float = key(0.03, _non_negative, "its axial damping as a share of critical on the module's mass")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -291,6 +334,8 @@ class Scenario:
     contact: Contact = key(Contact(), doc="sphere layers, search and the normal contact law (Table 1)")
     friction: Friction = key(Friction(), doc="bristle friction (Table 2)")
     completion: Completion = key(Completion(), doc="when a grasp is complete, and its time-out")
+    dynamometer: Dynamometer = key(Dynamometer(), doc="the force plate under the arm (arm.base: dynamometer)")
+    suspension: Suspension = key(Suspension(), doc="how the module hangs: free, or on a bungee")
 
 
 #: Table 6: the arms' joint states during the grasps, rad.
@@ -523,6 +568,29 @@ def _cross_checks(s: Scenario, where: str) -> list[str]:
                             f"is fitted with TM-1's centroid at {_fmt(list(com))} mm in its groove frame")
     for section, module in modules_of(s).items():
         problems += _inertia_problems(section, module, where)
+    if isinstance(s, Scenario) and s.arm.base == "dynamometer":
+        dyn, rate = s.dynamometer, 1.0 / s.simulation.dt_s
+        if rate < 10.0 * dyn.filter_cutoff_Hz:
+            problems.append(f"{where}: simulation.dt_s = {_fmt(s.simulation.dt_s)}: the dynamometer's filter "
+                            f"(dynamometer.filter_cutoff_Hz = {_fmt(dyn.filter_cutoff_Hz)}) reads the recorded "
+                            f"series, which must be at least ten times faster: dt_s <= {0.1 / dyn.filter_cutoff_Hz:g}")
+        ratio = rate / dyn.sampling_Hz
+        if ratio < 1.0 - 1e-9 or abs(ratio - round(ratio)) > 1e-6 * ratio:
+            problems.append(f"{where}: dynamometer.sampling_Hz = {_fmt(dyn.sampling_Hz)}: the recorder keeps every "
+                            f"n-th recorded sample: 1 / simulation.dt_s = {rate:g} Hz must be a whole multiple of it")
+        if dyn.filter_cutoff_Hz >= 0.5 * dyn.sampling_Hz:
+            problems.append(f"{where}: dynamometer.filter_cutoff_Hz = {_fmt(dyn.filter_cutoff_Hz)}: an anti-alias "
+                            f"filter cuts off below half the sampling rate ({0.5 * dyn.sampling_Hz:g} Hz)")
+    if isinstance(s, Scenario) and s.suspension.kind == "bungee":
+        g = math.sqrt(sum(c * c for c in s.simulation.gravity_m_s2))
+        b = s.suspension
+        if g == 0.0:
+            problems.append(f"{where}: suspension.kind = bungee: the module hangs against gravity: "
+                            "simulation.gravity_m_s2 must not be zero")
+        elif b.loaded_length_m - s.module.mass_kg * g / b.stiffness_N_m <= 0.0:
+            problems.append(f"{where}: suspension.stiffness_N_m = {_fmt(b.stiffness_N_m)}: the module's weight would "
+                            f"stretch the bungee by {s.module.mass_kg * g / b.stiffness_N_m:.3g} m, more than its "
+                            f"loaded length {_fmt(b.loaded_length_m)} m")
     integrator = s.simulation.integrator
     if integrator.h_min_s > integrator.h_max_s:
         problems.append(f"{where}: simulation.integrator.h_min_s = {_fmt(integrator.h_min_s)}: must not exceed "
@@ -795,7 +863,8 @@ def to_yaml(s: Scenario) -> str:
 def fingerprint(s) -> str:
     """The scene a scenario runs, as a short hash of every value but its name and description,
     of the motor block unless its drive is the motor (no other drive reads it), and of the arms'
-    compliance block unless their joints are compliant (rigid joints read nothing of it): equal
+    compliance block unless their joints are compliant (rigid joints read nothing of it), of the
+    dynamometer and the suspension unless they are there: equal
     for two scenarios that run the same physics at the same settings."""
     raw = {k: v for k, v in to_dict(s).items() if k not in ("name", "description")}
     if s.end_effector.drive != "motor":
@@ -803,6 +872,11 @@ def fingerprint(s) -> str:
     arms = "arm" if "arm" in raw else "robot"
     if raw[arms]["compliance"]["joints"] == "rigid":
         raw[arms] = {k: v for k, v in raw[arms].items() if k != "compliance"}
+    if raw.get("arm", {}).get("base") == "fixed":  # the lab rig's blocks, unless it is there
+        raw["arm"] = {k: v for k, v in raw["arm"].items() if k != "base"}
+        raw.pop("dynamometer")
+    if raw.get("suspension", {}).get("kind") == "none":
+        raw.pop("suspension")
     return hashlib.sha256(json.dumps(raw, sort_keys=True).encode()).hexdigest()[:16]
 
 

@@ -39,11 +39,13 @@ from ..sim.model import (
     sim_model,
 )
 from ..sim.record import REPLAY_RATE_HZ, Layout
+from ..sim.tether import Tethers, no_tethers
 from ..sim.tree import joint_axis, kinematic_tree
 from ..tables import ADAPTIVE, DRIVES, METHODS, MOTOR
 from . import assets
 from .compliance import compliance_of, joint_springs, spring_arrays
 from .faces import INSET_KINDS, TOUCHING_KINDS, contact_faces, inset, sphere_layer
+from .rig import DYNAMOMETER_JOINTS, bungee, dynamometer_springs, mount_on_dynamometer, settle
 from .scene import FINGER_NAMES, SceneSpec, check_inertials, check_inertias, frame, lock_joints, scene_spec, weld_urdf
 from .table import mount_on_table
 
@@ -193,6 +195,8 @@ def build_model(s, source: str = "<scenario>", welded: dict | None = None, urdf:
         for arm, prefix in spec.arms:
             assets.prefixed_arm(arm, prefix)
         urdf = assets.compile_xacro(spec.xacro, spec.args)
+        if spec.dynamometer:
+            urdf = mount_on_dynamometer(urdf, s.dynamometer)
     else:
         urdf = weld_urdf(urdf, spec)
     check_inertials(urdf)
@@ -244,12 +248,23 @@ def build_model(s, source: str = "<scenario>", welded: dict | None = None, urdf:
     q0 = with_openings(model, q0, fingers)
     if springs is None:
         springs = joint_springs(model, q0, spec.compliant, compliance_of(s))
+        if spec.dynamometer:
+            springs = {**springs, **dynamometer_springs(model, q0, s.dynamometer)}
+    if np.any(model.gravity.linear) and springs and not spec.welded:
+        # the arms sag on their gearboxes under gravity: the start is where they hold still,
+        # and the modules start from the grasp frames there
+        q0 = settle(model, q0, springs, [name for name, _, _, _ in spec.compliant])
+        q0 = start_configuration(model, spec, end_effectors, modules, q0)
+        if spec.dynamometer:  # its rests hold the settled arm
+            springs = {**springs, **dynamometer_springs(model, q0, s.dynamometer)}
+    tethers = (bungee(model, q0, modules[0].joint, s.suspension, s.module.mass_kg)
+               if hasattr(s, "suspension") and modules[0].joint else no_tethers())
     layout = Layout(scene_fingers(spec), bool(robot_joint), [m.name for m in modules], [e.name for e in end_effectors],
-                    tuple(name for name, _, _, _ in spec.compliant))
+                    tuple(name for name, _, _, _ in spec.compliant), spec.dynamometer)
     parts = _Parts(scenario=s, pin_model=model, end_effectors=end_effectors, modules=modules, grasps=spec.grasps,
                    robot_joint=robot_joint, fingers=tuple(fingers), free_joints=free, layers=layers, law=law,
                    layout=layout, held={name: spec.locked[name] for name in scene_fingers(spec) if name in spec.locked},
-                   springs=springs)
+                   springs=springs, tethers=tethers)
     return Model(scenario=s, spec=spec, urdf=urdf, pin_model=model, geom_model=layers.geom,
                  end_effectors=tuple(end_effectors), modules=tuple(modules), grasps=spec.grasps,
                  robot_joint=robot_joint,
@@ -278,13 +293,16 @@ def on_table(s) -> bool:
     return getattr(getattr(s, "testbed", None), "mount", None) == "air_bearing"
 
 
-def start_configuration(model: pin.Model, spec: SceneSpec, end_effectors, modules) -> np.ndarray:
-    """The configuration at the start (nq,): the compliant arms' joints at their brakes' angles
-    (locked ones are reduced away) and each active module at its `initial_offset_mm` and `initial_rpy_deg`
-    from its end-effector's grasp frame O_a."""
-    q0 = pin.neutral(model)
-    for name, angle, _, _ in spec.compliant:
-        q0[model.idx_qs[model.getJointId(name)]] = angle
+def start_configuration(model: pin.Model, spec: SceneSpec, end_effectors, modules, q=None) -> np.ndarray:
+    """The configuration at the start (nq,): the robot's joints as q has them (default: the
+    compliant arms' joints at their brakes' angles, locked ones reduced away) and each active
+    module at its `initial_offset_mm` and `initial_rpy_deg` from its end-effector's grasp frame O_a."""
+    if q is None:
+        q0 = pin.neutral(model)
+        for name, angle, _, _ in spec.compliant:
+            q0[model.idx_qs[model.getJointId(name)]] = angle
+    else:
+        q0 = np.array(q, dtype=float)
     data = model.createData()
     pin.forwardKinematics(model, data, q0)
     for k, (_, _, m, e) in enumerate(spec.modules):
@@ -335,11 +353,13 @@ def with_start(model: Model, s) -> Model:
         raise ValueError("with_start: the scenarios differ in more than the modules' starts")
     if on_table(s):  # each body's planar joint lies in the plane through its start
         return build_model(s, urdf=model.urdf, faces=model.faces)
+    if getattr(s, "suspension", None) is not None and s.suspension.kind != "none":  # hung from above its start
+        return build_model(s, urdf=model.urdf, faces=model.faces)
     sections = list(modules_of(s).values())
     spec = replace(model.spec, modules=tuple((name, prefix, sections[k], e)
                                              for k, (name, prefix, _, e) in enumerate(model.spec.modules)))
     q0 = with_openings(model.pin_model, start_configuration(model.pin_model, spec, model.end_effectors,
-                                                           model.modules), model.fingers)
+                                                           model.modules, model.q0), model.fingers)
     return replace(model, scenario=s, spec=spec, q0=q0)
 
 
@@ -502,6 +522,7 @@ class _Parts:
     layout: Layout
     held: dict  # the locked fingers' openings, by name (`scene.scene_spec`)
     springs: dict  # the compliant arm joints' springs, by name (`compliance.joint_springs`)
+    tethers: Tethers  # the bungee the module hangs on, if it does (`rig.bungee`)
 
 
 def model_fields(p: _Parts) -> ModelFields:
@@ -535,7 +556,8 @@ def model_fields(p: _Parts) -> ModelFields:
     # a sphere centre sits r off its face, so faces whose spheres may pair are within
     # r1 + cutoff + r2 of each other; the skin keeps the culling conservative
     limits = Limits(max_penetration=min(law.r1, law.r2), skin=skin, margin=law.r1 + law.r2 + law.cutoff + skin,
-                    external_contact=bool((~tree.free[master.joint]).any() or (~tree.free[layers.slave.joint]).any()))
+                    external_contact=bool((~tree.free[master.joint]).any() or (~tree.free[layers.slave.joint]).any()
+                                          or len(p.tethers.joint)))
     c, sim = s.completion, s.simulation
     i = sim.integrator
     A, b, c_nodes, e = tableau(i.method)
@@ -555,7 +577,7 @@ def model_fields(p: _Parts) -> ModelFields:
                       max((model.inertias[f.joint].mass for f in p.fingers), default=0.0)), grasps=grasps,
         completion=CompletionParams(hold_s=c.hold_s, max_contact_speed=c.max_contact_speed_m_s,
                                     max_net_force=c.max_net_force_N, phase_timeout=c.phase_timeout_s),
-        limits=limits, record=_record_frames(p, tree, branches), integrator=integrator, dt=sim.dt_s,
+        tethers=p.tethers, limits=limits, record=_record_frames(p, tree, branches), integrator=integrator, dt=sim.dt_s,
         substeps=sim.substeps, h=sim.dt_s / sim.substeps)
 
 
@@ -643,6 +665,7 @@ def _record_frames(p: _Parts, tree, branches) -> RecordFrames:
             locked.append(p.held.get(name, 0.0))
             actuator.append(-1)
     dt = p.scenario.simulation.dt_s
+    mount = DYNAMOMETER_JOINTS if p.layout.dynamometer else ()
     return RecordFrames(
         joint=np.array([j for j, _ in frames], dtype=np.int64),
         R=np.array([np.eye(3) if M is None else M.rotation for _, M in frames]).reshape(-1, 3, 3),
@@ -651,6 +674,8 @@ def _record_frames(p: _Parts, tree, branches) -> RecordFrames:
         finger_q=np.array(finger_q, dtype=np.int64), locked_opening=np.array(locked, dtype=float),
         finger_actuator=np.array(actuator, dtype=np.int64),
         arm_q=np.array([model.idx_qs[model.getJointId(name)] for name in p.layout.arm_joints], dtype=np.int64),
+        mount_q=np.array([model.idx_qs[model.getJointId(name)] for name in mount], dtype=np.int64),
+        mount_v=np.array([model.idx_vs[model.getJointId(name)] for name in mount], dtype=np.int64),
         all_branches=np.flatnonzero(branches.floating).astype(np.int64),
         robot_branches=of([p.robot_joint] if p.robot_joint else []),
         system_branches=of(p.free_joints),

@@ -42,6 +42,8 @@ class SceneSpec:
     # the arms' compliant joints, kept (not locked): (joint name, the brake's angle (rad), arm
     # model, the joint's index in its arm), `compliance.joint_springs`; limit-checked as `checked` says
     compliant: tuple[tuple[str, float, str, int], ...] = ()
+    # the arm's base on the dynamometer (`rig.mount_on_dynamometer`)
+    dynamometer: bool = False
 
     @property
     def welded_modules(self) -> set[int]:
@@ -78,7 +80,7 @@ def scene_spec(s, welded: dict | None = None, held: dict | None = None) -> Scene
         return SceneSpec(assets.URDF_DIR / "single_arm_scene.urdf.xacro", args, locked, checked,
                          (("EE", "ee_"),), (("TM", "tm_", s.module, 0),), ((0, 0),),
                          compliant=tuple((name, joints[name], s.arm.model, i) for i, name in enumerate(arm)
-                                         if compliant))
+                                         if compliant), dynamometer=s.arm.base == "dynamometer")
     if isinstance(s, DualArmScenario):
         args = {**geometry_args(s.geometry), **module_args("tm1_", s.tm1), **module_args("tm2_", s.tm2),
                 **robot.LAYOUTS[s.robot.layout]}

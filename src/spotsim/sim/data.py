@@ -128,6 +128,7 @@ class DataFields(NamedTuple):
     energy_start: float  # mechanical energy at the start, J
     energy_now: float  # ... at the last record, J
     energy_passive: float  # ... when the current passive phase began, J (nan: not in one)
+    gravity_datum: float  # the bodies' potential in gravity at the start (`tree.gravity_energy`), J
     momentum_start: np.ndarray  # (3,) the floating branches' linear momentum at the start, kg m/s
     angular_momentum_start: np.ndarray  # (3,) their angular momentum about the world origin
     momentum_max: float  # the largest single body's linear momentum, kg m/s
@@ -228,7 +229,7 @@ def make_data(model, rows: int = ROWS_PER_CALL, start: bool = True) -> Data:
         peak_table_moment=np.zeros(n_g),
         impulse_W=np.zeros(3), impulse_moment_O_W=np.zeros(3), drive_power=0.0, drive_work=0.0,
         steps=0, pair_steps=0, flights=0, evaluations=0, accepted=0, rejected=0, cut=0,
-        energy_start=0.0, energy_now=0.0, energy_passive=math.nan, momentum_start=np.zeros(3),
+        energy_start=0.0, energy_now=0.0, energy_passive=math.nan, gravity_datum=0.0, momentum_start=np.zeros(3),
         angular_momentum_start=np.zeros(3), momentum_max=0.0, angular_momentum_max=0.0, momentum_drift=0.0,
         angular_momentum_drift=0.0,
         left=0, h=sim.h, t_end=0.0, flight=False, held=False,

@@ -1,6 +1,7 @@
 """One force evaluation: the contact stages of the paper's Fig. 5, in order, and the actuators.
 
-kinematics -> sphere pairs -> pair forces -> wrenches (-> what the step watches) -> actuators.
+kinematics -> sphere pairs -> pair forces -> wrenches (-> what the step watches) -> tethers ->
+actuators.
 Every integrator evaluates the forces through `forces` (`sim.integrators`); at a state whose
 pairs were just found, with only velocities changed (a controller's impulse), through its last
 stages alone (`contact_forces`): the pairs depend on the poses alone.
@@ -13,6 +14,7 @@ from ..contact.search import find_pairs
 from ..contact.wrenches import body_wrenches, contact_summary
 from ..jit import njit
 from .actuation import actuation
+from .tether import tether_loads
 from .tree import kinematics
 
 
@@ -34,5 +36,6 @@ def contact_forces(m, d, h, jump):
     shared = pair_forces(m, d, h, jump)  # Eq. (11)-(17), per pair
     body_wrenches(m, d)  # Eq. (18)-(21), one wrench per body
     contact_summary(m, d)  # the active module's wrench in O_a, the fastest and deepest pair
+    tether_loads(m, d)  # the cords' pulls, after the summary: they are not contact
     actuation(m, d)  # the actuated joints' loads and forces
     return shared

@@ -17,6 +17,7 @@ from ..contact.forces import ContactLaw
 from ..contact.layers import FaceTable, MasterSpheres, SlaveSpheres
 from ..structs import StructProxy, StructType, new_struct, register
 from .actuation import Actuators, Drives
+from .tether import Tethers
 from .tree import Branches, Tree
 
 
@@ -68,6 +69,9 @@ class RecordFrames(NamedTuple):
     locked_opening: np.ndarray  # (n_f,)
     finger_actuator: np.ndarray  # (n_f,)
     arm_q: np.ndarray  # (n_arm,) the index in q of each compliant arm joint (`Layout.arm_joints`)
+    # the dynamometer's six joints (`assemble.rig`; none without it): their indices in q and v
+    mount_q: np.ndarray
+    mount_v: np.ndarray
     all_branches: np.ndarray  # every floating branch
     robot_branches: np.ndarray  # the robot's branch (none on a fixed base)
     system_branches: np.ndarray  # the floating branches the system centroid is taken over
@@ -113,6 +117,7 @@ class ModelFields(NamedTuple):
     slave: SlaveSpheres
     faces: FaceTable
     law: ContactLaw
+    tethers: Tethers  # cords from fixed points to bodies (`sim.tether`)
     literal: bool  # the paper's all-pairs search instead of the culled one
     actuators: Actuators
     drives: Drives

@@ -22,7 +22,7 @@ from .actuation import current_speed
 from .data import Snapshots
 from .events import ENERGY, ENERGY_WORK, NONFINITE, RAN
 from .stability import ENERGY_FLOOR_J, ENERGY_GROWTH, mechanical_energy
-from .tree import centroid3, current_frames, momenta
+from .tree import centroid3, current_frames, gravity_energy, momenta
 
 #: Contact snapshots per simulated second kept for `spotsim replay`: its highest display rate.
 #: 100 Hz is ten samples of a 10 ms bounce.
@@ -41,7 +41,7 @@ class Layout:
     """
 
     def __init__(self, fingers: list[str], free_robot: bool, modules: list[str], end_effectors: list[str],
-                 arm_joints: tuple[str, ...] = ()):
+                 arm_joints: tuple[str, ...] = (), dynamometer: bool = False):
         n_f = len(fingers)
         spec = [("t", 1), ("module_pos_m", 3), ("module_quat_xyzw", 4), ("offset_mm", 3), ("rpy_deg", 3),
                 ("module_vel_m_s", 3), ("module_omega_rad_s", 3), ("force_N", 3), ("torque_Nm", 3),
@@ -56,6 +56,8 @@ class Layout:
             spec += [(f"{name}_pos_m", 3) for name in end_effectors]
         if arm_joints:
             spec.append(("arm_joint_angles_rad", len(arm_joints)))
+        if dynamometer:
+            spec += [("dynamometer_force_N", 3), ("dynamometer_moment_Nm", 3)]
         self.columns, start = {}, 0
         for name, width in spec:
             self.columns[name] = (start, width)
@@ -63,6 +65,7 @@ class Layout:
         self.width = start
         self.fingers = list(fingers)
         self.arm_joints = tuple(arm_joints)
+        self.dynamometer = dynamometer
 
     def split(self, rows: np.ndarray) -> dict[str, np.ndarray]:
         """The named series of stacked rows (n, width)."""
@@ -138,7 +141,7 @@ def sample(m, d, row):
     """Write one row of the time series (`Layout`) into row, from the state's kinematics
     (made here, into d.now): the active grasp's module, its offset in the grasp frame, the
     last step's contact wrench and pairs, the fingers, for a free-flying robot its centroids
-    and frames, and the compliant arms' joint angles."""
+    and frames, the compliant arms' joint angles and the dynamometer's load."""
     current_frames(m, d)
     g = d.active
     ee, k = m.grasps.ee[g], m.grasps.module[g]
@@ -199,6 +202,12 @@ def sample(m, d, row):
             at = _put(row, at, p)
     for i in range(m.record.arm_q.shape[0]):
         row[at + i] = d.q[m.record.arm_q[i]]
+    at += m.record.arm_q.shape[0]
+    for i in range(m.record.mount_q.shape[0]):
+        # what the arm and the top plate put on the sensors since the start (its joints start
+        # at zero): the springs' and dampers' pull on the top, reversed
+        iv = m.record.mount_v[i]
+        row[at + i] = m.tree.stiffness[iv] * d.q[m.record.mount_q[i]] + m.tree.damping[iv] * d.v[iv]
 
 
 @njit
@@ -242,6 +251,7 @@ def begin_record(m, d):
     current_frames(m, d)
     P, L, p_max, l_max, _ = momenta(m, d.now, m.record.all_branches)
     d.energy_passive = np.nan
+    d.gravity_datum = gravity_energy(m, d.now)
     d.momentum_max, d.angular_momentum_max = p_max, l_max
     d.momentum_start[:] = P
     d.angular_momentum_start[:] = L

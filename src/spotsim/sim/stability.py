@@ -30,7 +30,8 @@ from ..contact.normal import hertz_potential
 from ..jit import njit_inline
 from ..tables import ADAPTIVE
 from .actuation import rotor_energy
-from .tree import kinetic_energy, spring_energy
+from .tether import tether_energy
+from .tree import gravity_energy, kinetic_energy, spring_energy
 
 #: Pairs sharing the load in the estimate: the shipped runs peak at 20-100 pairs in contact
 #: (Case I ~ 20 at its impacts, the dual-arm second grasp 62).
@@ -140,8 +141,10 @@ def mechanical_energy(m, d, phi, s):
     d.now; the motor drives' rotors, `actuation.rotor_energy`), plus the energy stored in the
     joints' springs and in the contacts, J: Hertz 0.8 K (phi/2)^2.5 per pair (`hertz_potential`)
     and 1/2 k_b |s|^2 per bristle (phi: the pairs' penetrations, m; s: their bristle
-    deflections, m)."""
-    E = kinetic_energy(m, d.now, d.v) + spring_energy(m, d.q) + rotor_energy(m, d)
+    deflections, m); with gravity, the bodies' potential in it since the start (d.gravity_datum),
+    and the tethers' stretch."""
+    E = (kinetic_energy(m, d.now, d.v) + spring_energy(m, d.q) + rotor_energy(m, d) + tether_energy(m, d.now)
+         + gravity_energy(m, d.now) - d.gravity_datum)
     K, k_b = m.law.K, m.law.bristle.k_b
     for i in range(phi.shape[0]):
         E += hertz_potential(phi[i], K)

@@ -540,6 +540,19 @@ def kinetic_energy(m, f, v):
 
 
 @njit
+def gravity_energy(m, f):
+    """The moving bodies' potential in the gravity their branches fall in, -m g . r_G summed,
+    J, from the Frames f (zero in zero gravity)."""
+    t, total = m.tree, 0.0
+    for j in range(1, t.parent.shape[0]):
+        g = m.branches.gravity_W[t.branch[j]]
+        if g[0] != 0.0 or g[1] != 0.0 or g[2] != 0.0:
+            r, _ = body_centroid(t, f, j)
+            total -= t.mass[j] * (g[0] * r[0] + g[1] * r[1] + g[2] * r[2])
+    return total
+
+
+@njit
 def spring_energy(m, q):
     """The energy stored in the joints' passive springs, 1/2 k (q - rest)^2 summed, J."""
     t = m.tree
