@@ -8,6 +8,8 @@
                                       # (~40 min; only the named drives, if any)
     python docs/generate.py envelope  # rerun only Case I's capture envelopes (about a minute)
     python docs/generate.py sensitivity  # rerun only the motor-driven grasp's sensitivity study (~5 min)
+    python docs/generate.py rig       # rerun the single-arm experiment's replica and the compliant
+                                      # arms' dual-arm and testbed runs (a few minutes)
     python docs/generate.py runs      # rerun all but the ensemble studies (~2 min)
     python docs/generate.py pages     # docs/scenarios.md, and the generated blocks of README.md,
                                       # docs/usage.md, docs/validation.md and docs/performance.md,
@@ -349,7 +351,7 @@ def runs_command(keep_ensembles: bool = True) -> None:
     kept = []
     if keep_ensembles and (RESULTS / "meta.json").exists():
         outs = {str((RESULTS / kind / name).relative_to(ROOT)) for kind, name, _ in ENSEMBLE_STUDIES}
-        separate = tuple(str((RESULTS / kind).relative_to(ROOT)) + "/" for kind in ("drives", "envelope"))
+        separate = tuple(str((RESULTS / kind).relative_to(ROOT)) + "/" for kind in ("drives", "envelope", "rig"))
         kept = [x for x in json.loads((RESULTS / "meta.json").read_text())["studies"]
                 if x.get("out") in outs or x.get("out", "").startswith(separate)]
     meta = {"spotsim_version": spotsim.__version__, "commit": commit,
@@ -522,6 +524,40 @@ def sensitivity_command() -> None:
     record_studies([done])
 
 
+#: The lab rig and the compliant arms (`rig`): (name, config, --set overrides). The replica at its
+#: default (compliant arm), with a rigid arm and with a wider filter; the dual arm and the SPOT
+#: testbed with compliant arms (their rigid runs are the shipped runs, runs/).
+EXPERIMENT = "single_arm_experiment"
+RIG_RUNS = [
+    (EXPERIMENT, EXPERIMENT, []),
+    (f"{EXPERIMENT}_rigid_arm", EXPERIMENT, ["arm.compliance.joints=rigid"]),
+    (f"{EXPERIMENT}_900Hz", EXPERIMENT, ["dynamometer.filter_cutoff_Hz=900", "dynamometer.sampling_Hz=2000"]),
+] + [(f"{name}_compliant", name, ["robot.compliance.joints=compliant"])
+     for name in ("dual_arm_sequential", "spot_testbed_2p5mm", "spot_testbed_3mm", "spot_testbed_3p5mm")]
+RIG_FIGURE = IMAGES / f"{EXPERIMENT}_dynamometer.png"
+
+
+def rig_command() -> None:
+    """Rerun the lab rig's and the compliant arms' runs (RIG_RUNS, a few minutes) into
+    docs/results/rig/NAME.json (their summaries), the replica's dynamometer figure into
+    docs/images/, stamped in docs/results/meta.json."""
+    out = RESULTS / "rig"
+    shutil.rmtree(out, ignore_errors=True)
+    out.mkdir(parents=True)
+    done = []
+    for name, config, sets in RIG_RUNS:
+        with tempfile.TemporaryDirectory() as tmp:
+            args = [f"config/{config}.yaml", *(x for s in sets for x in ("--set", s))]
+            cmd = [sys.executable, "-m", "spotsim.cli", "run", *args, "--out", tmp, "--quiet"]
+            entry = timed_run(cmd, "spotsim run " + " ".join(args), out, ok=(0, 3))
+            shutil.copyfile(Path(tmp) / "summary.json", out / f"{name}.json")
+            if name == EXPERIMENT:
+                shutil.copyfile(Path(tmp) / "figures" / "dynamometer.png", RIG_FIGURE)
+        done.append({**entry, "out": str((out / f"{name}.json").relative_to(ROOT))})
+        print(f"  {name}: {done[-1]['wall_time_s']:.0f} s", flush=True)
+    record_studies(done)
+
+
 # ------------------------------------------------------------------------------ reading results
 
 
@@ -565,6 +601,7 @@ class Results:
         self.sensitivity = read_csv(sensitivity) if sensitivity.exists() else None
         speed = root / "speed.md"
         self.speed = speed.read_text() if speed.exists() else None
+        self.rig = {p.stem: json.loads(p.read_text()) for p in sorted((root / "rig").glob("*.json"))}
 
     def role(self, study: str, role: str) -> dict:
         return next(r for r in self.accuracy[study] if r["role"] == role)
@@ -898,6 +935,59 @@ def spot_amplitudes_table(r: Results) -> str:
             lines.append(f"The {k} amplitude on the {scenes[0]} is ×{num(min(ratio))} to ×{num(max(ratio))} the "
                          f"{scenes[1]} one's.")
     return text + "\n\n" + " ".join(lines)
+
+
+def rig_experiment_table(r: Results) -> str:
+    """The replica of the single-arm experiment: the contact force's peaks and the dynamometer's,
+    per axis of O_a, for each variant of RIG_RUNS."""
+    if EXPERIMENT not in r.rig:
+        return f"(no results: run `{GENERATE} rig`)"
+    rows = []
+    for name, _, sets in RIG_RUNS:
+        if not name.startswith(EXPERIMENT) or name not in r.rig:
+            continue
+        s = r.rig[name]
+        g, dyn = s["grasps"][0], s["dynamometer"]
+        after = dyn.get("after_grasp")
+        rings = ["–", "–"] if after is None else [
+            f"{num(after['mean_force_N'][a], 2)} / {num(after['largest_swing_N'][a], 2)} / "
+            f"{num(after['ringing_Hz'][a], 2)}" for a in (1, 2)]
+        rows.append([", ".join(f"`{x}`" for x in sets) or "the config as shipped",
+                     vec(g["peak_force_N"]), vec(dyn["peak_force_N"]), *rings,
+                     f"{num(dyn['filter_cutoff_Hz'])} Hz, {num(dyn['sampling_Hz'])} Hz",
+                     fixed(g["completed_s"], 3) if g["completed_s"] is not None else s["status"],
+                     num(g["residual_offset_norm_mm"], 2), f"{s['momentum']['linear_drift_rel']:.2g}",
+                     num(s["wall_time_s"], 2)])
+    return table(["variant", "contact force peaks x, y, z (N)", "dynamometer peaks x, y, z (N)",
+                  "after the grasp, y: mean (N) / swing (N) / ringing (Hz)", "after the grasp, z: the same",
+                  "filter, sampling", "complete (s)", "e (mm)", "linear momentum drift (relative)", "wall (s)"], rows)
+
+
+def rig_compliant_table(r: Results) -> str:
+    """The dual arm and the SPOT testbed with rigid arms (the shipped runs) and compliant ones."""
+    rows = []
+    for name, config, _ in RIG_RUNS:
+        if not name.endswith("_compliant") or name not in r.rig or config not in r.runs:
+            continue
+        for arms, s in (("rigid", r.runs[config]), ("compliant", r.rig[name])):
+            g1, g2 = s["grasps"]
+            done = s["status"] == "completed"
+            p2p = (f"{num(_p2p(g1, 'base', 'x'))} / {num(_p2p(g2, 'base', 'x'))}"
+                   if "displacements" in g1 else "–")
+            rows.append([config, arms, fixed(g2["completed_s"], 3) if done else s["status"],
+                         f"{num(norm(g1['robot_centroid_displacement_mm']))} / "
+                         f"{num(norm(g2['robot_centroid_displacement_mm']))}",
+                         f"{vec(g2['start_offset_mm'])}", p2p,
+                         f"{num(g1['peak_force_norm_N'])} / {num(g2['peak_force_norm_N'])}",
+                         f"{num(g1['residual_offset_norm_mm'], 2)} / {num(g2['residual_offset_norm_mm'], 2)}"
+                         if done else "–",
+                         f"{s['momentum']['linear_drift_rel']:.2g}", num(s["wall_time_s"], 2)])
+    if not rows:
+        return f"(no results: run `{GENERATE} rig`)"
+    return table(["config", "arms", "complete (s)", "FDR centroid displacement |d1| / |d2| (mm)",
+                  "EE-2 to TM-2 as grasp 2 starts (mm)", "base x peak to peak, grasp 1 / 2 (mm)",
+                  "peak contact force, grasp 1 / 2 (N)", "residual TM-1 / TM-2 (mm)",
+                  "linear momentum drift (relative)", "wall (s)"], rows)
 
 
 def testbed_momentum(r: Results) -> str:
@@ -1695,6 +1785,8 @@ RENDER = {
     "spot-table": spot_table,
     "spot-amplitudes": spot_amplitudes_table,
     "testbed-momentum": testbed_momentum,
+    "rig-experiment": rig_experiment_table,
+    "rig-compliant": rig_compliant_table,
     "study-commands": study_commands,
     "timestep-table": timestep_table,
     "stable-step-table": stable_step_table,
@@ -1749,7 +1841,7 @@ def pages_command() -> None:
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("command", choices=["results", "runs", "ensembles", "spreads", "drives", "envelope",
-                                            "sensitivity", "pages"])
+                                            "sensitivity", "rig", "pages"])
     parser.add_argument("drives", nargs="*", metavar="DRIVE", help=f"drives: only these ({', '.join(DRIVES)})")
     args = parser.parse_args(argv)
     if args.drives and args.command != "drives":
@@ -1758,7 +1850,8 @@ def main(argv=None) -> None:
         drives_command(tuple(args.drives))
         return
     {"results": results_command, "runs": runs_command, "ensembles": ensembles_command, "spreads": spreads_command,
-     "envelope": envelope_command, "sensitivity": sensitivity_command, "pages": pages_command}[args.command]()
+     "envelope": envelope_command, "sensitivity": sensitivity_command, "rig": rig_command,
+     "pages": pages_command}[args.command]()
 
 
 if __name__ == "__main__":

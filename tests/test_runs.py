@@ -41,6 +41,21 @@ def test_case_completes_sub_millimetre(cases, case):
         assert r.grasp["residual_offset_norm_mm"] <= RESIDUAL_BOUND_MM
 
 
+def test_recording_after_the_grasp_keeps_the_grasps_results_and_records_the_window(cases):
+    """With `completion.record_after_s` the run goes on past the completion it would have
+    stopped at, the drive holding: the same run up to then (the same completion time, peaks
+    and residual offset, to the bit), then rows up to the window's end, status completed."""
+    plain = cases["I"]
+    after = 0.05
+    r = spotsim.simulate(spotsim.replace(plain.scenario, completion={"record_after_s": after}))
+    assert r.status == "completed" and plain.status == "completed"
+    for key in ("completed_s", "peak_force_N", "peak_torque_Nm", "residual_offset_mm", "max_active_pairs"):
+        assert r.grasp[key] == plain.grasp[key], key
+    t = r.timeseries["t"]
+    assert t[-1] == pytest.approx(plain.grasp["completed_s"] + after, abs=plain.scenario.simulation.dt_s)
+    assert len(t) > len(plain.timeseries["t"])
+
+
 @pytest.mark.parametrize("case", ["I", "II", "III"])
 def test_no_contact_before_the_fingers_reach_the_groove(cases, case):
     """First contact comes when the finger has closed start_gap - |y0| cot(bevel): for a 45 deg

@@ -49,3 +49,23 @@ def peaks(samples: dict) -> dict:
     """The largest |reading| per axis (O_a) over the samples."""
     return {"peak_force_N": np.abs(samples["force_N"]).max(axis=0).tolist(),
             "peak_moment_Nm": np.abs(samples["moment_Nm"]).max(axis=0).tolist()}
+
+
+def after_grasp(samples: dict, t_complete: float) -> dict | None:
+    """What the reading does after the grasp completed (`completion.record_after_s`), per axis
+    of O_a: its mean over the window's second half (what the bungee and gravity leave on the
+    plate), its largest swing about that mean, and the frequency of its largest spectral line
+    (the ringing's). None without at least a second of samples after the completion."""
+    t = samples["t"]
+    after = t > t_complete
+    if not after.any() or t[-1] - t_complete < 1.0:
+        return None
+    x, tt = samples["force_N"][after], t[after]
+    late = tt >= tt[0] + 0.5 * (tt[-1] - tt[0])
+    mean = x[late].mean(axis=0)
+    swing = x - mean
+    spectrum = np.abs(np.fft.rfft(swing - swing.mean(axis=0), axis=0))
+    freqs = np.fft.rfftfreq(len(tt), (tt[-1] - tt[0]) / (len(tt) - 1))
+    return {"window_s": float(tt[-1] - t_complete), "mean_force_N": mean.tolist(),
+            "largest_swing_N": np.abs(swing).max(axis=0).tolist(),
+            "ringing_Hz": [float(freqs[1:][np.argmax(spectrum[1:, a])]) for a in range(3)]}

@@ -23,9 +23,9 @@ from .errors import ScenarioError
 from .scenario import in_grooves, modules_of, tolerance_warnings
 from .sim.broadphase import BroadPhase, StateOverflow
 from .sim.data import ROWS_PER_CALL, make_data
-from .sim.events import ENERGY, ENERGY_WORK, NONFINITE, RAN, REFRESH, TOO_DEEP, UNDERFLOW
+from .sim.events import ENERGY, ENERGY_WORK, NONFINITE, RAN, REFRESH, STOPPED, TOO_DEEP, UNDERFLOW
 from .sim.loop import progress_of, run_intervals, skin_used
-from .sim.phase import completion_criteria
+from .sim.phase import HOLD_ROUND_OFF_S, completion_criteria
 from .sim.record import begin_record
 from .sim.recorder import Recorder
 from .sim.stability import ENERGY_GROWTH, stability_warnings
@@ -104,24 +104,27 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
             if message:
                 status = DIVERGED
                 break
-            if out.complete:
+            if out.complete and out.event == STOPPED:  # (before: the window after the last grasp)
                 if out.active + 1 == len(model.grasps):
                     status = COMPLETED
-                    message = f"{'all grasps' if len(model.grasps) > 1 else 'grasp'} complete at t = {out.t:.4f} s"
+                    message = _completed(model, data)
                     break
                 model, data = weld(model, data, source)
                 broad = None if model.sim.literal else BroadPhase(model)
                 near = np.zeros(0, dtype=np.int64)
                 out = progress_of(data, RAN)
                 welds.append(out.t)
-            elif out.elapsed > model.sim.completion.phase_timeout:
+            elif not out.complete and out.elapsed > model.sim.completion.phase_timeout:
                 message = _why_incomplete(model, data, "the phase time-out")
                 break
             if spent:  # checked at every return of the compiled loop, a refresh of the broad phase's too
                 status, message = WALL_LIMIT, f"wall-time budget of {wall_limit_s:g} s spent at t = {out.t:.4f} s"
                 break
         else:
-            message = _why_incomplete(model, data, "the time-out")
+            if out.complete and out.active + 1 == len(model.grasps):  # the duration ended the window after it
+                status, message = COMPLETED, _completed(model, data)
+            else:
+                message = _why_incomplete(model, data, "the time-out")
     except KeyboardInterrupt:
         status, message = INTERRUPTED, f"interrupted by the user at t = {out.t:.4f} s"
     finally:
@@ -130,6 +133,12 @@ def simulate(scenario, *, model: Model | None = None, progress: bool = False,
     series = rec.arrays()
     summary = _summary(scenario, model, data.view(), rec, series, status, message, wall, welds)
     return Result(scenario, model, summary, series, rec.replay_arrays())
+
+
+def _completed(model: Model, data) -> str:
+    """The message of a run whose grasps all completed: when the last did."""
+    v = data.view()
+    return f"{'all grasps' if len(model.grasps) > 1 else 'grasp'} complete at t = {v.t_complete[v.active]:.4f} s"
 
 
 def compile_loop(model: Model, data) -> None:
@@ -214,6 +223,8 @@ def _summary(s, model, v, rec, series, status, message, wall, welds) -> dict:
     for g, (ee, k) in enumerate(model.grasps):
         completed = _time(v.t_complete[g])
         rows = np.flatnonzero(series["grasp"] == g)
+        if completed is not None:  # not the rows recorded after it (`completion.record_after_s`)
+            rows = rows[series["t"][rows] <= v.t_complete[g] + HOLD_ROUND_OFF_S]
         last = rows[-1] if len(rows) else None
         done = completed is not None and last is not None
         offset = series["offset_mm"][last] if done else None
@@ -303,8 +314,11 @@ def _summary(s, model, v, rec, series, status, message, wall, welds) -> dict:
         data = model.pin_model.createData()
         pin.forwardKinematics(model.pin_model, data, model.q0)
         setting = instrument.settings(s, grasp_frame(model, data, 0).rotation)
-        rig["dynamometer"] = {**setting, **(instrument.peaks(instrument.reading(series, setting))
-                                            if len(series["t"]) > 1 else {})}
+        samples = instrument.reading(series, setting) if len(series["t"]) > 1 else None
+        rig["dynamometer"] = {**setting, **(instrument.peaks(samples) if samples is not None else {})}
+        done = _time(v.t_complete[len(model.grasps) - 1])
+        if samples is not None and done is not None:
+            rig["dynamometer"]["after_grasp"] = instrument.after_grasp(samples, done)
     return {
         "scenario": s.name,
         "spotsim_version": __version__,

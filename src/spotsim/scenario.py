@@ -317,6 +317,9 @@ class Completion:
     phase_timeout_s: float = key(2.0, _positive, "a grasp not complete this long after its drive starts is incomplete")
     max_contact_speed_m_s: float = key(1e-4, _positive, "relative speed at every active contact below this")
     max_net_force_N: float = key(0.5, _positive, "net contact force on the module below this (equilibrium)")
+    record_after_s: float = key(0.0, _non_negative, "the last grasp complete, the run goes on recording this "
+                                "long with the drive holding (what rings after the grasp); its peaks and "
+                                "residual offset stay the grasp's, at its completion")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -864,7 +867,8 @@ def fingerprint(s) -> str:
     """The scene a scenario runs, as a short hash of every value but its name and description,
     of the motor block unless its drive is the motor (no other drive reads it), and of the arms'
     compliance block unless their joints are compliant (rigid joints read nothing of it), of the
-    dynamometer and the suspension unless they are there: equal
+    dynamometer and the suspension unless they are there, and of `completion.record_after_s` at
+    zero: equal
     for two scenarios that run the same physics at the same settings."""
     raw = {k: v for k, v in to_dict(s).items() if k not in ("name", "description")}
     if s.end_effector.drive != "motor":
@@ -875,6 +879,8 @@ def fingerprint(s) -> str:
     if raw.get("arm", {}).get("base") == "fixed":  # the lab rig's blocks, unless it is there
         raw["arm"] = {k: v for k, v in raw["arm"].items() if k != "base"}
         raw.pop("dynamometer")
+    if raw["completion"]["record_after_s"] == 0.0:  # the grasp ends the run, as before the key
+        raw["completion"] = {k: v for k, v in raw["completion"].items() if k != "record_after_s"}
     if raw.get("suspension", {}).get("kind") == "none":
         raw.pop("suspension")
     return hashlib.sha256(json.dumps(raw, sort_keys=True).encode()).hexdigest()[:16]

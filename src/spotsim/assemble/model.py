@@ -576,7 +576,8 @@ def model_fields(p: _Parts) -> ModelFields:
         drives=drives(s.end_effector, len(p.end_effectors),
                       max((model.inertias[f.joint].mass for f in p.fingers), default=0.0)), grasps=grasps,
         completion=CompletionParams(hold_s=c.hold_s, max_contact_speed=c.max_contact_speed_m_s,
-                                    max_net_force=c.max_net_force_N, phase_timeout=c.phase_timeout_s),
+                                    max_net_force=c.max_net_force_N, phase_timeout=c.phase_timeout_s,
+                                    record_after=c.record_after_s),
         tethers=p.tethers, limits=limits, record=_record_frames(p, tree, branches), integrator=integrator, dt=sim.dt_s,
         substeps=sim.substeps, h=sim.dt_s / sim.substeps)
 

@@ -7,6 +7,7 @@ import math
 
 from ..jit import njit
 from ..linalg import cross, mv
+from ..tables import COMPLETE
 from .actuation import current_speed, motor_records
 from .dynamics import table_load
 
@@ -43,7 +44,8 @@ def bookkeeping(m, d, h):
     d.pair_steps += n
     d.drive_work += h * d.drive_power
     motor_records(m, d, h)
-    if n:
+    g = d.active
+    if n and not (d.phase[g] == COMPLETE and d.t > d.t_complete[g]):  # not after it (`completion.record_after`)
         raise_peaks(m, d)
     if m.limits.external_contact:
         for i in range(3):

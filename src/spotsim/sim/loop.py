@@ -17,6 +17,7 @@ from ..jit import njit
 from ..tables import COMPLETE
 from .actuation import current_speed, next_event
 from .events import RAN, REFRESH, STOPPED, TOO_DEEP, UNDERFLOW
+from .phase import HOLD_ROUND_OFF_S
 from .record import close_interval
 from .step import free_flight, step
 
@@ -57,9 +58,12 @@ def skin_used(m, d):
 
 @njit
 def phase_ended(m, d):
-    """Whether the active grasp's phase completed or timed out."""
+    """Whether the active grasp's phase ended: it timed out, or it completed (the last grasp
+    `record_after` before, the run recording what rings after it)."""
     g = d.active
-    return d.phase[g] == COMPLETE or d.t - d.t_start[g] > m.completion.phase_timeout
+    if d.phase[g] == COMPLETE:
+        return g + 1 < m.grasps.ee.shape[0] or d.t - d.t_complete[g] >= m.completion.record_after - HOLD_ROUND_OFF_S
+    return d.t - d.t_start[g] > m.completion.phase_timeout
 
 
 @njit
@@ -103,8 +107,8 @@ def interval_steps(m, d):
             d.left -= 1
         if d.contacts.key.shape[0] and d.summary.max_penetration > m.limits.max_penetration:
             return TOO_DEEP
-        if phase_ended(m, d):
-            return STOPPED
+        if phase_ended(m, d) or (d.phase[d.active] == COMPLETE and d.t == d.t_complete[d.active]):
+            return STOPPED  # (a completion ends its interval: a row at it, the window's rows after)
         if skin_used(m, d) and d.left > 0:
             return REFRESH
     return RAN

@@ -39,6 +39,7 @@ class CompletionParams(NamedTuple):
     max_contact_speed: float  # m/s
     max_net_force: float  # N
     phase_timeout: float  # a grasp not complete this long after its drive started is incomplete, s
+    record_after: float  # the last grasp complete, the run records this long more, s
 
 
 class Limits(NamedTuple):
