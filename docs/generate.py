@@ -532,8 +532,9 @@ RIG_RUNS = [
     (EXPERIMENT, EXPERIMENT, []),
     (f"{EXPERIMENT}_rigid_arm", EXPERIMENT, ["arm.compliance.joints=rigid"]),
     (f"{EXPERIMENT}_900Hz", EXPERIMENT, ["dynamometer.filter_cutoff_Hz=900", "dynamometer.sampling_Hz=2000"]),
-] + [(f"{name}_compliant", name, ["robot.compliance.joints=compliant"])
-     for name in ("dual_arm_sequential", "spot_testbed_2p5mm", "spot_testbed_3mm", "spot_testbed_3p5mm")]
+] + [(f"{name}_{holding}", name, [f"robot.compliance.joints={holding}"])
+     for name in ("dual_arm_sequential", "spot_testbed_2p5mm", "spot_testbed_3mm", "spot_testbed_3p5mm")
+     for holding in ("compliant", "servo")]
 RIG_FIGURE = IMAGES / f"{EXPERIMENT}_dynamometer.png"
 
 
@@ -964,12 +965,16 @@ def rig_experiment_table(r: Results) -> str:
 
 
 def rig_compliant_table(r: Results) -> str:
-    """The dual arm and the SPOT testbed with rigid arms (the shipped runs) and compliant ones."""
+    """The dual arm and the SPOT testbed with rigid arms (the shipped runs), compliant ones
+    (braked) and servo-held ones."""
     rows = []
-    for name, config, _ in RIG_RUNS:
-        if not name.endswith("_compliant") or name not in r.rig or config not in r.runs:
+    configs = [config for name, config, _ in RIG_RUNS if not name.startswith(EXPERIMENT)]
+    for config in dict.fromkeys(configs):
+        if config not in r.runs:
             continue
-        for arms, s in (("rigid", r.runs[config]), ("compliant", r.rig[name])):
+        variants = [("rigid", r.runs[config])] + [(holding, r.rig[f"{config}_{holding}"]) for holding in
+                                                  ("compliant", "servo") if f"{config}_{holding}" in r.rig]
+        for arms, s in variants:
             g1, g2 = s["grasps"]
             done = s["status"] == "completed"
             p2p = (f"{num(_p2p(g1, 'base', 'x'))} / {num(_p2p(g2, 'base', 'x'))}"

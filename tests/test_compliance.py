@@ -33,10 +33,11 @@ RIGID_LIMIT_REL = 0.02
 
 
 def arm_joints(model):
-    """The compliant joints' (configuration index, velocity index, stiffness, the brake's angle)."""
+    """The spring-held joints' (configuration index, velocity index, stiffness, rest: the brake's
+    angle, a servo's setpoint or the gearbox's zero deflection)."""
     pm = model.pin_model
-    return [(pm.idx_qs[pm.getJointId(name)], pm.idx_vs[pm.getJointId(name)], k, angle)
-            for name, (k, _, angle) in model.springs.items()]
+    return [(pm.idx_qs[pm.getJointId(name)], pm.idx_vs[pm.getJointId(name)], spring.stiffness, spring.rest)
+            for name, spring in model.springs.items()]
 
 
 def test_rigid_arms_have_no_joint_springs_and_compliant_ones_one_per_joint():
@@ -77,13 +78,17 @@ def test_a_compliant_arm_under_its_own_weight_settles_where_its_springs_balance_
     assert np.asarray(d.q)[iq] - brake == pytest.approx(sag, rel=SAG_SHARE, abs=SAG_SHARE * np.abs(sag).max())
 
 
-@pytest.mark.parametrize("mode", [0, 5], ids=["lowest", "highest"])
-def test_an_undamped_compliant_arm_rings_at_its_joint_springs_natural_frequencies(mode):
+@pytest.mark.parametrize("holding", ["compliant", "servo"])
+@pytest.mark.parametrize("mode", [0, -1], ids=["lowest", "highest"])
+def test_an_undamped_compliant_arm_rings_at_its_joint_springs_natural_frequencies(mode, holding):
     """No damping, no gravity: started along one of its modes (K phi = omega^2 M phi, M the
     arm joints' block of the mass matrix; the fingers move at the drive's constant speed, so
     they ride on the arm), the arm swings in that mode alone at its omega: the modal
-    coordinate's zero crossings over five periods give it within 1 %."""
-    s = spotsim.load_scenario(CASE_I, [*COMPLIANT, "arm.compliance.damping_ratio=0"])
+    coordinate's zero crossings over five periods give it within 1 %. Held by servos, each
+    joint is two: the motor side (the servo's spring, the rotor's armature) and the gearbox's
+    deflection (its spring), twelve modes."""
+    s = spotsim.load_scenario(CASE_I, [*COMPLIANT, f"arm.compliance.joints={holding}", "arm.compliance.damping_ratio=0",
+                                       "arm.compliance.servo_damping_ratio=0"])
     model = spotsim.build_model(s)
     joints = arm_joints(model)
     iq = [j[0] for j in joints]
@@ -94,6 +99,7 @@ def test_an_undamped_compliant_arm_rings_at_its_joint_springs_natural_frequencie
     M = np.triu(M) + np.triu(M, 1).T
     M = M[np.ix_(iv, iv)]
     w2, phi = scipy.linalg.eigh(K, M)
+    assert len(w2) == (6 if holding == "compliant" else 12)
     omega, shape = math.sqrt(w2[mode]), phi[:, mode] / np.abs(phi[:, mode]).max()
     stepper = Stepper(model)
     d = stepper.data
@@ -114,11 +120,13 @@ def test_an_undamped_compliant_arm_rings_at_its_joint_springs_natural_frequencie
 
 
 @pytest.mark.slow
-def test_the_free_floating_robot_with_compliant_arms_keeps_its_linear_momentum():
-    """The joints' springs and dampers act between the links they join: internal. The dual arm
-    with compliant arms through TM-1's first impacts keeps its linear momentum to round-off."""
+@pytest.mark.parametrize("joints", ["compliant", "servo"])
+def test_the_free_floating_robot_with_compliant_arms_keeps_its_linear_momentum(joints):
+    """The joints' springs and dampers (and servos) act between the links they join: internal.
+    The dual arm with compliant arms through TM-1's first impacts keeps its linear momentum to
+    round-off."""
     s = spotsim.load_scenario(ROOT / "config" / "dual_arm_sequential.yaml",
-                              ["robot.compliance.joints=compliant", "simulation.duration_s=0.6"])
+                              [f"robot.compliance.joints={joints}", "simulation.duration_s=0.6"])
     r = spotsim.simulate(s)
     assert len(r.summary["grasps"]) >= 1 and r.summary["grasps"][0]["peak_force_norm_N"] > 0
     assert r.summary["momentum"]["linear_drift_rel"] <= LINEAR_MOMENTUM_BOUND
@@ -175,3 +183,21 @@ def test_stiff_compliant_joints_give_the_rigid_arms_results():
     stiff = members("arm.compliance.joints=compliant", "arm.compliance.stiffness_scale=1e4")
     change = np.median(stiff / rigid - 1, axis=0)
     assert np.abs(change).max() < RIGID_LIMIT_REL, change
+
+
+@pytest.mark.parametrize("holding", ["compliant", "servo"])
+def test_on_the_air_bearing_table_the_arms_start_at_their_angles(holding):
+    """On the table the bearings carry the weight (the branches fall in gravity's part in its
+    plane: none), so nothing sags: each arm joint starts at its angle, the gearboxes
+    undeflected, and a servo holds its motor side with no feed-forward."""
+    s = spotsim.load_scenario(ROOT / "config" / "spot_testbed_3mm.yaml", [f"robot.compliance.joints={holding}"])
+    model = spotsim.build_model(s)
+    pm = model.pin_model
+    angles = (*s.robot.arm1_joint_angles_rad, *s.robot.arm2_joint_angles_rad)
+    for (name, angle, _, _), expected in zip(model.spec.compliant, angles, strict=True):
+        link = model.q0[pm.idx_qs[pm.getJointId(name)]]
+        if holding == "servo":
+            motor = model.q0[pm.idx_qs[pm.getJointId(name + "_motor")]]
+            assert (motor, link) == (expected, 0.0) and model.springs[name + "_motor"].rest == expected
+        else:
+            assert link == expected == angle

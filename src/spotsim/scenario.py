@@ -135,12 +135,17 @@ class Simulation:
 
 @dataclass(frozen=True, kw_only=True)
 class Compliance:
-    joints: str = key("rigid", _choice("rigid", "compliant"),
-                      "rigid (the joints locked and reduced away) or compliant (each joint's gearbox a torsional "
-                      "spring and damper to its brake, held at its angle: docs/model.md)")
+    joints: str = key("rigid", _choice("rigid", "compliant", "servo"),
+                      "rigid (the joints locked and reduced away), compliant (each joint's gearbox a torsional "
+                      "spring and damper to its brake, held at its angle) or servo (the gearbox's spring to a "
+                      "motor side that turns, its rotor's reflected inertia held by a PD position servo within "
+                      "the joint's torque limit): docs/model.md")
     stiffness_scale: float = key(1.0, _positive, "a factor on every joint's catalogue stiffness (compliant joints)")
     damping_ratio: float = key(0.05, _non_negative, "each compliant joint's damping as a share of critical, on the "
                                "link-side inertia it turns at the start (the mass matrix's diagonal)")
+    servo_bandwidth_Hz: float = key(20.0, _positive, "servo: the position loop's natural frequency on the joint's "
+                                    "inertia (its rotor's reflected inertia and the link side's): its gains")
+    servo_damping_ratio: float = key(0.7, _non_negative, "servo: the position loop's damping ratio")
 
 
 @dataclass(frozen=True, kw_only=True)

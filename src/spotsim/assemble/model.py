@@ -43,7 +43,7 @@ from ..sim.tether import Tethers, no_tethers
 from ..sim.tree import joint_axis, kinematic_tree
 from ..tables import ADAPTIVE, DRIVES, METHODS, MOTOR
 from . import assets
-from .compliance import compliance_of, joint_springs, spring_arrays
+from .compliance import MOTOR_SUFFIX, compliance_of, joint_springs, reflected_inertias, servo_urdf, spring_arrays
 from .faces import INSET_KINDS, TOUCHING_KINDS, contact_faces, inset, sphere_layer
 from .rig import DYNAMOMETER_JOINTS, bungee, dynamometer_springs, mount_on_dynamometer, settle
 from .scene import FINGER_NAMES, SceneSpec, check_inertials, check_inertias, frame, lock_joints, scene_spec, weld_urdf
@@ -197,6 +197,8 @@ def build_model(s, source: str = "<scenario>", welded: dict | None = None, urdf:
         urdf = assets.compile_xacro(spec.xacro, spec.args)
         if spec.dynamometer:
             urdf = mount_on_dynamometer(urdf, s.dynamometer)
+        if spec.servo:
+            urdf = servo_urdf(urdf, spec.compliant)
     else:
         urdf = weld_urdf(urdf, spec)
     check_inertials(urdf)
@@ -208,6 +210,8 @@ def build_model(s, source: str = "<scenario>", welded: dict | None = None, urdf:
     model, problems = lock_joints(full, spec)
     if problems:
         raise ScenarioError([f"{source}: {p}" for p in problems])
+    if spec.servo:
+        reflected_inertias(model, spec.compliant)
     model.gravity = pin.Motion(np.array(s.simulation.gravity_m_s2), np.zeros(3))
     robot_joint = model.getJointId(spec.robot_joint) if spec.robot_joint else 0
 
@@ -247,14 +251,17 @@ def build_model(s, source: str = "<scenario>", welded: dict | None = None, urdf:
         return build_model(s, source, welded, urdf=urdf, faces=faces, held={**(held or {}), **idle}, springs=springs)
     q0 = with_openings(model, q0, fingers)
     if springs is None:
-        springs = joint_springs(model, q0, spec.compliant, compliance_of(s))
+        springs = joint_springs(model, q0, spec.compliant, compliance_of(s), not on_table(s))
         if spec.dynamometer:
             springs = {**springs, **dynamometer_springs(model, q0, s.dynamometer)}
-    if np.any(model.gravity.linear) and springs and not spec.welded:
+    if np.any(model.gravity.linear) and springs and not spec.welded and not on_table(s):
         # the arms sag on their gearboxes under gravity: the start is where they hold still,
-        # and the modules start from the grasp frames there
+        # and the modules start from the grasp frames there (on the air-bearing table the
+        # bearings carry the weight: `assemble.table`)
         q0 = settle(model, q0, springs, [name for name, _, _, _ in spec.compliant])
         q0 = start_configuration(model, spec, end_effectors, modules, q0)
+        if spec.servo:  # the servos hold the settled start
+            springs = {**springs, **joint_springs(model, q0, spec.compliant, compliance_of(s), not on_table(s))}
         if spec.dynamometer:  # its rests hold the settled arm
             springs = {**springs, **dynamometer_springs(model, q0, s.dynamometer)}
     tethers = (bungee(model, q0, modules[0].joint, s.suspension, s.module.mass_kg)
@@ -299,8 +306,8 @@ def start_configuration(model: pin.Model, spec: SceneSpec, end_effectors, module
     module at its `initial_offset_mm` and `initial_rpy_deg` from its end-effector's grasp frame O_a."""
     if q is None:
         q0 = pin.neutral(model)
-        for name, angle, _, _ in spec.compliant:
-            q0[model.idx_qs[model.getJointId(name)]] = angle
+        for name, angle, _, _ in spec.compliant:  # a servo holds the motor side there, the gearbox undeflected
+            q0[model.idx_qs[model.getJointId(name + MOTOR_SUFFIX if spec.servo else name)]] = angle
     else:
         q0 = np.array(q, dtype=float)
     data = model.createData()
@@ -542,10 +549,10 @@ def model_fields(p: _Parts) -> ModelFields:
     spheres += [(j, layers.slave.centre_J[layers.slave.joint == j], 0.0) for j in np.unique(layers.slave.joint)]
     # a kinematic or relay drive prescribes its fingers' motion; a motor pushes them
     prescribed = [] if s.end_effector.drive == "motor" else [f.joint for f in p.fingers]
-    stiffness, damping, rest = spring_arrays(model, p.springs)
+    stiffness, damping, rest, limit = spring_arrays(model, p.springs)
     tree, branches = kinematic_tree(model, prescribed=prescribed, gravity_W=model.gravity.linear,
                                     table_normal=table if table.any() else None, stiffness=stiffness, rest=rest,
-                                    damping=damping, spheres=spheres)
+                                    damping=damping, torque_limit=limit, spheres=spheres)
     ees, mods = [ee for ee, _ in p.grasps], [k for _, k in p.grasps]
     grasps = Grasps(ee=np.array(ees, dtype=np.int64), module=np.array(mods, dtype=np.int64),
                     ee_joint=np.array([p.end_effectors[e].joint for e in ees], dtype=np.int64),
@@ -675,6 +682,8 @@ def _record_frames(p: _Parts, tree, branches) -> RecordFrames:
         finger_q=np.array(finger_q, dtype=np.int64), locked_opening=np.array(locked, dtype=float),
         finger_actuator=np.array(actuator, dtype=np.int64),
         arm_q=np.array([model.idx_qs[model.getJointId(name)] for name in p.layout.arm_joints], dtype=np.int64),
+        arm_motor_q=np.array([model.idx_qs[model.getJointId(name + MOTOR_SUFFIX)] if model.existJointName(
+            name + MOTOR_SUFFIX) else -1 for name in p.layout.arm_joints], dtype=np.int64),
         mount_q=np.array([model.idx_qs[model.getJointId(name)] for name in mount], dtype=np.int64),
         mount_v=np.array([model.idx_vs[model.getJointId(name)] for name in mount], dtype=np.int64),
         all_branches=np.flatnonzero(branches.floating).astype(np.int64),

@@ -27,6 +27,7 @@ import pinocchio as pin
 
 from ..errors import ModelError
 from ..sim.tether import Tethers, no_tethers
+from .compliance import Spring
 
 #: The dynamometer's joints, base to top: along x, y, z, then about x, y, z.
 DYNAMOMETER_JOINTS = ("dyn_x", "dyn_y", "dyn_z", "dyn_rx", "dyn_ry", "dyn_rz")
@@ -101,17 +102,17 @@ def gravity_loads(model: pin.Model, q: np.ndarray, names) -> np.ndarray:
     return np.array([G[model.idx_vs[model.getJointId(name)]] for name in names])
 
 
-def dynamometer_springs(model: pin.Model, q0: np.ndarray, dyn) -> dict[str, tuple[float, float, float]]:
-    """The dynamometer's six springs ({joint name: (stiffness, damping, rest)}, as
-    `compliance.joint_springs`): each rest where its spring holds the start still against
-    gravity (its joint at zero), each damping `dyn.damping_ratio` of critical on the inertia its
-    joint carries at the start (the mass matrix's diagonal)."""
+def dynamometer_springs(model: pin.Model, q0: np.ndarray, dyn) -> dict[str, Spring]:
+    """The dynamometer's six springs (by joint name, as `compliance.joint_springs`): each rest
+    where its spring holds the start still against gravity (its joint at zero), each damping
+    `dyn.damping_ratio` of critical on the inertia its joint carries at the start (the mass
+    matrix's diagonal)."""
     M = pin.crba(model, model.createData(), q0)
     G = gravity_loads(model, q0, DYNAMOMETER_JOINTS)
     springs = {}
     for name, k, g in zip(DYNAMOMETER_JOINTS, stiffnesses(dyn), G, strict=True):
         iv = model.idx_vs[model.getJointId(name)]
-        springs[name] = (float(k), 2.0 * dyn.damping_ratio * math.sqrt(k * M[iv, iv]), float(g / k))
+        springs[name] = Spring(float(k), 2.0 * dyn.damping_ratio * math.sqrt(k * M[iv, iv]), float(g / k))
     return springs
 
 
@@ -125,8 +126,8 @@ def settle(model: pin.Model, q: np.ndarray, springs: dict, names, iterations: in
     for _ in range(iterations):
         G = gravity_loads(model, q, names)
         for name, g in zip(names, G, strict=True):
-            k, _, rest = springs[name]
-            q[model.idx_qs[model.getJointId(name)]] = rest - g / k
+            spring = springs[name]
+            q[model.idx_qs[model.getJointId(name)]] = spring.rest - g / spring.stiffness
     return q
 
 

@@ -44,6 +44,9 @@ class SceneSpec:
     compliant: tuple[tuple[str, float, str, int], ...] = ()
     # the arm's base on the dynamometer (`rig.mount_on_dynamometer`)
     dynamometer: bool = False
+    # the compliant joints held by servos, each split in a motor side and the gearbox's
+    # deflection (`compliance.servo_urdf`)
+    servo: bool = False
 
     @property
     def welded_modules(self) -> set[int]:
@@ -74,13 +77,14 @@ def scene_spec(s, welded: dict | None = None, held: dict | None = None) -> Scene
         args = {**geometry_args(s.geometry), **module_args("module_", s.module)}
         arm = [f"joint{i}" for i in range(1, 7)]
         joints = dict(zip(arm, s.arm.joint_angles_rad, strict=True))
-        compliant = s.arm.compliance.joints == "compliant"
+        compliant = s.arm.compliance.joints != "rigid"
         locked = {**({} if compliant else joints), "jointGripper": 0.0, **{name: float(x) for name, x in held.items()}}
         checked = {name: f"arm.joint_angles_rad[{i}]" for i, name in enumerate(arm)}
         return SceneSpec(assets.URDF_DIR / "single_arm_scene.urdf.xacro", args, locked, checked,
                          (("EE", "ee_"),), (("TM", "tm_", s.module, 0),), ((0, 0),),
                          compliant=tuple((name, joints[name], s.arm.model, i) for i, name in enumerate(arm)
-                                         if compliant), dynamometer=s.arm.base == "dynamometer")
+                                         if compliant), dynamometer=s.arm.base == "dynamometer",
+                         servo=s.arm.compliance.joints == "servo")
     if isinstance(s, DualArmScenario):
         args = {**geometry_args(s.geometry), **module_args("tm1_", s.tm1), **module_args("tm2_", s.tm2),
                 **robot.LAYOUTS[s.robot.layout]}
@@ -92,7 +96,7 @@ def scene_spec(s, welded: dict | None = None, held: dict | None = None) -> Scene
         locked, checked, compliant = {}, {}, []
         for arm, angles in (("arm1_", s.robot.arm1_joint_angles_rad), ("arm2_", s.robot.arm2_joint_angles_rad)):
             for i, (name, angle) in enumerate(zip(robot.ARM_JOINTS, angles, strict=True)):
-                if s.robot.compliance.joints == "compliant":
+                if s.robot.compliance.joints != "rigid":
                     compliant.append((arm + name, angle, s.robot.arm_model, i))
                 else:
                     locked[arm + name] = angle
@@ -107,7 +111,8 @@ def scene_spec(s, welded: dict | None = None, held: dict | None = None) -> Scene
                          ((0, 0), (1, 1)), robot_joint="fdr_free_flyer",
                          welded=tuple((k, tuple(map(float, xyz)), tuple(map(float, rpy)))
                                       for k, (xyz, rpy) in sorted(welded.items())),
-                         arms=((s.robot.arm_model, "arm1_"), (s.robot.arm_model, "arm2_")), compliant=tuple(compliant))
+                         arms=((s.robot.arm_model, "arm1_"), (s.robot.arm_model, "arm2_")), compliant=tuple(compliant),
+                         servo=s.robot.compliance.joints == "servo")
     raise TypeError(f"not a scenario: {type(s).__name__}")
 
 

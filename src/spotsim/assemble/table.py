@@ -58,14 +58,15 @@ def mount_on_table(model: pin.Model, q0: np.ndarray, joints, normal_W) -> tuple[
             jid = new.addJoint(model.parents[j], model.joints[j], placement, model.names[j])
             new.appendBodyToJoint(jid, model.inertias[j], pin.SE3.Identity())
             q.extend(q0[model.idx_qs[j]:model.idx_qs[j] + model.nqs[j]])
-    # the joints' rotors and dampers carried over (a mounted joint's are the table's: none)
-    armature, damping = np.array(new.armature), np.array(new.damping)
+    # the joints' rotors, dampers and torque limits carried over (a mounted joint's are the
+    # table's: none)
+    armature, damping, effort = np.array(new.armature), np.array(new.damping), np.array(new.effortLimit)
     for j in range(1, model.njoints):
         if j not in turn:
             src = slice(model.idx_vs[j], model.idx_vs[j] + model.nvs[j])
             dst = slice(new.idx_vs[j], new.idx_vs[j] + new.nvs[j])
-            armature[dst], damping[dst] = model.armature[src], model.damping[src]
-    new.armature, new.damping = armature, damping
+            armature[dst], damping[dst], effort[dst] = model.armature[src], model.damping[src], model.effortLimit[src]
+    new.armature, new.damping, new.effortLimit = armature, damping, effort
     for f in list(model.frames)[1:]:  # the first is the universe, which every model has
         g = pin.Frame(f)
         if f.parentJoint in turn:

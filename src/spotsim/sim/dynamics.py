@@ -84,6 +84,15 @@ def new_articulation(nj: int, nv: int) -> ArticulationStruct:
 # ------------------------------------------------------------------------------- one free body
 
 
+
+@njit_inline
+def passive_force(t, iv, x, u):
+    """The passive spring's and damper's force on degree of freedom iv at coordinate x and
+    speed u: -stiffness (x - rest) - damping u, clamped to +-torque_limit."""
+    f = -t.stiffness[iv] * (x - t.rest[iv]) - t.damping[iv] * u
+    limit = t.torque_limit[iv]
+    return limit if f > limit else -limit if f < -limit else f
+
 @njit_inline
 def body_acceleration(t, j, R, v, f, tau_O, g_W, planar):
     """One free body's (a_O, alpha), two 3-tuples: the articulated-body algorithm of a branch
@@ -354,7 +363,7 @@ def _articulated(m, d, b, bias, out, inertias=True):
             w_D[j] = _dot6(w_S[j], w_U[j]) + t.armature[iv]
         D = w_D[j]
         if bias:
-            tau = d.tau[iv] - t.stiffness[iv] * (q[t.idx_q[j]] - t.rest[iv]) - t.damping[iv] * v[iv]
+            tau = d.tau[iv] + passive_force(t, iv, q[t.idx_q[j]], v[iv])
         else:
             tau = w.unit[iv]
         w_u[j] = tau - _dot6(w_S[j], w_pA[j])

@@ -70,6 +70,8 @@ class RecordFrames(NamedTuple):
     locked_opening: np.ndarray  # (n_f,)
     finger_actuator: np.ndarray  # (n_f,)
     arm_q: np.ndarray  # (n_arm,) the index in q of each compliant arm joint (`Layout.arm_joints`)
+    # (n_arm,) ... of its motor side's joint, whose angle adds to it (-1: braked, none)
+    arm_motor_q: np.ndarray
     # the dynamometer's six joints (`assemble.rig`; none without it): their indices in q and v
     mount_q: np.ndarray
     mount_v: np.ndarray

@@ -200,8 +200,9 @@ def sample(m, d, row):
         for i in range(n_ee):
             p = _frame(m, d, n_mod + i, R_b)
             at = _put(row, at, p)
-    for i in range(m.record.arm_q.shape[0]):
-        row[at + i] = d.q[m.record.arm_q[i]]
+    for i in range(m.record.arm_q.shape[0]):  # the link's angle: the motor side's and the gearbox's
+        im = m.record.arm_motor_q[i]
+        row[at + i] = d.q[m.record.arm_q[i]] + (d.q[im] if im >= 0 else 0.0)
     at += m.record.arm_q.shape[0]
     for i in range(m.record.mount_q.shape[0]):
         # what the arm and the top plate put on the sensors since the start (its joints start

@@ -61,10 +61,12 @@ class Tree(NamedTuple):
     free: np.ndarray
     # per degree of freedom (nv,): the rotor inertia on the mass matrix's diagonal (Pinocchio's
     # `armature`), kg or kg m^2; the passive spring and damper, -stiffness (q - rest) - damping v
+    # clamped to +-torque_limit (a servo's within its motor's torque)
     armature: np.ndarray
     stiffness: np.ndarray  # N/m or N m/rad
     damping: np.ndarray  # N s/m or N m s/rad
     rest: np.ndarray  # m or rad
+    torque_limit: np.ndarray  # N or N m (inf: none)
     # the revolute and prismatic joints, in tree order, and how far a contact sphere of their
     # subtree moves per unit of their coordinate (prismatic: 1; revolute: its farthest sphere
     # from the axis, m); 0 where their subtree carries no sphere
@@ -175,7 +177,8 @@ def joint_axis(model: pin.Model, j: int) -> np.ndarray:
 
 
 def kinematic_tree(model: pin.Model, prescribed=(), gravity_W=(0.0, 0.0, 0.0), table_normal=None,
-                   stiffness=None, rest=None, damping=None, spheres=()) -> tuple[TreeStruct, BranchesStruct]:
+                   stiffness=None, rest=None, damping=None, torque_limit=None,
+                   spheres=()) -> tuple[TreeStruct, BranchesStruct]:
     """The compiled tree and branches of a reduced Pinocchio model.
 
     prescribed: joints whose actuator prescribes their motion. gravity_W: (3,), m/s^2.
@@ -227,6 +230,7 @@ def kinematic_tree(model: pin.Model, prescribed=(), gravity_W=(0.0, 0.0, 0.0), t
         stiffness=np.zeros(nv) if stiffness is None else np.asarray(stiffness, dtype=float).reshape(nv),
         damping=np.array(model.damping if damping is None else damping, dtype=float).reshape(nv),
         rest=np.zeros(nv) if rest is None else np.asarray(rest, dtype=float).reshape(nv),
+        torque_limit=np.full(nv, np.inf) if torque_limit is None else np.asarray(torque_limit, dtype=float).reshape(nv),
         internal=ints([j for j in range(1, nj) if kinds[j] in (REVOLUTE, PRISMATIC)]),
         reach=tree_reach)
     rows = []
@@ -554,13 +558,15 @@ def gravity_energy(m, f):
 
 @njit
 def spring_energy(m, q):
-    """The energy stored in the joints' passive springs, 1/2 k (q - rest)^2 summed, J."""
+    """The energy stored in the joints' passive springs, J: 1/2 k x^2 each (x = q - rest), and
+    past its torque limit L, where it pushes with L alone, L |x| - L^2 / 2k."""
     t = m.tree
     total = 0.0
     for j in t.internal:
         i, k = t.idx_v[j], t.stiffness[t.idx_v[j]]
         if k != 0.0:
-            total += 0.5 * k * (q[t.idx_q[j]] - t.rest[i]) ** 2
+            x, L = abs(q[t.idx_q[j]] - t.rest[i]), t.torque_limit[i]
+            total += 0.5 * k * x * x if k * x <= L else L * x - 0.5 * L * L / k
     return total
 
 
