@@ -46,3 +46,10 @@ def test_unpacked_wheel_validates_its_own_scenario_from_any_directory(wheel, tmp
                           cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr
     assert "name: single_arm_case_I" in proc.stdout
+    # and by name, from the API and the command line alike
+    proc = subprocess.run([sys.executable, "-c", "import spotsim; print(spotsim.load_scenario('case_III').name)"],
+                          cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0 and proc.stdout.split() == ["single_arm_case_III"], proc.stderr
+    proc = subprocess.run([sys.executable, "-m", "spotsim.cli", "validate", "single_arm_case_II"],
+                          cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0 and "name: single_arm_case_II" in proc.stdout, proc.stderr

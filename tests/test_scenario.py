@@ -119,3 +119,24 @@ def test_unwritable_results_directory_is_a_clear_error(tmp_path, capsys):
     blocker.write_text("not a directory")
     assert main(["run", str(CASE_I), "--out", str(blocker / "out"), "--quiet"]) == 2
     assert "cannot write results" in capsys.readouterr().err
+
+
+def test_shipped_scenarios_are_found_by_name_from_any_directory(tmp_path, monkeypatch, capsys):
+    """A shipped scenario by its name, or by the end of it after an underscore when only one
+    ends so; `spotsim list` names them all; an ambiguous or unknown name is one clear error."""
+    from spotsim.assemble.assets import shipped_scenarios
+
+    monkeypatch.chdir(tmp_path)
+    shipped = shipped_scenarios()
+    assert set(shipped) == {p.stem for p in CONFIGS}
+    assert spotsim.load_scenario("case_III").name == "single_arm_case_III"
+    assert spotsim.load_scenario("single_arm_case_II.yaml").name == "single_arm_case_II"
+    assert spotsim.load_scenario("testbed_3mm", ["simulation.duration_s=1"]).name == "spot_testbed_3mm"
+    assert main(["list"]) == 0
+    listed = capsys.readouterr().out
+    assert all(name in listed for name in shipped)
+    assert main(["validate", "case_I"]) == 0 and "name: single_arm_case_I" in capsys.readouterr().out
+    assert main(["validate", "3mm"]) == 2
+    assert "spot_offset_3mm, spot_testbed_3mm" in capsys.readouterr().err
+    assert main(["validate", "no_such_case"]) == 2
+    assert "no shipped scenario of that name" in capsys.readouterr().err

@@ -66,7 +66,8 @@ def _parser() -> argparse.ArgumentParser:
     p = _Parser(prog="spotsim", description=__doc__.splitlines()[0])
     sub = p.add_subparsers(dest="command", required=True)
     run = sub.add_parser("run", help="run a scenario and write its results")
-    run.add_argument("config", nargs="?", help=f"scenario YAML (default: config/{DEFAULT_SCENARIO})")
+    run.add_argument("config", nargs="?", help=f"scenario YAML, or a shipped scenario's name (`spotsim list`; "
+                                              f"default: config/{DEFAULT_SCENARIO})")
     run.add_argument("--out", help="results directory (default: results/<scenario name>, with --ensemble "
                                    "results/<scenario name>/ensemble)")
     run.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE",
@@ -90,7 +91,9 @@ def _parser() -> argparse.ArgumentParser:
                      help=f"a dual-arm run's markers.csv: its bodies' displacements sampled at this rate, as a "
                           f"motion camera records them (default {CAMERA_HZ:g} Hz, the SPOT testbed's)")
     val = sub.add_parser("validate", help="print the resolved scenario, or every problem in it")
-    val.add_argument("config")
+    val.add_argument("config", help="scenario YAML, or a shipped scenario's name")
+    sub.add_parser("list", help="the shipped scenarios: their names (which run, validate, sweep, envelope and "
+                                "study take in place of a file) and descriptions")
     val.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE")
     plot = sub.add_parser("plot", help="regenerate the figures of a run's results directory")
     plot.add_argument("result_dir")
@@ -120,7 +123,7 @@ def _envelope_parser(sub) -> None:
     from .studies.sweep import PRECISION_MM, WALL_LIMIT_S
 
     en = sub.add_parser("envelope", help="the capture envelope of a single-arm scenario, by bisection along rays")
-    en.add_argument("config", help="scenario YAML (single arm)")
+    en.add_argument("config", help="scenario YAML, or a shipped scenario's name (single arm)")
     en.add_argument("--axes", default=",".join(AXES), help=f"axes searched both ways (default {','.join(AXES)})")
     en.add_argument("--planes", default="x-y,roll-yaw", help="planes fanned with rays, or 'none' (default "
                                                              "x-y,roll-yaw)")
@@ -151,8 +154,8 @@ def _envelope(args) -> int:
     from .scenario import load_scenario
     from .studies.envelope import AXES, PLANES, Search, envelope
 
-    path = Path(args.config)
     try:
+        path = _config_path(args.config)
         axes = tuple(a for a in args.axes.split(",") if a) if args.axes != "none" else ()
         bad = [a for a in axes if a not in AXES]
         planes = () if args.planes == "none" else tuple(tuple(p.split("-")) for p in args.planes.split(","))
@@ -182,7 +185,7 @@ def _sweep_parser(sub) -> None:
     from .studies.sweep import PRECISION_MM, WALL_LIMIT_S
 
     sw = sub.add_parser("sweep", help="run a scenario over variations of its keys on Dask, resumable")
-    sw.add_argument("config", help="scenario YAML")
+    sw.add_argument("config", help="scenario YAML, or a shipped scenario's name")
     sw.add_argument("--vary", action="append", default=[], metavar="KEY.PATH=LO:HI:N|A,B,C",
                     help="an axis of a grid: N values from LO to HI, or the values listed (repeatable; "
                          "module.initial_offset_mm.1 is one component)")
@@ -213,6 +216,17 @@ def _cluster(args):
     return Cluster(args.scheduler, args.workers, args.wall_limit, not args.quiet)
 
 
+def _list() -> int:
+    """`spotsim list`: each shipped scenario's name and description."""
+    from .assemble.assets import shipped_scenarios
+    from .scenario import read_yaml
+
+    print("shipped scenarios (give a name, or its end after an underscore when only one ends so: case_III):")
+    for name, path in shipped_scenarios().items():
+        print(f"  {name:24s} {(read_yaml(path) or {}).get('description', '')}")
+    return 0
+
+
 def _bad_input(e: SpotsimError) -> int:
     """Print every problem of a bad input (a ScenarioError's each on its line): exit code 2."""
     for line in e.problems if isinstance(e, ScenarioError) else [str(e)]:
@@ -226,8 +240,8 @@ def _sweep(args) -> int:
     from .scenario import load_scenario
     from .studies.sweep import run_sweep, spec_of
 
-    path = Path(args.config)
     try:
+        path = _config_path(args.config)
         spec = spec_of(args.vary, args.spec, args.set)
         out = Path(args.out) if args.out else Path("results") / load_scenario(path, spec.sets).name / "sweep"
         report = run_sweep(path, spec, out, cluster=_cluster(args), precision_mm=args.precision_mm,
@@ -250,7 +264,8 @@ def _study_parser(sub) -> None:
     stab = verbs.add_parser("stability", help="stiff and extreme cases: predicted stable step and verdict")
     est = verbs.add_parser("estimate", help="each run's error estimate against a converged reference, over starts")
     for v in (acc, stab, est):
-        v.add_argument("config", nargs="?", help=f"scenario YAML (default: config/{DEFAULT_SCENARIO})")
+        v.add_argument("config", nargs="?", help=f"scenario YAML, or a shipped scenario's name (default: "
+                                                 f"config/{DEFAULT_SCENARIO})")
         v.add_argument("--out", help="output directory (default: results/study/<scenario name>)")
         v.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE",
                        help="override a scenario key for every run (repeatable)")
@@ -358,7 +373,10 @@ def _study(args) -> int:
         return 2
     if duration is not None:
         overrides.append(f"simulation.duration_s={duration}")
-    path = _config_path(args.config)
+    try:
+        path = _config_path(args.config)
+    except ScenarioError as e:
+        return _bad_input(e)
     loaded = _load_or_report(path, overrides)
     if loaded is None:
         return 2
@@ -587,9 +605,11 @@ def estimate_lines(entry: dict) -> str:
 
 
 def _config_path(arg: str | None) -> Path:
-    from .assemble.assets import CONFIG_DIR
+    """The scenario file of a command's argument: a file, or a shipped scenario by name
+    (`assets.scenario_file`); none: the default scenario."""
+    from .assemble.assets import CONFIG_DIR, scenario_file
 
-    return Path(arg) if arg else CONFIG_DIR / DEFAULT_SCENARIO
+    return scenario_file(arg) if arg else CONFIG_DIR / DEFAULT_SCENARIO
 
 
 def _load(path: Path, overrides):
@@ -620,6 +640,8 @@ def main(argv=None) -> int:
         args = _parser().parse_args(argv)
     except SystemExit as e:  # --help (0) or a bad option (2, one line printed)
         return e.code
+    if args.command == "list":
+        return _list()
     if args.command == "replay":
         return _replay(args.result_dir, args)
     if args.command == "study":
@@ -651,7 +673,10 @@ def main(argv=None) -> int:
         if given:
             print(f"{', '.join(given)}: only with --ensemble N", file=sys.stderr)
             return 2
-    path = _config_path(getattr(args, "config", None))
+    try:
+        path = _config_path(getattr(args, "config", None))
+    except ScenarioError as e:
+        return _bad_input(e)
     loaded = _load_or_report(path, args.set)
     if loaded is None:
         return 2
@@ -715,6 +740,10 @@ def main(argv=None) -> int:
         if "robot_centroid_displacement_mm" in g:
             print(f"    robot centroid displacement "
                   f"{json.dumps([round(d, 4) for d in g['robot_centroid_displacement_mm']])} mm")
+    if "peak_force_N" in s.get("dynamometer", {}):
+        dyn = s["dynamometer"]
+        print(f"  dynamometer ({dyn['filter_cutoff_Hz']:g} Hz low-pass, {dyn['sampling_Hz']:g} Hz): peak force "
+              f"{json.dumps([round(f, 3) for f in dyn['peak_force_N']])} N (axes of O_a)")
     if "error_estimate" in s:
         print(estimate_lines(s["error_estimate"]))
     print(f"  wall time {s['wall_time_s']:.2f} s for {s['sim_time_s']:.3f} s simulated")

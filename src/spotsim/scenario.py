@@ -844,8 +844,11 @@ def read_yaml(path: str | Path) -> Any:
 
 
 def load_scenario(path: str | Path, overrides: list[str] = ()) -> Scenario:
-    """Read, override (`key.path=value`) and validate a YAML scenario file."""
-    path = Path(path)
+    """Read, override (`key.path=value`) and validate a YAML scenario file, or a shipped
+    scenario by name (`assemble.assets.scenario_file`: `load_scenario("case_III")`)."""
+    from .assemble.assets import scenario_file
+
+    path = scenario_file(path)
     raw = read_yaml(path)
     if raw is None:
         raw = {}

@@ -33,6 +33,36 @@ URDF_DIR = ROOT / "urdf"
 CONFIG_DIR = ROOT / "config"
 
 
+def shipped_scenarios() -> dict[str, Path]:
+    """The scenarios spotsim ships (config/*.yaml), by name (the file's stem)."""
+    return {p.stem: p for p in sorted(CONFIG_DIR.glob("*.yaml"))}
+
+
+def scenario_file(arg: str | Path) -> Path:
+    """The scenario file `arg` names: a file that exists, as given; else a shipped scenario by
+    its name (`single_arm_case_III`, with or without `.yaml`) or by the end of its name after an
+    underscore when only one ends so (`case_III`). A YAML path that does not exist is returned
+    as given (reading it reports it); a name that no shipped scenario has, or that several end
+    with, is a ScenarioError."""
+    from ..errors import ScenarioError
+
+    path = Path(arg)
+    if path.exists() or len(path.parts) != 1:
+        return path
+    name = path.name.removesuffix(".yaml")
+    shipped = shipped_scenarios()
+    if name in shipped:
+        return shipped[name]
+    ending = [stem for stem in shipped if stem.endswith("_" + name)]
+    if len(ending) > 1:
+        raise ScenarioError([f"{arg}: names several shipped scenarios ({', '.join(ending)}): give the whole name"])
+    if ending:
+        return shipped[ending[0]]
+    if path.suffix not in (".yaml", ".yml"):
+        raise ScenarioError([f"{arg}: no such file, and no shipped scenario of that name (`spotsim list` names them)"])
+    return path
+
+
 @lru_cache(maxsize=1)
 def example_robot_data_dir() -> Path:
     """The example-robot-data share directory (version 6 ships data only, under cmeel)."""
