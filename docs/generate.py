@@ -189,7 +189,8 @@ def norm(v) -> float:
 
 
 def table(header: list[str], rows: list[list[str]]) -> str:
-    lines = ["| " + " | ".join(header) + " |", "| " + " | ".join("---" for _ in header) + " |"]
+    lines = ["| " + " | ".join(h.replace("|", "\\|") for h in header) + " |",
+             "| " + " | ".join("---" for _ in header) + " |"]
     lines += ["| " + " | ".join(str(c).replace("|", "\\|") for c in row) + " |" for row in rows]
     return "\n".join(lines)
 
@@ -847,9 +848,7 @@ def composite(r: Results) -> str:
 def study_commands(r: Results) -> str:
     lines = []
     for s in r.meta["studies"]:
-        kind = s["command"].split()[2]
-        name = Path(s["command"].split()[3]).stem
-        out = s.get("out", f"docs/results/{kind}/{name}")
+        out = s.get("out") or f"docs/results/{s['command'].split()[2]}/{Path(s['command'].split()[3]).stem}"
         at = f" (at commit `{s['commit']}`)" if s.get("commit") and s["commit"] != r.meta["commit"] else ""
         lines.append(f"- `{s['command']} --out {out}`: {num(s['wall_time_s'], 2)} s{at}")
     return "\n".join(lines)
@@ -957,11 +956,10 @@ def rig_experiment_table(r: Results) -> str:
                      vec(g["peak_force_N"]), vec(dyn["peak_force_N"]), *rings,
                      f"{num(dyn['filter_cutoff_Hz'])} Hz, {num(dyn['sampling_Hz'])} Hz",
                      fixed(g["completed_s"], 3) if g["completed_s"] is not None else s["status"],
-                     num(g["residual_offset_norm_mm"], 2), f"{s['momentum']['linear_drift_rel']:.2g}",
-                     num(s["wall_time_s"], 2)])
+                     num(g["residual_offset_norm_mm"], 2), f"{s['momentum']['linear_drift_rel']:.2g}"])
     return table(["variant", "contact force peaks x, y, z (N)", "dynamometer peaks x, y, z (N)",
                   "after the grasp, y: mean (N) / swing (N) / ringing (Hz)", "after the grasp, z: the same",
-                  "filter, sampling", "complete (s)", "e (mm)", "linear momentum drift (relative)", "wall (s)"], rows)
+                  "filter, sampling", "complete (s)", "e (mm)", "linear momentum drift (relative)"], rows)
 
 
 def rig_compliant_table(r: Results) -> str:
@@ -986,13 +984,13 @@ def rig_compliant_table(r: Results) -> str:
                          f"{num(g1['peak_force_norm_N'])} / {num(g2['peak_force_norm_N'])}",
                          f"{num(g1['residual_offset_norm_mm'], 2)} / {num(g2['residual_offset_norm_mm'], 2)}"
                          if done else "–",
-                         f"{s['momentum']['linear_drift_rel']:.2g}", num(s["wall_time_s"], 2)])
+                         f"{s['momentum']['linear_drift_rel']:.2g}"])
     if not rows:
         return f"(no results: run `{GENERATE} rig`)"
     return table(["config", "arms", "complete (s)", "FDR centroid displacement |d1| / |d2| (mm)",
                   "EE-2 to TM-2 as grasp 2 starts (mm)", "base x peak to peak, grasp 1 / 2 (mm)",
                   "peak contact force, grasp 1 / 2 (N)", "residual TM-1 / TM-2 (mm)",
-                  "linear momentum drift (relative)", "wall (s)"], rows)
+                  "linear momentum drift (relative)"], rows)
 
 
 def testbed_momentum(r: Results) -> str:
