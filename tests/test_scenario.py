@@ -124,7 +124,7 @@ def test_unwritable_results_directory_is_a_clear_error(tmp_path, capsys):
 def test_shipped_scenarios_are_found_by_name_from_any_directory(tmp_path, monkeypatch, capsys):
     """A shipped scenario by its name, or by the end of it after an underscore when only one
     ends so; `spotsim list` names them all; an ambiguous or unknown name is one clear error."""
-    from spotsim.assemble.assets import shipped_scenarios
+    from spotsim.paths import shipped_scenarios
 
     monkeypatch.chdir(tmp_path)
     shipped = shipped_scenarios()

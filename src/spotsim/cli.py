@@ -218,7 +218,7 @@ def _cluster(args):
 
 def _list() -> int:
     """`spotsim list`: each shipped scenario's name and description."""
-    from .assemble.assets import shipped_scenarios
+    from .paths import shipped_scenarios
     from .scenario import read_yaml
 
     print("shipped scenarios (give a name, or its end after an underscore when only one ends so: case_III):")
@@ -606,8 +606,8 @@ def estimate_lines(entry: dict) -> str:
 
 def _config_path(arg: str | None) -> Path:
     """The scenario file of a command's argument: a file, or a shipped scenario by name
-    (`assets.scenario_file`); none: the default scenario."""
-    from .assemble.assets import CONFIG_DIR, scenario_file
+    (`paths.scenario_file`); none: the default scenario."""
+    from .paths import CONFIG_DIR, scenario_file
 
     return scenario_file(arg) if arg else CONFIG_DIR / DEFAULT_SCENARIO
 

@@ -21,6 +21,7 @@ import numpy as np
 import yaml
 
 from .errors import ScenarioError
+from .paths import scenario_file
 from .tables import DRIVES, METHODS
 
 # ----------------------------------------------------------------------------- rules
@@ -845,9 +846,7 @@ def read_yaml(path: str | Path) -> Any:
 
 def load_scenario(path: str | Path, overrides: list[str] = ()) -> Scenario:
     """Read, override (`key.path=value`) and validate a YAML scenario file, or a shipped
-    scenario by name (`assemble.assets.scenario_file`: `load_scenario("case_III")`)."""
-    from .assemble.assets import scenario_file
-
+    scenario by name (`paths.scenario_file`: `load_scenario("case_III")`)."""
     path = scenario_file(path)
     raw = read_yaml(path)
     if raw is None:

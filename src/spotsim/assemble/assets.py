@@ -6,61 +6,10 @@ import os
 import sys
 import sysconfig
 from functools import lru_cache
-from importlib import resources
 from pathlib import Path
 
 from ..errors import ModelError
-
-
-def assets_root() -> Path:
-    """The directory holding spotsim's `urdf/` and `config/`: inside the installed package (a
-    wheel ships them there), else the checkout's top level (an editable install). The
-    environment variable SPOTSIM_ROOT overrides both."""
-    if os.environ.get("SPOTSIM_ROOT"):
-        return Path(os.environ["SPOTSIM_ROOT"])
-    packaged = resources.files("spotsim")
-    if packaged.joinpath("urdf").is_dir():
-        return Path(str(packaged))
-    checkout = Path(__file__).resolve().parents[3]
-    if (checkout / "urdf").is_dir():
-        return checkout
-    raise ModelError(f"spotsim's urdf/ is neither in the package ({packaged}) nor in a checkout ({checkout}); "
-                     "reinstall spotsim")
-
-
-ROOT = assets_root()
-URDF_DIR = ROOT / "urdf"
-CONFIG_DIR = ROOT / "config"
-
-
-def shipped_scenarios() -> dict[str, Path]:
-    """The scenarios spotsim ships (config/*.yaml), by name (the file's stem)."""
-    return {p.stem: p for p in sorted(CONFIG_DIR.glob("*.yaml"))}
-
-
-def scenario_file(arg: str | Path) -> Path:
-    """The scenario file `arg` names: a file that exists, as given; else a shipped scenario by
-    its name (`single_arm_case_III`, with or without `.yaml`) or by the end of its name after an
-    underscore when only one ends so (`case_III`). A YAML path that does not exist is returned
-    as given (reading it reports it); a name that no shipped scenario has, or that several end
-    with, is a ScenarioError."""
-    from ..errors import ScenarioError
-
-    path = Path(arg)
-    if path.exists() or len(path.parts) != 1:
-        return path
-    name = path.name.removesuffix(".yaml")
-    shipped = shipped_scenarios()
-    if name in shipped:
-        return shipped[name]
-    ending = [stem for stem in shipped if stem.endswith("_" + name)]
-    if len(ending) > 1:
-        raise ScenarioError([f"{arg}: names several shipped scenarios ({', '.join(ending)}): give the whole name"])
-    if ending:
-        return shipped[ending[0]]
-    if path.suffix not in (".yaml", ".yml"):
-        raise ScenarioError([f"{arg}: no such file, and no shipped scenario of that name (`spotsim list` names them)"])
-    return path
+from ..paths import CONFIG_DIR, ROOT, URDF_DIR  # noqa: F401 (where the assets are: `paths`)
 
 
 @lru_cache(maxsize=1)
