@@ -201,3 +201,51 @@ def test_on_the_air_bearing_table_the_arms_start_at_their_angles(holding):
             assert (motor, link) == (expected, 0.0) and model.springs[name + "_motor"].rest == expected
         else:
             assert link == expected == angle
+
+
+#: The torsion curve against the catalogue's formula, and its energy against a quadrature:
+#: the same numbers by two routes, so round-off.
+CURVE_REL = 1e-9
+
+
+@pytest.mark.parametrize("joint, size", [("arm1_shoulder_pan_joint", 17), ("arm1_elbow_joint", 14)])
+def test_a_strain_wave_joint_twists_as_its_gear_catalogue_says(joint, size):
+    """The UR3's joints are Harmonic Drive sizes 17 and 14: under a torque T their gear twists
+    T/K1 up to T1, T1/K1 + (T - T1)/K2 up to T2, and by K3 beyond (the catalogue's formula,
+    doc. 1018854 Eq. 68.1-68.4). At those twists the compiled spring pushes back with T, across
+    both knees, and stores the curve's integral."""
+    from scipy.integrate import quad
+
+    from spotsim.sim.dynamics import passive_force
+    from spotsim.sim.tree import spring_energy
+
+    K1, T1, K2, T2, K3 = {17: (1.0e4, 3.9, 1.4e4, 12.0, 1.6e4), 14: (4.7e3, 2.0, 6.1e3, 6.9, 7.1e3)}[size]
+
+    def catalogue_twist(T):
+        if T <= T1:
+            return T / K1
+        if T <= T2:
+            return T1 / K1 + (T - T1) / K2
+        return T1 / K1 + (T2 - T1) / K2 + (T - T2) / K3
+
+    def torque(a):  # the catalogue's curve, its twist inverted
+        a1, a2 = T1 / K1, T1 / K1 + (T2 - T1) / K2
+        return K1 * a if a <= a1 else T1 + K2 * (a - a1) if a <= a2 else T2 + K3 * (a - a2)
+
+    model = spotsim.build_model(spotsim.load_scenario(ROOT / "config" / "dual_arm_sequential.yaml",
+                                                      ["robot.compliance.joints=compliant"]))
+    pm, tree = model.pin_model, model.sim.tree
+    iq, iv = pm.idx_qs[pm.getJointId(joint)], pm.idx_vs[pm.getJointId(joint)]
+    rest = model.springs[joint].rest
+    for T in (1.0, T1, 0.5 * (T1 + T2), T2, 2.5 * T2):
+        for sign in (1.0, -1.0):
+            phi = sign * catalogue_twist(T)
+            assert passive_force(tree, iv, rest + phi, 0.0) == pytest.approx(-sign * T, rel=CURVE_REL)
+            q = model.q0.copy()
+            q[iq] = rest + phi
+            others = q.copy()
+            others[iq] = rest
+            stored = spring_energy(model.sim, q) - spring_energy(model.sim, others)
+            knees = [a for a in (T1 / K1, T1 / K1 + (T2 - T1) / K2) if a < abs(phi)]
+            exact = sum(quad(torque, a, b)[0] for a, b in zip([0.0, *knees], [*knees, abs(phi)]))
+            assert stored == pytest.approx(exact, rel=CURVE_REL)

@@ -12,7 +12,7 @@ from spotsim.errors import ModelError
 from spotsim.sim.bare import bare
 from spotsim.sim.data import make_data
 from spotsim.sim.dynamics import accelerations, velocity_jump
-from spotsim.sim.tree import NEWTON_EULER, kinematic_tree, kinematics
+from spotsim.sim.tree import NEWTON_EULER, kinematic_tree, kinematics, no_springs
 
 #: The compiled algorithm and Pinocchio's sum the same terms in another order: 1e-12 of the
 #: largest acceleration is a thousand times their round-off on these models.
@@ -45,8 +45,13 @@ def articulated_model(rng, root, n=6) -> pin.Model:
 
 
 def compiled(model, prescribed=(), stiffness=None, rest=None, torque_limit=None):
-    """The compiled tree of a Pinocchio model and a Data for it (`sim.bare`)."""
-    return bare(model, prescribed, stiffness, rest, torque_limit)
+    """The compiled tree of a Pinocchio model and a Data for it (`sim.bare`), with linear
+    springs (stiffness, rest), clamped to torque_limit, if given."""
+    springs = no_springs(model)
+    for array, values in ((springs.stiffness, stiffness), (springs.rest, rest), (springs.limit, torque_limit)):
+        if values is not None:
+            array[:] = values
+    return bare(model, prescribed, springs)
 
 
 def random_state(model, rng, data):

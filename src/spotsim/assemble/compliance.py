@@ -29,16 +29,27 @@ import numpy as np
 import pinocchio as pin
 
 from ..errors import ScenarioError
+from ..sim.tree import Spring, no_springs
 
 
-class Spring(NamedTuple):
-    """A joint's passive spring and damper: -stiffness (q - rest) - damping q', clamped to
-    +-limit (N m, or N; inf: not clamped)."""
+class GearStiffness(NamedTuple):
+    """A gearbox's torsional stiffness as its catalogue gives it: K1 up to the limit torque T1,
+    K2 up to T2, K3 beyond (N m/rad, N m)."""
 
-    stiffness: float
-    damping: float
-    rest: float
-    limit: float = math.inf
+    K1: float
+    T1: float
+    K2: float
+    T2: float
+    K3: float
+
+    def deflection(self, torque: float) -> float:
+        """The twist under |torque| (rad): the catalogue's T/K1, T1/K1 + (T - T1)/K2, ... ."""
+        T = abs(torque)
+        if T <= self.T1:
+            return T / self.K1
+        if T <= self.T2:
+            return self.T1 / self.K1 + (T - self.T1) / self.K2
+        return self.T1 / self.K1 + (self.T2 - self.T1) / self.K2 + (T - self.T2) / self.K3
 
 
 #: Each arm model's rotors' inertia reflected through their gearboxes, kg m^2, base to wrist
@@ -53,15 +64,26 @@ REFLECTED_INERTIA_KG_M2 = {
 MOTOR_SUFFIX = "_motor"
 
 
-#: Each arm model's joints' torsional stiffness, N m/rad, base to wrist: the gearbox catalogue's
-#: stiffness below its first limit torque (K1) for each joint's size, the softest of its three
-#: (docs/model.md's assumptions table gives the sources). UR3: strain-wave gears in UR's joint
-#: sizes 2, 2, 1, 0, 0, 0 (56, 56, 28, 12 N m), taken as Harmonic Drive sizes 17, 17, 14, 14, 14,
-#: 14 (size 14 the smallest the table gives). Z1: planetary gearboxes of its 30 N m class.
-JOINT_STIFFNESS_NM_RAD = {
-    "ur3": (1.0e4, 1.0e4, 4.7e3, 4.7e3, 4.7e3, 4.7e3),
-    "z1": (1.0e4, 1.0e4, 1.0e4, 1.0e4, 1.0e4, 1.0e4),
+#: Harmonic Drive's torsional stiffness by size, ratio above 50 (CHA engineering data, doc.
+#: 1018854, Tables 50.3/50.4; docs/model.md's assumptions table).
+HARMONIC_DRIVE_14 = GearStiffness(K1=4.7e3, T1=2.0, K2=6.1e3, T2=6.9, K3=7.1e3)
+HARMONIC_DRIVE_17 = GearStiffness(K1=1.0e4, T1=3.9, K2=1.4e4, T2=12.0, K3=1.6e4)
+#: A planetary gearbox of the Z1's 30 N m class: one stiffness, ~1e4 N m/rad.
+PLANETARY_30NM = GearStiffness(K1=1.0e4, T1=math.inf, K2=1.0e4, T2=math.inf, K3=1.0e4)
+#: Each arm model's joints' gearboxes, base to wrist. UR3: strain-wave gears in UR's joint sizes
+#: 2, 2, 1, 0, 0, 0 (56, 56, 28, 12 N m), taken as Harmonic Drive sizes 17, 17, 14, 14, 14, 14
+#: (size 14 the smallest the table gives). Z1: Unitree publishes neither reduction nor stiffness.
+JOINT_STIFFNESS = {
+    "ur3": (HARMONIC_DRIVE_17, HARMONIC_DRIVE_17) + (HARMONIC_DRIVE_14,) * 4,
+    "z1": (PLANETARY_30NM,) * 6,
 }
+
+
+def twist(spring: Spring, torque: float) -> float:
+    """How far `spring` twists under a torque (or force) of `torque` >= 0: its torsion curve
+    inverted (`sim.tree.spring_torque`), the catalogue's T/K1, T1/K1 + (T - T1)/K2, ... ."""
+    return GearStiffness(spring.stiffness, spring.knee_1, spring.stiffness_2 or spring.stiffness, spring.knee_2,
+                         spring.stiffness_3 or spring.stiffness).deflection(torque)
 
 
 def compliance_of(s):
@@ -89,11 +111,13 @@ def joint_springs(model: pin.Model, q0: np.ndarray, joints, compliance, gravity:
         G = pin.computeGeneralizedGravity(model, model.createData(), q0)
     springs = {}
     for name, angle, arm, i in joints:
-        if arm not in JOINT_STIFFNESS_NM_RAD:
+        if arm not in JOINT_STIFFNESS:
             raise ScenarioError([f"no joint stiffness known for the {arm} arm"])
         iv = model.idx_vs[model.getJointId(name)]
-        k = compliance.stiffness_scale * JOINT_STIFFNESS_NM_RAD[arm][i]
-        springs[name] = Spring(k, 2.0 * compliance.damping_ratio * math.sqrt(k * M[iv, iv]), 0.0 if servo else angle)
+        gear, scale = JOINT_STIFFNESS[arm][i], compliance.stiffness_scale
+        k = scale * gear.K1
+        springs[name] = Spring(k, 2.0 * compliance.damping_ratio * math.sqrt(k * M[iv, iv]), 0.0 if servo else angle,
+                               knee_1=gear.T1, stiffness_2=scale * gear.K2, knee_2=gear.T2, stiffness_3=scale * gear.K3)
         if servo:
             im = model.idx_vs[model.getJointId(name + MOTOR_SUFFIX)]
             inertia = M[im, im]  # the rotor's armature and the link side
@@ -113,15 +137,16 @@ def reflected_inertias(model: pin.Model, joints) -> None:
     model.armature = armature
 
 
-def spring_arrays(model: pin.Model, springs: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The springs by velocity index (nv,): stiffness, damping, rest and limit
-    (`sim.tree.kinematic_tree`); the other joints' damping is the model's own."""
-    stiffness, damping, rest = np.zeros(model.nv), np.array(model.damping, dtype=float), np.zeros(model.nv)
-    limit = np.full(model.nv, np.inf)
+def spring_arrays(model: pin.Model, springs: dict) -> Spring:
+    """The springs by velocity index, each field an array (nv,) (`sim.tree.kinematic_tree`); a
+    joint without one has none (zero stiffness, infinite knees and limit) and the model's own
+    damping."""
+    arrays = no_springs(model)
     for name, spring in springs.items():
         iv = model.idx_vs[model.getJointId(name)]
-        stiffness[iv], damping[iv], rest[iv], limit[iv] = spring
-    return stiffness, damping, rest, limit
+        for array, value in zip(arrays, spring, strict=True):
+            array[iv] = value
+    return arrays
 
 
 def servo_urdf(urdf: str, joints) -> str:

@@ -549,10 +549,9 @@ def model_fields(p: _Parts) -> ModelFields:
     spheres += [(j, layers.slave.centre_J[layers.slave.joint == j], 0.0) for j in np.unique(layers.slave.joint)]
     # a kinematic or relay drive prescribes its fingers' motion; a motor pushes them
     prescribed = [] if s.end_effector.drive == "motor" else [f.joint for f in p.fingers]
-    stiffness, damping, rest, limit = spring_arrays(model, p.springs)
     tree, branches = kinematic_tree(model, prescribed=prescribed, gravity_W=model.gravity.linear,
-                                    table_normal=table if table.any() else None, stiffness=stiffness, rest=rest,
-                                    damping=damping, torque_limit=limit, spheres=spheres)
+                                    table_normal=table if table.any() else None,
+                                    springs=spring_arrays(model, p.springs), spheres=spheres)
     ees, mods = [ee for ee, _ in p.grasps], [k for _, k in p.grasps]
     grasps = Grasps(ee=np.array(ees, dtype=np.int64), module=np.array(mods, dtype=np.int64),
                     ee_joint=np.array([p.end_effectors[e].joint for e in ees], dtype=np.int64),

@@ -27,7 +27,7 @@ import pinocchio as pin
 
 from ..errors import ModelError
 from ..sim.tether import Tethers, no_tethers
-from .compliance import Spring
+from .compliance import Spring, twist
 
 #: The dynamometer's joints, base to top: along x, y, z, then about x, y, z.
 DYNAMOMETER_JOINTS = ("dyn_x", "dyn_y", "dyn_z", "dyn_rx", "dyn_ry", "dyn_rz")
@@ -118,8 +118,9 @@ def dynamometer_springs(model: pin.Model, q0: np.ndarray, dyn) -> dict[str, Spri
 
 def settle(model: pin.Model, q: np.ndarray, springs: dict, names, iterations: int = 20) -> np.ndarray:
     """q with joints `names` (springs about their rests) where their springs hold them still
-    against gravity: q_i = rest_i - G_i(q) / k_i, iterated from q (G changes little over the
-    few milliradians a gearbox gives)."""
+    against gravity: q_i = rest_i - sign(G_i) twist_i(|G_i(q)|) (the spring's torsion curve
+    inverted, `Spring.twist`), iterated from q (G changes little over the few milliradians a
+    gearbox gives)."""
     q = q.copy()
     if not np.any(model.gravity.linear) or not names:
         return q
@@ -127,7 +128,7 @@ def settle(model: pin.Model, q: np.ndarray, springs: dict, names, iterations: in
         G = gravity_loads(model, q, names)
         for name, g in zip(names, G, strict=True):
             spring = springs[name]
-            q[model.idx_qs[model.getJointId(name)]] = spring.rest - g / spring.stiffness
+            q[model.idx_qs[model.getJointId(name)]] = spring.rest - math.copysign(twist(spring, abs(g)), g)
     return q
 
 

@@ -68,13 +68,12 @@ class BareData(NamedTuple):
     current: np.ndarray
 
 
-def bare(model: pin.Model, prescribed=(), stiffness=None, rest=None, torque_limit=None) -> tuple[BareModel, BareData]:
+def bare(model: pin.Model, prescribed=(), springs=None) -> tuple[BareModel, BareData]:
     """The compiled Model and a Data (at the neutral configuration, at rest) of a Pinocchio
-    model's tree; `prescribed`, `stiffness`, `rest`, `torque_limit` as `tree.kinematic_tree`. Its gravity is the
+    model's tree; `prescribed`, `springs` as `tree.kinematic_tree`. Its gravity is the
     model's. External wrenches go into data.loads.f_local, and their world forces, which the
     integrators' centroids read, into data.loads.force_W."""
-    tree, branches = kinematic_tree(model, prescribed, model.gravity.linear, stiffness=stiffness, rest=rest,
-                                    torque_limit=torque_limit)
+    tree, branches = kinematic_tree(model, prescribed, model.gravity.linear, springs=springs)
     nj, nv = model.njoints, model.nv
     frames = new_frames(nj)
     data = BareData(q=pin.neutral(model), v=np.zeros(nv), tau=np.zeros(nv),

@@ -60,18 +60,41 @@ class Tree(NamedTuple):
     # a body that does not float exerts on it is external
     free: np.ndarray
     # per degree of freedom (nv,): the rotor inertia on the mass matrix's diagonal (Pinocchio's
-    # `armature`), kg or kg m^2; the passive spring and damper, -stiffness (q - rest) - damping v
-    # clamped to +-torque_limit (a servo's within its motor's torque)
+    # `armature`), kg or kg m^2; the passive spring and damper (`dynamics.passive_force`),
+    # -T(|q - rest|) sign(q - rest) - damping v clamped to +-torque_limit (a servo's within its
+    # motor's torque), T a gear's torsion curve: stiffness up to the torque knee_1, stiffness_2
+    # up to knee_2, stiffness_3 beyond (a linear spring: infinite knees)
     armature: np.ndarray
     stiffness: np.ndarray  # N/m or N m/rad
     damping: np.ndarray  # N s/m or N m s/rad
     rest: np.ndarray  # m or rad
     torque_limit: np.ndarray  # N or N m (inf: none)
+    knee_1: np.ndarray  # N or N m
+    stiffness_2: np.ndarray
+    knee_2: np.ndarray
+    stiffness_3: np.ndarray
     # the revolute and prismatic joints, in tree order, and how far a contact sphere of their
     # subtree moves per unit of their coordinate (prismatic: 1; revolute: its farthest sphere
     # from the axis, m); 0 where their subtree carries no sphere
     internal: np.ndarray  # (n_i,)
     reach: np.ndarray  # (nj,)
+
+
+class Spring(NamedTuple):
+    """A joint's passive spring and damper (or, each field an array by velocity index, every
+    joint's: `kinematic_tree`): -T(|q - rest|) sign(q - rest) - damping q', clamped
+    to +-limit (N m, or N; inf: not clamped). T is a strain-wave gear's torsion curve, three
+    lines through its catalogue's limit torques (stiffness up to knee_1, stiffness_2 up to
+    knee_2, stiffness_3 beyond; a linear spring: infinite knees)."""
+
+    stiffness: float
+    damping: float
+    rest: float
+    limit: float = math.inf
+    knee_1: float = math.inf
+    stiffness_2: float = 0.0
+    knee_2: float = math.inf
+    stiffness_3: float = 0.0
 
 
 class Branches(NamedTuple):
@@ -176,15 +199,21 @@ def joint_axis(model: pin.Model, j: int) -> np.ndarray:
     return axis
 
 
-def kinematic_tree(model: pin.Model, prescribed=(), gravity_W=(0.0, 0.0, 0.0), table_normal=None,
-                   stiffness=None, rest=None, damping=None, torque_limit=None,
+def no_springs(model: pin.Model) -> Spring:
+    """No passive springs (each field an array by velocity index), the model's own dampers."""
+    arrays = Spring(*(np.full(model.nv, default) for default in (0.0, 0.0, 0.0, *Spring._field_defaults.values())))
+    arrays.damping[:] = model.damping
+    return arrays
+
+
+def kinematic_tree(model: pin.Model, prescribed=(), gravity_W=(0.0, 0.0, 0.0), table_normal=None, springs=None,
                    spheres=()) -> tuple[TreeStruct, BranchesStruct]:
     """The compiled tree and branches of a reduced Pinocchio model.
 
     prescribed: joints whose actuator prescribes their motion. gravity_W: (3,), m/s^2.
     table_normal: the air-bearing table's normal (world), whose component of gravity the
-    bearings carry on planar branches. stiffness, rest: (nv,) passive springs (default none);
-    damping: (nv,) their dampers (default the model's `damping`).
+    bearings carry on planar branches. springs: the passive springs and dampers, a Spring of
+    (nv,) arrays (default none, and the model's `damping`).
     spheres: (joint, (n, 3) centres in its frame, travel (m) of the prismatic joints above
     them) of each contact layer, for the integrators' levers and the motion bound.
     """
@@ -227,10 +256,9 @@ def kinematic_tree(model: pin.Model, prescribed=(), gravity_W=(0.0, 0.0, 0.0), t
         leaf=np.array([not children[j] for j in range(nj)], dtype=np.bool_),
         branch=np.full(nj, -1, dtype=np.int64), free=np.zeros(nj, dtype=np.bool_),
         armature=np.array(model.armature, dtype=float).reshape(nv),
-        stiffness=np.zeros(nv) if stiffness is None else np.asarray(stiffness, dtype=float).reshape(nv),
-        damping=np.array(model.damping if damping is None else damping, dtype=float).reshape(nv),
-        rest=np.zeros(nv) if rest is None else np.asarray(rest, dtype=float).reshape(nv),
-        torque_limit=np.full(nv, np.inf) if torque_limit is None else np.asarray(torque_limit, dtype=float).reshape(nv),
+        **{name: np.array(values, dtype=float).reshape(nv) for name, values in (springs or no_springs(model))._asdict()
+           .items() if name != "limit"},
+        torque_limit=np.array((springs or no_springs(model)).limit, dtype=float).reshape(nv),
         internal=ints([j for j in range(1, nj) if kinds[j] in (REVOLUTE, PRISMATIC)]),
         reach=tree_reach)
     rows = []
@@ -556,17 +584,51 @@ def gravity_energy(m, f):
     return total
 
 
+@njit_inline
+def _knees(t, iv):
+    """Degree of freedom iv's spring's twists at its knees (`Tree`), rad or m (inf: none)."""
+    if t.knee_1[iv] == math.inf or t.stiffness[iv] == 0.0:
+        return math.inf, math.inf
+    a1 = t.knee_1[iv] / t.stiffness[iv]
+    return a1, a1 + (t.knee_2[iv] - t.knee_1[iv]) / t.stiffness_2[iv] if t.knee_2[iv] < math.inf else math.inf
+
+
+@njit_inline
+def spring_torque(t, iv, a):
+    """The torque (or force) of degree of freedom iv's spring twisted by a >= 0: its torsion
+    curve, stiffness up to knee_1, stiffness_2 up to knee_2, stiffness_3 beyond."""
+    a1, a2 = _knees(t, iv)
+    if a <= a1:
+        return t.stiffness[iv] * a
+    if a <= a2:
+        return t.knee_1[iv] + t.stiffness_2[iv] * (a - a1)
+    return t.knee_2[iv] + t.stiffness_3[iv] * (a - a2)
+
+
 @njit
 def spring_energy(m, q):
-    """The energy stored in the joints' passive springs, J: 1/2 k x^2 each (x = q - rest), and
-    past its torque limit L, where it pushes with L alone, L |x| - L^2 / 2k."""
+    """The energy stored in the joints' passive springs, J: the torsion curve's integral
+    (`spring_torque`) to each twist, and past a clamped spring's limit L, where it pushes with L
+    alone, L |x| - L^2 / 2k (a clamped spring is linear)."""
     t = m.tree
     total = 0.0
     for j in t.internal:
         i, k = t.idx_v[j], t.stiffness[t.idx_v[j]]
-        if k != 0.0:
-            x, L = abs(q[t.idx_q[j]] - t.rest[i]), t.torque_limit[i]
-            total += 0.5 * k * x * x if k * x <= L else L * x - 0.5 * L * L / k
+        if k == 0.0:
+            continue
+        a, L = abs(q[t.idx_q[j]] - t.rest[i]), t.torque_limit[i]
+        a1, a2 = _knees(t, i)
+        if k * a > L:
+            total += L * a - 0.5 * L * L / k
+        elif a <= a1:
+            total += 0.5 * k * a * a
+        elif a <= a2:
+            b = a - a1
+            total += 0.5 * t.knee_1[i] * a1 + t.knee_1[i] * b + 0.5 * t.stiffness_2[i] * b * b
+        else:
+            b = a - a2
+            total += (0.5 * t.knee_1[i] * a1 + 0.5 * (t.knee_1[i] + t.knee_2[i]) * (a2 - a1) + t.knee_2[i] * b
+                      + 0.5 * t.stiffness_3[i] * b * b)
     return total
 
 
