@@ -48,7 +48,7 @@ def compiled(model, prescribed=(), stiffness=None, rest=None, torque_limit=None)
     """The compiled tree of a Pinocchio model and a Data for it (`sim.bare`), with linear
     springs (stiffness, rest), clamped to torque_limit, if given."""
     springs = no_springs(model)
-    for array, values in ((springs.stiffness, stiffness), (springs.rest, rest), (springs.limit, torque_limit)):
+    for array, values in ((springs.stiffness, stiffness), (springs.rest, rest), (springs.torque_limit, torque_limit)):
         if values is not None:
             array[:] = values
     return bare(model, prescribed, springs)

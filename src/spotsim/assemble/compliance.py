@@ -82,8 +82,8 @@ JOINT_STIFFNESS = {
 def twist(spring: Spring, torque: float) -> float:
     """How far `spring` twists under a torque (or force) of `torque` >= 0: its torsion curve
     inverted (`sim.tree.spring_torque`), the catalogue's T/K1, T1/K1 + (T - T1)/K2, ... ."""
-    return GearStiffness(spring.stiffness, spring.knee_1, spring.stiffness_2 or spring.stiffness, spring.knee_2,
-                         spring.stiffness_3 or spring.stiffness).deflection(torque)
+    return GearStiffness(spring.stiffness, spring.knee_1, spring.stiffness_2, spring.knee_2,
+                         spring.stiffness_3).deflection(torque)
 
 
 def compliance_of(s):

@@ -250,19 +250,17 @@ def build_model(s, source: str = "<scenario>", welded: dict | None = None, urdf:
     if idle:  # the next grasp's fingers stay at their start until it begins: locked there
         return build_model(s, source, welded, urdf=urdf, faces=faces, held={**(held or {}), **idle}, springs=springs)
     q0 = with_openings(model, q0, fingers)
-    if springs is None:
+    if springs is None:  # (a weld keeps those of the scene before it)
         springs = joint_springs(model, q0, spec.compliant, compliance_of(s), not on_table(s))
-        if spec.dynamometer:
-            springs = {**springs, **dynamometer_springs(model, q0, s.dynamometer)}
-    if np.any(model.gravity.linear) and springs and not spec.welded and not on_table(s):
-        # the arms sag on their gearboxes under gravity: the start is where they hold still,
-        # and the modules start from the grasp frames there (on the air-bearing table the
-        # bearings carry the weight: `assemble.table`)
-        q0 = settle(model, q0, springs, [name for name, _, _, _ in spec.compliant])
-        q0 = start_configuration(model, spec, end_effectors, modules, q0)
-        if spec.servo:  # the servos hold the settled start
-            springs = {**springs, **joint_springs(model, q0, spec.compliant, compliance_of(s), not on_table(s))}
-        if spec.dynamometer:  # its rests hold the settled arm
+        if spec.compliant and np.any(model.gravity.linear) and not on_table(s):
+            # the arms sag on their gearboxes under gravity: the start is where they hold still,
+            # and the modules start from the grasp frames there (on the air-bearing table the
+            # bearings carry the weight: `assemble.table`)
+            q0 = settle(model, q0, springs, [name for name, _, _, _ in spec.compliant])
+            q0 = start_configuration(model, spec, end_effectors, modules, q0)
+            if spec.servo:  # the servos hold the settled start
+                springs = joint_springs(model, q0, spec.compliant, compliance_of(s))
+        if spec.dynamometer:  # its rests hold the (settled) arm
             springs = {**springs, **dynamometer_springs(model, q0, s.dynamometer)}
     tethers = (bungee(model, q0, modules[0].joint, s.suspension, s.module.mass_kg)
                if hasattr(s, "suspension") and modules[0].joint else no_tethers())

@@ -35,7 +35,7 @@ from ..jit import njit, njit_inline
 from ..linalg import add3, cross3, mtv3, mv3, solve_spd3, sub3
 from ..structs import StructProxy, StructType, new_struct, register
 from ..tables import FORWARD, MOTOR, PLANAR, PRISMATIC, STUCK
-from .tree import ARTICULATED, NEWTON_EULER, branch_centroid, joint_twist, spring_torque
+from .tree import ARTICULATED, NEWTON_EULER, branch_centroid, joint_twist, passive_force
 
 
 class Articulation(NamedTuple):
@@ -83,18 +83,6 @@ def new_articulation(nj: int, nv: int) -> ArticulationStruct:
 
 # ------------------------------------------------------------------------------- one free body
 
-
-
-@njit_inline
-def passive_force(t, iv, x, u):
-    """The passive spring's and damper's force on degree of freedom iv at coordinate x and
-    speed u: -T(|x - rest|) sign(x - rest) - damping u (`tree.spring_torque`), clamped to
-    +-torque_limit."""
-    d = x - t.rest[iv]
-    T = spring_torque(t, iv, abs(d))
-    f = (-T if d > 0.0 else T) - t.damping[iv] * u
-    limit = t.torque_limit[iv]
-    return limit if f > limit else -limit if f < -limit else f
 
 @njit_inline
 def body_acceleration(t, j, R, v, f, tau_O, g_W, planar):

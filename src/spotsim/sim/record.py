@@ -22,7 +22,7 @@ from .actuation import current_speed
 from .data import Snapshots
 from .events import ENERGY, ENERGY_WORK, NONFINITE, RAN
 from .stability import ENERGY_FLOOR_J, ENERGY_GROWTH, mechanical_energy
-from .tree import centroid3, current_frames, gravity_energy, momenta
+from .tree import centroid3, current_frames, gravity_energy, momenta, passive_force
 
 #: Contact snapshots per simulated second kept for `spotsim replay`: its highest display rate.
 #: 100 Hz is ten samples of a 10 ms bounce.
@@ -206,9 +206,9 @@ def sample(m, d, row):
     at += m.record.arm_q.shape[0]
     for i in range(m.record.mount_q.shape[0]):
         # what the arm and the top plate put on the sensors since the start (its joints start
-        # at zero): the springs' and dampers' pull on the top, reversed
+        # at zero, at rest): the springs' and dampers' pull on the top then, less now
         iv = m.record.mount_v[i]
-        row[at + i] = m.tree.stiffness[iv] * d.q[m.record.mount_q[i]] + m.tree.damping[iv] * d.v[iv]
+        row[at + i] = passive_force(m.tree, iv, 0.0, 0.0) - passive_force(m.tree, iv, d.q[m.record.mount_q[i]], d.v[iv])
 
 
 @njit

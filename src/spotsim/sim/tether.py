@@ -35,15 +35,24 @@ def no_tethers() -> Tethers:
 
 
 @njit
+def _cord(tt, i, R_W, p_W):
+    """Tether i's held point's lever from its joint's origin and the point (3-tuples, world),
+    the vector from the point to the anchor and its length, m, from the frames given (R_W, p_W
+    of a Data or of its Frames)."""
+    j = tt.joint[i]
+    r = mv3(R_W[j], (tt.point[i, 0], tt.point[i, 1], tt.point[i, 2]))
+    p = add3((p_W[j, 0], p_W[j, 1], p_W[j, 2]), r)
+    u = (tt.anchor_W[i, 0] - p[0], tt.anchor_W[i, 1] - p[1], tt.anchor_W[i, 2] - p[2])
+    return r, p, u, math.sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2])
+
+
+@njit
 def tether_force(m, i, R_W, p_W, w_W, vo_W):
     """Tether i's pull on its body (3-tuple, world, N) and the point it acts at (3-tuple,
     world), from the frames given (R_W ... of a Data or of its Frames)."""
     tt = m.tethers
     j = tt.joint[i]
-    r = mv3(R_W[j], (tt.point[i, 0], tt.point[i, 1], tt.point[i, 2]))
-    p = add3((p_W[j, 0], p_W[j, 1], p_W[j, 2]), r)
-    u = (tt.anchor_W[i, 0] - p[0], tt.anchor_W[i, 1] - p[1], tt.anchor_W[i, 2] - p[2])
-    length = math.sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2])
+    r, p, u, length = _cord(tt, i, R_W, p_W)
     stretch = length - tt.rest_length[i]
     if stretch <= 0.0 or length == 0.0:
         return (0.0, 0.0, 0.0), p
@@ -79,15 +88,9 @@ def tether_loads(m, d):
 @njit
 def tether_energy(m, f):
     """The energy stored in the stretched tethers, 1/2 k (l - l_0)^2 each, J, at the Frames f."""
-    total = 0.0
-    for i in range(m.tethers.joint.shape[0]):
-        tt = m.tethers
-        j = tt.joint[i]
-        p = add3((f.p_W[j, 0], f.p_W[j, 1], f.p_W[j, 2]), mv3(f.R_W[j], (tt.point[i, 0], tt.point[i, 1],
-                                                                         tt.point[i, 2])))
-        length = math.sqrt((tt.anchor_W[i, 0] - p[0]) ** 2 + (tt.anchor_W[i, 1] - p[1]) ** 2
-                           + (tt.anchor_W[i, 2] - p[2]) ** 2)
-        stretch = length - tt.rest_length[i]
+    total, tt = 0.0, m.tethers
+    for i in range(tt.joint.shape[0]):
+        stretch = _cord(tt, i, f.R_W, f.p_W)[3] - tt.rest_length[i]
         if stretch > 0.0:
             total += 0.5 * tt.stiffness[i] * stretch * stretch
     return total

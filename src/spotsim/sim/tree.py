@@ -60,7 +60,7 @@ class Tree(NamedTuple):
     # a body that does not float exerts on it is external
     free: np.ndarray
     # per degree of freedom (nv,): the rotor inertia on the mass matrix's diagonal (Pinocchio's
-    # `armature`), kg or kg m^2; the passive spring and damper (`dynamics.passive_force`),
+    # `armature`), kg or kg m^2; the passive spring and damper (`passive_force`),
     # -T(|q - rest|) sign(q - rest) - damping v clamped to +-torque_limit (a servo's within its
     # motor's torque), T a gear's torsion curve: stiffness up to the torque knee_1, stiffness_2
     # up to knee_2, stiffness_3 beyond (a linear spring: infinite knees)
@@ -83,14 +83,14 @@ class Tree(NamedTuple):
 class Spring(NamedTuple):
     """A joint's passive spring and damper (or, each field an array by velocity index, every
     joint's: `kinematic_tree`): -T(|q - rest|) sign(q - rest) - damping q', clamped
-    to +-limit (N m, or N; inf: not clamped). T is a strain-wave gear's torsion curve, three
+    to +-torque_limit (N m, or N; inf: not clamped). T is a strain-wave gear's torsion curve, three
     lines through its catalogue's limit torques (stiffness up to knee_1, stiffness_2 up to
     knee_2, stiffness_3 beyond; a linear spring: infinite knees)."""
 
     stiffness: float
     damping: float
     rest: float
-    limit: float = math.inf
+    torque_limit: float = math.inf
     knee_1: float = math.inf
     stiffness_2: float = 0.0
     knee_2: float = math.inf
@@ -218,6 +218,7 @@ def kinematic_tree(model: pin.Model, prescribed=(), gravity_W=(0.0, 0.0, 0.0), t
     them) of each contact layer, for the integrators' levers and the motion bound.
     """
     nj, nv = model.njoints, model.nv
+    springs = no_springs(model) if springs is None else springs
     kinds = [FIXED] + [joint_kind(model, j) for j in range(1, nj)]
     ints = lambda values: np.array(values, dtype=np.int64).reshape(-1)
     prescribed = set(prescribed)
@@ -256,9 +257,7 @@ def kinematic_tree(model: pin.Model, prescribed=(), gravity_W=(0.0, 0.0, 0.0), t
         leaf=np.array([not children[j] for j in range(nj)], dtype=np.bool_),
         branch=np.full(nj, -1, dtype=np.int64), free=np.zeros(nj, dtype=np.bool_),
         armature=np.array(model.armature, dtype=float).reshape(nv),
-        **{name: np.array(values, dtype=float).reshape(nv) for name, values in (springs or no_springs(model))._asdict()
-           .items() if name != "limit"},
-        torque_limit=np.array((springs or no_springs(model)).limit, dtype=float).reshape(nv),
+        **{name: np.array(values, dtype=float).reshape(nv) for name, values in springs._asdict().items()},
         internal=ints([j for j in range(1, nj) if kinds[j] in (REVOLUTE, PRISMATIC)]),
         reach=tree_reach)
     rows = []
@@ -603,6 +602,18 @@ def spring_torque(t, iv, a):
     if a <= a2:
         return t.knee_1[iv] + t.stiffness_2[iv] * (a - a1)
     return t.knee_2[iv] + t.stiffness_3[iv] * (a - a2)
+
+
+@njit_inline
+def passive_force(t, iv, x, u):
+    """The passive spring's and damper's force on degree of freedom iv at coordinate x and
+    speed u: -T(|x - rest|) sign(x - rest) - damping u (`spring_torque`), clamped to
+    +-torque_limit."""
+    d = x - t.rest[iv]
+    T = spring_torque(t, iv, abs(d))
+    f = (-T if d > 0.0 else T) - t.damping[iv] * u
+    limit = t.torque_limit[iv]
+    return limit if f > limit else -limit if f < -limit else f
 
 
 @njit
