@@ -120,7 +120,7 @@ def _parser() -> argparse.ArgumentParser:
 
 def _envelope_parser(sub) -> None:
     from .studies.envelope import AXES, LIMIT, PLANE_RAYS, RESOLUTION
-    from .studies.sweep import PRECISION_MM, WALL_LIMIT_S
+    from .studies.sweep import MAX_POINTS, PRECISION_MM, WALL_LIMIT_S
 
     en = sub.add_parser("envelope", help="the capture envelope of a single-arm scenario, by bisection along rays")
     en.add_argument("config", help="scenario YAML, or a shipped scenario's name (single arm)")
@@ -140,6 +140,8 @@ def _envelope_parser(sub) -> None:
     en.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="an existing Dask scheduler")
     en.add_argument("--workers", type=COUNT, metavar="W", help="local cluster: worker processes")
     en.add_argument("--wall-limit", type=float, default=WALL_LIMIT_S, metavar="S", help="budget of each probe")
+    en.add_argument("--max-points", type=COUNT, default=MAX_POINTS, metavar="N",
+                    help=f"refuse a search that may run more probes (default {MAX_POINTS})")
     en.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE",
                     help="override a scenario key for every probe (repeatable)")
     en.add_argument("--members", type=COUNT, default=1, metavar="N",
@@ -182,7 +184,7 @@ def _envelope(args) -> int:
 
 
 def _sweep_parser(sub) -> None:
-    from .studies.sweep import PRECISION_MM, WALL_LIMIT_S
+    from .studies.sweep import MAX_POINTS, PRECISION_MM, WALL_LIMIT_S
 
     sw = sub.add_parser("sweep", help="run a scenario over variations of its keys on Dask, resumable")
     sw.add_argument("config", help="scenario YAML, or a shipped scenario's name")
@@ -201,6 +203,8 @@ def _sweep_parser(sub) -> None:
                                                              "per core)")
     sw.add_argument("--wall-limit", type=float, default=WALL_LIMIT_S, metavar="S",
                     help=f"wall-time budget of each point (default {WALL_LIMIT_S:g} s)")
+    sw.add_argument("--max-points", type=COUNT, default=MAX_POINTS, metavar="N",
+                    help=f"refuse a sweep of more points (default {MAX_POINTS})")
     sw.add_argument("--precision-mm", type=float, default=PRECISION_MM, metavar="MM",
                     help=f"a complete grasp within it is converged, else off centre (default {PRECISION_MM:g})")
     sw.add_argument("--no-error-estimate", action="store_true", help="skip each point's companion run")
@@ -213,7 +217,7 @@ def _cluster(args):
 
     if not args.wall_limit > 0:
         raise ScenarioError([f"--wall-limit = {args.wall_limit}: must be positive"])
-    return Cluster(args.scheduler, args.workers, args.wall_limit, not args.quiet)
+    return Cluster(args.scheduler, args.workers, args.wall_limit, not args.quiet, args.max_points)
 
 
 def _list() -> int:
@@ -242,9 +246,10 @@ def _sweep(args) -> int:
 
     try:
         path = _config_path(args.config)
-        spec = spec_of(args.vary, args.spec, args.set)
+        cluster = _cluster(args)
+        spec = spec_of(args.vary, args.spec, args.set, cluster.max_points)
         out = Path(args.out) if args.out else Path("results") / load_scenario(path, spec.sets).name / "sweep"
-        report = run_sweep(path, spec, out, cluster=_cluster(args), precision_mm=args.precision_mm,
+        report = run_sweep(path, spec, out, cluster=cluster, precision_mm=args.precision_mm,
                            error_estimate=not args.no_error_estimate)
     except SpotsimError as e:
         return _bad_input(e)

@@ -37,14 +37,16 @@ from .sweep import (
     PRECISION_MM,
     Cluster,
     Point,
+    SchedulerLost,
     _append,
+    check_budget,
     dask_client,
-    failed_record,
     read_records,
     run_point,
     scenario_key,
+    task_record,
     verdict,
-    warm_worker,
+    warm,
 )
 
 #: The misalignment axes: key path of the module's start, unit.
@@ -180,6 +182,18 @@ class Search:
     def rays(self) -> list[Ray]:
         return rays(self.axes, self.planes, self.plane_rays, self.resolution, self.limit)
 
+    def most_runs(self) -> int:
+        """The most runs the search can make, counted without making its rays: each ray's
+        bisection (the limit, then halvings until the bracket is within the resolution) and,
+        with members, its bracket's two ends that many times."""
+        res, lim = {**RESOLUTION, **(self.resolution or {})}, {**LIMIT, **(self.limit or {})}
+        total = 0
+        for axes, n_rays in [((a,), 2) for a in self.axes] + [(p, self.plane_rays) for p in self.planes]:
+            unit = AXES[axes[0]][1]
+            halvings = max(0, math.ceil(math.log2(lim[unit] / res[unit])))
+            total += n_rays * (1 + halvings + (2 * self.members if self.members > 1 else 0))
+        return total
+
 
 def envelope(config, out_dir, search: Search = Search(), *, cluster: Cluster = Cluster(), sets=(),
              run=None) -> EnvelopeReport:
@@ -198,6 +212,7 @@ def envelope(config, out_dir, search: Search = Search(), *, cluster: Cluster = C
         raise ScenarioError([f"{config}: kind = {scenario.kind}: the envelope is of a single-arm scenario's module"])
     for axis in AXES:  # the centred start: the rays' origin
         set_value(raw0, AXES[axis][0], 0.0)
+    check_budget(search.most_runs(), cluster.max_points, f"{config}: the envelope (at most)")
     todo = search.rays()
     done = read_records(out / POINTS_FILE)  # before anything is written: a foreign file stays as it is
     prepare(out, "envelope.md")
@@ -242,6 +257,10 @@ def envelope(config, out_dir, search: Search = Search(), *, cluster: Cluster = C
             state["runs"] += _chances(todo, raw0, search, done, out, cluster, str(config), store, run)
     except KeyboardInterrupt:
         interrupted = True
+    except SchedulerLost as e:
+        write_envelope(EnvelopeReport(todo, done, state["runs"], True, out))
+        raise SchedulerLost(f"{e}: {state['runs']} probes finished now, kept in {out / POINTS_FILE}: run the "
+                            "envelope again to resume") from e
     report = EnvelopeReport(todo, done, state["runs"], interrupted, out)
     write_envelope(report)
     return report
@@ -289,7 +308,7 @@ def _on_dask(todo, probe, settle, cluster: Cluster, source: str, scenario) -> No
     from tqdm import tqdm
 
     with dask_client(cluster) as client:
-        client.run(warm_worker, scenario, source)
+        warm(client, scenario, source)
         pending = as_completed()
         where = {}
         bar = tqdm(unit="probe", disable=not cluster.progress)
@@ -308,10 +327,7 @@ def _on_dask(todo, probe, settle, cluster: Cluster, source: str, scenario) -> No
                 submit(ray)
             for fut in pending:
                 ray, m, point = where.pop(fut.key)
-                try:
-                    record = fut.result()
-                except Exception as e:  # noqa: BLE001 - the probe's failure, not the envelope's
-                    record = failed_record(point, e)
+                record = task_record(point, fut)
                 settle(ray, m, record)
                 bar.update(1)
                 submit(ray)

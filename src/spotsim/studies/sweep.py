@@ -38,6 +38,7 @@ import functools
 import hashlib
 import itertools
 import json
+import logging
 import math
 import os
 import time
@@ -68,6 +69,10 @@ CONVERGED, OFF_CENTRE, NOT_CAPTURED, DIVERGED = "converged", "off centre", "not 
 PRECISION_MM = 0.3
 #: A point's default wall-time budget (its run and its error estimate's companion), s.
 WALL_LIMIT_S = 600.0
+#: The most runs a sweep or an envelope makes unless told otherwise (`--max-points`,
+#: `Cluster.max_points`): each is a whole run of a second or more, so a larger count is far
+#: more often a mistyped range than a plan; it is refused before any point is built.
+MAX_POINTS = 10_000
 #: Models a worker keeps, the least recently used dropped first.
 MODELS_KEPT = 8
 SAMPLERS = ("sobol", "lhs")
@@ -82,8 +87,9 @@ def _number(text: str):
     return parse_yaml(text, f"--vary: {text}")
 
 
-def parse_range(text: str, where: str) -> list:
-    """`LO:HI:N` as N values from LO to HI (N >= 2; N = 1 gives LO), or `A,B,C` as a list."""
+def parse_range(text: str, where: str, most: int = MAX_POINTS) -> list:
+    """`LO:HI:N` as N values from LO to HI (N >= 2; N = 1 gives LO), or `A,B,C` as a list; N
+    above `most` (the budget of points) is refused before the values are made."""
     if ":" in text:
         parts = text.split(":")
         try:
@@ -92,6 +98,7 @@ def parse_range(text: str, where: str) -> list:
             raise ScenarioError([f"{where} = {text}: must read LO:HI:N (N a whole number) or A,B,C"]) from None
         if len(parts) != 3 or n < 1 or not (math.isfinite(lo) and math.isfinite(hi)):
             raise ScenarioError([f"{where} = {text}: must read LO:HI:N with finite LO, HI and N >= 1"])
+        check_budget(n, most, f"{where} = {text}")
         return [float(x) for x in np.linspace(lo, hi, n)]
     values = [_number(x) for x in text.split(",")]
     if any(v is None for v in values):
@@ -99,12 +106,19 @@ def parse_range(text: str, where: str) -> list:
     return values
 
 
-def parse_vary(assignment: str) -> tuple[str, list]:
-    """`key.path=LO:HI:N` or `key.path=A,B,C` as (key path, values)."""
+def check_budget(count: int, most: int, what: str) -> None:
+    """Refuse `count` runs above the budget `most` (ScenarioError naming the option)."""
+    if count > most:
+        raise ScenarioError([f"{what}: {count} runs, more than the budget of {most}: give --max-points (Python: "
+                             "Cluster(max_points=...)) to allow more, or fewer points"])
+
+
+def parse_vary(assignment: str, most: int = MAX_POINTS) -> tuple[str, list]:
+    """`key.path=LO:HI:N` or `key.path=A,B,C` as (key path, values), at most `most` of them."""
     if "=" not in assignment:
         raise ScenarioError([f"--vary: {assignment}: must read key.path=LO:HI:N or key.path=A,B,C"])
     path, text = (x.strip() for x in assignment.split("=", 1))
-    return path, parse_range(text, f"--vary: {path}")
+    return path, parse_range(text, f"--vary: {path}", most)
 
 
 @dataclass
@@ -119,10 +133,11 @@ class SweepSpec:
     sets: list = field(default_factory=list)
 
     @classmethod
-    def from_yaml(cls, path: str | Path) -> SweepSpec:
+    def from_yaml(cls, path: str | Path, most: int = MAX_POINTS) -> SweepSpec:
         """A spec file: `set` (a list of key.path=value), then one of `grid` (key path: a list
         or 'LO:HI:N'), `sample` (method: sobol or lhs, n, seed, ranges: key path: [lo, hi]) or
-        `points` (a list of mappings of key path to value)."""
+        `points` (a list of mappings of key path to value); a range of more than `most` values
+        is refused before it is made."""
         path = Path(path)
         raw = read_yaml(path)
         if not isinstance(raw, dict):
@@ -133,7 +148,7 @@ class SweepSpec:
                                  for k in unknown])
         grid = {}
         for k, v in (raw.get("grid") or {}).items():
-            grid[str(k)] = parse_range(str(v), f"{path}: grid.{k}") if isinstance(v, str) else (
+            grid[str(k)] = parse_range(str(v), f"{path}: grid.{k}", most) if isinstance(v, str) else (
                 list(v) if isinstance(v, list) else [v])
         spec = cls(grid=grid, sample=raw.get("sample"), points=list(raw.get("points") or []),
                    sets=[str(s) for s in raw.get("set") or []])
@@ -167,6 +182,14 @@ class SweepSpec:
                 problems.append(f"{where}: grid.{k}: no values")
         if problems:
             raise ScenarioError(problems)
+
+    def count(self) -> int:
+        """How many points the spec gives, without making them."""
+        if self.grid:
+            return math.prod(len(v) for v in self.grid.values())
+        if self.sample is not None:
+            return int(self.sample["n"])
+        return len(self.points)
 
     def keys(self) -> list[str]:
         if self.grid:
@@ -341,6 +364,23 @@ def warm_worker(scenario, source: str = "<sweep>") -> int:
     model = model_for(scenario, source)
     compile_loop(model, make_data(model))
     return os.getpid()
+
+
+def warm(client, scenario, source: str = "<sweep>") -> None:
+    """`warm_worker` on every worker of `client`, now and as each joins later (a worker plugin,
+    set up before the worker takes a point). A worker lost meanwhile, or whose warm-up raised,
+    is passed over: a point that lands on a worker builds its model there, and reports its own
+    problem."""
+    from distributed.diagnostics.plugin import WorkerPlugin
+
+    class Warm(WorkerPlugin):
+        def setup(self, worker):
+            warm_worker(scenario, source)
+
+    try:
+        client.register_plugin(Warm(), name=f"spotsim-warm-{scenario_key(scenario)}")
+    except Exception:  # noqa: BLE001 - a worker lost while it warmed, or a warm-up that raised
+        pass
 
 
 def run_point(point: Point, wall_limit_s: float | None = WALL_LIMIT_S, with_estimate: bool = True,
@@ -560,12 +600,14 @@ class SweepReport:
 class Cluster:
     """Where and how a sweep's or an envelope's points run: on the Dask scheduler at
     `scheduler`, or on a local cluster of `workers` processes (default one per core); each
-    point within `wall_limit_s` (None: no budget); with a progress bar or not."""
+    point within `wall_limit_s` (None: no budget), at most `max_points` runs in all; with a
+    progress bar or not."""
 
     scheduler: str | None = None
     workers: int | None = None
     wall_limit_s: float | None = WALL_LIMIT_S
     progress: bool = False
+    max_points: int = MAX_POINTS
 
 
 def run_sweep(config, spec: SweepSpec, out_dir, *, cluster: Cluster = Cluster(), precision_mm: float = PRECISION_MM,
@@ -575,6 +617,8 @@ def run_sweep(config, spec: SweepSpec, out_dir, *, cluster: Cluster = Cluster(),
     (report.interrupted); a point's own failure never stops it. `on_record(record)` is called
     after each point is written (tests use it to interrupt or kill)."""
     config, out = Path(config), Path(out_dir)
+    spec.check()
+    check_budget(spec.count(), cluster.max_points, f"{config}: the sweep")
     points = resolve_points(config, spec)
     keys = spec.keys()
     done = read_records(out / POINTS_FILE)  # before anything is written: a foreign file stays as it is
@@ -591,6 +635,7 @@ def run_sweep(config, spec: SweepSpec, out_dir, *, cluster: Cluster = Cluster(),
     t0 = time.perf_counter()
     interrupted = False
     ran = 0
+    lost = None
     if todo:
         try:
             ran = _run_on_dask(todo, out, done, cluster, str(config), error_estimate=error_estimate,
@@ -598,6 +643,8 @@ def run_sweep(config, spec: SweepSpec, out_dir, *, cluster: Cluster = Cluster(),
         except KeyboardInterrupt:
             interrupted = True
             ran = sum(1 for p in todo if p.key in done)
+        except SchedulerLost as e:
+            lost = e
     # a record may come from an earlier sweep over the directory: this spec's index and values
     rows = [table_row({**done[p.key], "index": p.index, "values": p.values}, p.scenario, keys, precision_mm)
             for p in points if p.key in done]
@@ -606,17 +653,21 @@ def run_sweep(config, spec: SweepSpec, out_dir, *, cluster: Cluster = Cluster(),
     except OSError as e:
         raise SpotsimError(f"{out}: cannot write the sweep's table: {e.strerror}; every point is kept in "
                            f"{POINTS_FILE}: free some space and run the sweep again to write it") from e
+    if lost is not None:
+        raise SchedulerLost(f"{lost}: {len(rows)} of {len(points)} points finished, kept in "
+                            f"{out / POINTS_FILE} and the table: run the sweep again to resume") from lost
     return SweepReport(table, ran, reused, interrupted, time.perf_counter() - t0, out)
 
 
-def spec_of(vary=(), spec: SweepSpec | str | Path | None = None, sets=()) -> SweepSpec:
-    """A SweepSpec from `--vary` assignments (a grid), a spec (or its file), and `--set`s."""
+def spec_of(vary=(), spec: SweepSpec | str | Path | None = None, sets=(), most: int = MAX_POINTS) -> SweepSpec:
+    """A SweepSpec from `--vary` assignments (a grid), a spec (or its file), and `--set`s; a
+    range of more than `most` values is refused before it is made."""
     if spec is not None and not isinstance(spec, SweepSpec):
-        spec = SweepSpec.from_yaml(spec)
+        spec = SweepSpec.from_yaml(spec, most)
     if spec is not None and vary:
         raise ScenarioError(["give the points either by --vary or by a spec file, not both"])
     if spec is None:
-        spec = SweepSpec(grid=dict(parse_vary(v) for v in vary))
+        spec = SweepSpec(grid=dict(parse_vary(v, most) for v in vary))
     spec = dataclasses.replace(spec, sets=[*spec.sets, *sets])
     spec.check()
     return spec
@@ -629,7 +680,7 @@ def sweep(config, *, vary=(), spec: SweepSpec | str | Path | None = None, sets=(
     results/<scenario name>/sweep."""
     from ..scenario import load_scenario
 
-    spec = spec_of(vary, spec, sets)
+    spec = spec_of(vary, spec, sets, options.get("cluster", Cluster()).max_points)
     if out_dir is None:
         out_dir = Path("results") / load_scenario(config, spec.sets).name / "sweep"
     report = run_sweep(config, spec, out_dir, **options)
@@ -647,6 +698,7 @@ def dask_client(cluster: Cluster):
     from distributed import Client, LocalCluster
 
     local = None
+    quiet = _quiet_dask()  # a lost worker or scheduler is reported by the sweep, not by Dask's logs
     with dask.config.set({"distributed.scheduler.allowed-failures": 1}):
         if cluster.scheduler:
             try:
@@ -654,15 +706,55 @@ def dask_client(cluster: Cluster):
             except (OSError, ValueError) as e:  # no answer; an address distributed cannot parse
                 raise SpotsimError(f"--scheduler {cluster.scheduler}: cannot connect: {e}") from e
         else:
-            local = LocalCluster(n_workers=cluster.workers or os.cpu_count() or 1, threads_per_worker=1,
-                                 processes=True, dashboard_address=None, silence_logs=40)
+            # started empty, then scaled: a worker lost while it starts is started again by the
+            # cluster instead of failing its construction
+            local = LocalCluster(n_workers=0, threads_per_worker=1, processes=True, dashboard_address=None,
+                                 silence_logs=logging.CRITICAL)
             client = Client(local)
+            local.scale(cluster.workers or os.cpu_count() or 1)
     try:
         yield client
     finally:
-        client.close()
-        if local is not None:
-            local.close()
+        try:
+            client.close()
+            if local is not None:
+                local.close()
+        finally:
+            quiet()
+
+
+def _quiet_dask():
+    """Raise Dask's loggers to CRITICAL; returns the function that restores them."""
+    names = [n for n in logging.root.manager.loggerDict if n.split(".")[0] in ("distributed", "tornado")]
+    loggers = [logging.getLogger(n) for n in ("distributed", "tornado", "asyncio", *names)]
+    levels = [lg.level for lg in loggers]
+    for lg in loggers:
+        lg.setLevel(logging.CRITICAL)
+
+    def restore():
+        for lg, level in zip(loggers, levels, strict=True):
+            lg.setLevel(level)
+    return restore
+
+
+class SchedulerLost(SpotsimError):
+    """The Dask scheduler went away during a sweep or an envelope: the points finished before
+    are kept in the points file, the others were not run."""
+
+
+def task_record(point: Point, future) -> dict:
+    """The record of a point's finished task: its run's record, or the task's failure
+    (`failed_record`). A result that cannot be had because the client lost its scheduler (the
+    futures cancelled, the connection closed) is no point's failure: SchedulerLost."""
+    from distributed.client import FutureCancelledError
+    from distributed.comm.core import CommClosedError
+
+    try:
+        return future.result()
+    except (FutureCancelledError, CommClosedError, OSError) as e:
+        raise SchedulerLost(f"the Dask scheduler was lost ({type(e).__name__})") from e
+    except Exception as e:  # noqa: BLE001 - the point's failure, not the sweep's
+        return failed_record(point, e)
 
 
 def failed_record(point: Point, error: BaseException) -> dict:
@@ -678,7 +770,6 @@ def _run_on_dask(todo: list[Point], out: Path, done: dict, cluster: Cluster, sou
     """Run the points `todo` on `cluster`, each record appended to out's points file and put
     in `done` as it ends (then `on_record(record)`); returns how many ran."""
     from distributed import as_completed
-    from distributed.client import FutureCancelledError
     from tqdm import tqdm
 
     ran = 0
@@ -687,17 +778,12 @@ def _run_on_dask(todo: list[Point], out: Path, done: dict, cluster: Cluster, sou
         try:
             first = next((p.scenario for p in todo if p.scenario is not None), None)
             if first is not None:
-                client.run(warm_worker, first, source)
+                warm(client, first, source)
             futures = {client.submit(run_point, p, cluster.wall_limit_s, error_estimate, source, grow_gap,
                                      key=f"point-{p.key}", pure=False): p for p in todo}
             for fut in as_completed(futures):
                 p = futures[fut]
-                try:
-                    record = fut.result()
-                except FutureCancelledError:
-                    continue
-                except Exception as e:  # noqa: BLE001 - the point's failure, not the sweep's
-                    record = failed_record(p, e)
+                record = task_record(p, fut)
                 _append(out / POINTS_FILE, record)
                 done[p.key] = record
                 ran += 1
