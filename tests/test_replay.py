@@ -16,6 +16,7 @@ from conftest import CASE_I, ROOT
 import spotsim
 from spotsim.cli import main
 from spotsim.contact.friction import SLIPPING, STICKING
+from spotsim.replay.scene import ARROW_LENGTH_M
 
 DUAL = ROOT / "config" / "dual_arm_sequential.yaml"
 #: Case I touches at 0.43 s, has sticking pairs from 0.51 s and completes at 0.96 s: 0.9 s
@@ -307,7 +308,9 @@ def test_force_arrow_shows_the_recorded_combined_force(single):
             q = at(tr[".quaternion"], key, 4)
             y = pin.Quaternion(*map(float, (q[3], q[0], q[1], q[2]))).matrix()[:, 1]
             assert np.allclose(y, F / np.linalg.norm(F), atol=1e-5)
-    assert scale is not None
+    loads = np.linalg.norm(snaps["force_W"], axis=2).ravel()
+    typical = np.percentile(loads[loads > 0], 95)
+    assert ARROW_LENGTH_M / 2.5 < scale * typical <= ARROW_LENGTH_M * (1 + 1e-6)
 
 
 def test_head_up_line_shows_the_time_and_the_phase(single):

@@ -86,9 +86,14 @@ def test_the_testbed_configs_complete(path):
     r = spotsim.simulate(spotsim.load_scenario(path))
     assert r.status == "completed", r.summary["message"]
     assert all(g["in_grooves"] for g in r.summary["grasps"])
-    for g in r.summary["grasps"]:
-        for column, a in g["displacements"].items():
-            assert a["peak_to_peak"] >= abs(a["max_excursion"]) >= 0, column
+    for g, grasp in enumerate(r.summary["grasps"]):
+        for column, a in grasp["displacements"].items():
+            assert a["peak_to_peak"] >= abs(a["max_excursion"]), column
+        moved = {body: max(grasp["displacements"][f"{body}_{c}"]["peak_to_peak"] for c in ("x_mm", "y_mm"))
+                 for body in ("TM-1", "TM-2")}
+        assert moved[f"TM-{g + 1}"] > 0  # the grasp pushes its module
+        if g == 0:
+            assert moved["TM-2"] == 0.0  # untouched, at rest on its air bearing
 
 
 def test_a_planar_body_moves_as_m_and_Izz_say_and_an_out_of_plane_wrench_moves_nothing():
