@@ -185,7 +185,8 @@ def test_run_writes_its_error_estimate_unless_told_not_to(tmp_path):
 
 def test_estimate_study_compares_each_start_with_the_reference(tmp_path, capsys):
     """`spotsim study estimate` writes a row per start, grasp and quantity with the true error
-    against the reference and whether it lies within the estimate."""
+    against the reference and whether it lies within the estimate; a scenario no study has seen
+    (here a shortened run) takes each start's own spread, as `spotsim run` does, and its bound."""
     out = tmp_path / "est"
     code = main(["study", "estimate", "--members", "2", "--workers", "1", "--reference", "symplectic_euler:20",
                  "--duration", "1.5", "--quiet", "--out", str(out)])
@@ -198,14 +199,17 @@ def test_estimate_study_compares_each_start_with_the_reference(tmp_path, capsys)
             assert error == pytest.approx(abs(float(r["value"]) - float(r["reference"])), abs=1e-12)
             assert (r["within"] == "True") == (error <= estimate)
             assert float(r["uncertainty"]) == pytest.approx(3 * estimate, rel=1e-15)
-        assert r["bound"] == r["within_bound"] == ""  # a shortened run is not the studied scenario
+            assert r["spread"] == "starts"  # a shortened run is not the studied scenario
+            assert float(r["bound"]) == pytest.approx(float(r["uncertainty"]) + float(r["chance"]), rel=1e-12)
+            assert (r["within_bound"] == "True") == (error <= float(r["bound"]))
     text = capsys.readouterr().out
-    assert "error within the estimate for" in text and "no bound" in text
+    assert "error within the estimate for" in text and "within the bound for" in text
 
 
 def test_a_run_takes_the_studys_spread_where_there_is_one_else_its_ensembles(case_I, monkeypatch):
     """`estimate` gives a studied scenario the study's spread (64 runs, validated), another
-    scenario its ensemble's, and a lone run of another scenario none."""
+    scenario its ensemble's, and a lone run of another scenario the spread around its own
+    start if it completed (none when told so, or when it did not complete)."""
     import spotsim.run as run_module
 
     monkeypatch.setattr(run_module, "simulate", lambda s, source: type("R", (), {"summary": summary(grasp(0.1))})())
@@ -215,4 +219,18 @@ def test_a_run_takes_the_studys_spread_where_there_is_one_else_its_ensembles(cas
     assert estimate_module.estimate(case_I, summary(grasp(0.1)), ensemble=ens)["spread"]["source"] == "study"
     mine = estimate_module.estimate(other, summary(grasp(0.1)), ensemble=ens)
     assert mine["spread"]["source"] == "ensemble" and mine["grasps"][0]["peak_force_norm_N"]["chance"] == 10.0
-    assert estimate_module.estimate(other, summary(grasp(0.1)))["spread"]["source"] is None
+    measured = []
+
+    def around(scenario, members, **_):
+        measured.append((scenario, members))
+        return {"source": "starts", "about": "", "grasps": {"grasp": {"peak_force_norm_N": stats(45.0, 48.0, 16)}}}
+
+    monkeypatch.setattr(estimate_module, "start_spread", around)
+    lone = estimate_module.estimate(other, summary(grasp(0.1)))
+    assert lone["spread"]["source"] == "starts" and lone["grasps"][0]["peak_force_norm_N"]["chance"] == 3.0
+    assert measured == [(other, estimate_module.SPREAD_MEMBERS)]
+    told = estimate_module.estimate(other, summary(grasp(0.1)), spread_members=0)
+    assert told["spread"]["source"] is None and "--spread-members 0" in told["spread"]["about"]
+    unfinished = {**summary(grasp(0.1)), "status": "incomplete"}
+    assert "ended incomplete" in estimate_module.estimate(other, unfinished)["spread"]["about"]
+    assert len(measured) == 1

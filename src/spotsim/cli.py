@@ -18,6 +18,7 @@ from pathlib import Path
 from .errors import ScenarioError, SpotsimError
 from .measures import CAMERA_HZ
 from .studies.ensemble import ALL_AXES, FAMILIES
+from .studies.estimate import MIN_SPREAD_COUNT, SPREAD_MEMBERS
 
 DEFAULT_SCENARIO = "single_arm_case_I.yaml"
 EXIT = {"completed": 0, "incomplete": 3, "diverged": 4, "interrupted": 130}
@@ -45,6 +46,15 @@ def _at_least(minimum: int):
 
 
 COUNT, SEED = _at_least(1), _at_least(0)
+
+
+def _spread_members(text: str) -> int:
+    """An argparse type: 0 (no spread over starts) or enough starts for a chance range."""
+    value = SEED(text)
+    if 0 < value < MIN_SPREAD_COUNT:
+        raise argparse.ArgumentTypeError(f"{text}: 0 (none) or at least {MIN_SPREAD_COUNT} (a chance range needs "
+                                         f"{MIN_SPREAD_COUNT} runs)")
+    return value
 
 
 def _rate(text: str) -> float:
@@ -75,6 +85,9 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     run.add_argument("--no-error-estimate", action="store_true",
                      help="skip the companion run that estimates the discretisation error (about half a run)")
+    run.add_argument("--spread-members", type=_spread_members, default=SPREAD_MEMBERS, metavar="N",
+                     help=f"a completed run of a scenario that no study has seen: its spread over N starts around "
+                          f"its own, which gives its error bound (default {SPREAD_MEMBERS}; 0: none)")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
     run.add_argument("--replay", action="store_true", help="replay the run in Meshcat when it ends")
     run.add_argument("--zmq-url", help="with --replay: the Meshcat server to use (default: start one)")
@@ -290,6 +303,9 @@ def _study_parser(sub) -> None:
     acc.add_argument("--wall-limit", type=float, metavar="S", help="wall-time budget of each run (default: none)")
     acc.add_argument("--no-plot", action="store_true", help="skip the work-precision plot")
     est.add_argument("--members", type=COUNT, default=8, metavar="N", help="starts compared (default 8)")
+    est.add_argument("--spread-members", type=_spread_members, default=SPREAD_MEMBERS, metavar="N",
+                     help=f"a scenario that no study has seen: each start's spread over N starts around it, as "
+                          f"`spotsim run` measures it (default {SPREAD_MEMBERS}; 0: none)")
     est.add_argument("--reference", metavar="METHOD:VALUE", default="symplectic_euler:1280",
                      help="the converged setting (default symplectic_euler:1280, 0.78125 us at dt 1 ms: the "
                           "ensemble accuracy studies' confirmed reference)")
@@ -440,7 +456,7 @@ def _estimate_study(scenario, reference, args, out: Path, progress: bool) -> int
 
     try:
         rows = validate(scenario, reference.apply(scenario), args.members, seed=args.seed, workers=args.workers,
-                        progress=progress)
+                        progress=progress, spread_members=args.spread_members)
     except ValueError as e:
         print(e, file=sys.stderr)
         return 2
@@ -457,7 +473,7 @@ def _estimate_study(scenario, reference, args, out: Path, progress: bool) -> int
           f"{args.members} perturbed starts (seed {args.seed})")
     for r in validation_table(rows):
         kind = " (a distribution)" if r["distribution"] else ""
-        bound = ("no bound (no study's spread for this scenario)" if r["within_bound"] is None else
+        bound = ("no bound (no spread over starts: --spread-members 0)" if r["within_bound"] is None else
                  f"within the bound for {r['within_bound']} of {r['bounded']} (median bound {r['median_bound']:.3g})")
         print(f"  grasp {r['grasp']} {r['quantity']}{kind}: error within the estimate for {r['within']} of "
               f"{r['members']}, within the uncertainty (3x) for {r['within_uncertainty']}, {bound}; median "
@@ -718,7 +734,9 @@ def main(argv=None) -> int:
         from .studies.estimate import estimate
 
         try:
-            result.summary["error_estimate"] = estimate(scenario, result.summary, source=str(path))
+            result.summary["error_estimate"] = estimate(scenario, result.summary, source=str(path), model=model,
+                                                        spread_members=args.spread_members,
+                                                        progress=not args.quiet)
         except KeyboardInterrupt:
             result.summary["error_estimate"] = {"note": "interrupted by the user"}
     try:

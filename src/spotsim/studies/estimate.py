@@ -24,10 +24,11 @@ over those starts) bounds it: the `bound` is the uncertainty plus the chance ran
 scenario that the ensemble accuracy study ran, the spread is that study's: its members at the
 run's own setting and at the converged reference, pooled (TYPICAL_SPREAD, written by `python
 docs/generate.py spreads`). For another scenario run as an ensemble (`spotsim run --ensemble
-N`, whose member 0 is estimated), it is the ensemble's own. A range needs MIN_SPREAD_COUNT
-runs: a lone run of an unstudied scenario, or a smaller ensemble, has no bound. `spotsim
-study estimate` counts how often the true error lies within the estimate, the uncertainty and
-the bound.
+N`, whose member 0 is estimated), it is the ensemble's own. For a lone run of any other
+scenario that completed, it is measured around the run's own start (`start_spread`):
+SPREAD_MEMBERS starts within the ensembles' tolerances of it, at its own setting. A range needs
+MIN_SPREAD_COUNT runs: a smaller ensemble has no bound. `spotsim study estimate` counts how
+often the true error lies within the estimate, the uncertainty and the bound.
 """
 
 from __future__ import annotations
@@ -61,6 +62,12 @@ MIN_SPREAD_COUNT = 16
 #: The seed of `spotsim study estimate`'s starts: not the ensemble accuracy studies' (0), whose
 #: spreads the bound uses, nor the one that confirmed the default tolerance (1).
 VALIDATION_SEED = 2
+#: A lone run's spread over starts (`start_spread`): as many starts as a range needs, drawn with
+#: a seed of their own (not the studies' 0, 1 or 2).
+SPREAD_MEMBERS, SPREAD_SEED = MIN_SPREAD_COUNT, 3
+#: Why a run has no spread over starts, by default.
+NO_SPREAD = ("none: no ensemble and no study of this scenario, and none measured around its start (`spotsim run` "
+             "measures one, --spread-members, for a run that completes)")
 #: Roache's factor of safety for a grid convergence index from two grids.
 GCI_SAFETY = 3.0
 METHOD = ("estimate: Richardson, first order: |Q(run) - Q(companion)|, the companion's steps twice as long "
@@ -91,10 +98,12 @@ def quantities(summary: dict) -> list[dict]:
     return out
 
 
-def error_estimate(summary: dict, companion_summary: dict | None, spread: dict | None = None) -> dict:
+def error_estimate(summary: dict, companion_summary: dict | None, spread: dict | None = None,
+                   no_spread: str = NO_SPREAD) -> dict:
     """The `error_estimate` entry of a summary: per grasp and quantity, its value, the
     companion's, the estimate |difference| and its uncertainty; with a `spread` over starts
-    (`ensemble_spread`, `typical_spread`), that spread, its chance range and the bound."""
+    (`ensemble_spread`, `typical_spread`, `start_spread`), that spread, its chance range and the
+    bound; without one, `no_spread` says why."""
     if companion_summary is None:
         return {"method": METHOD, "companion": None,
                 "note": "no companion with twice the step for this integrator: not estimated"}
@@ -120,8 +129,7 @@ def error_estimate(summary: dict, companion_summary: dict | None, spread: dict |
     return {"method": METHOD,
             "companion": {"status": c["status"], "integrator": c["integrator"], "wall_time_s": c["wall_time_s"]},
             "spread": ({k: v for k, v in spread.items() if k != "grasps"} if spread else
-                       {"source": None, "about": "no ensemble, and no study of this scenario: `spotsim run "
-                                                 "--ensemble N` measures the spread over starts and the bound"}),
+                       {"source": None, "about": no_spread}),
             "grasps": grasps,
             "note": ("the estimate and its uncertainty say how far the run moves with the step; the bound adds "
                      "the chance range over starts (largest - smallest), since the bounces decorrelate runs that "
@@ -140,6 +148,21 @@ def ensemble_spread(e) -> dict:
     return {"source": "ensemble", "about": f"this ensemble's {len(e.members)} members (seed {e.seed}), those "
                                            f"whose grasp completed (the bound needs {MIN_SPREAD_COUNT})",
             "grasps": e.statistics}
+
+
+def start_spread(scenario, members: int = SPREAD_MEMBERS, *, workers: int | None = None, model=None,
+                 source: str = "<scenario>", progress: bool = False) -> dict:
+    """The spread over `members` starts around the scenario's own (an ensemble, seed SPREAD_SEED:
+    its member 0 the start itself, the others within the ensembles' tolerances), at its own
+    setting: the chance range of a run of a scenario that no study has seen."""
+    from .ensemble import ensemble
+
+    e = ensemble(scenario, members, seed=SPREAD_SEED, workers=workers, model=model, source=source,
+                 progress=progress)
+    return {"source": "starts", "about": f"{members} starts within +-{e.offset_tol_mm:g} mm and +-{e.rpy_tol_deg:g} "
+                                         f"deg of this run's (seed {SPREAD_SEED}), at its own setting, "
+                                         f"{e.wall_time_s:.1f} s on {e.workers} workers",
+            "members": members, "wall_time_s": e.wall_time_s, "grasps": e.statistics}
 
 
 def study_spread(scenario, run_rows: list[dict], reference_rows: list[dict], about: str) -> dict:
@@ -161,29 +184,41 @@ def typical_spread(scenario) -> dict | None:
     return typical_spreads().get(fingerprint(scenario))
 
 
-def estimate(scenario, summary: dict, source: str = "<scenario>", ensemble=None) -> dict:
+def estimate(scenario, summary: dict, source: str = "<scenario>", ensemble=None, *,
+             spread_members: int = SPREAD_MEMBERS, workers: int | None = None, model=None,
+             progress: bool = False) -> dict:
     """Run the companion of `scenario`, whose run gave `summary`, and return the error
     estimate entry for that summary. Its spread: the study's (`typical_spread`) where the
-    scenario was studied, else that of the `ensemble` the run belongs to, if any."""
+    scenario was studied, else that of the `ensemble` the run belongs to, else, for a run that
+    completed, `spread_members` starts around its own (`start_spread`, in `workers` processes;
+    0: none, and no bound)."""
     from ..run import simulate
 
     s = companion(scenario)
     spread = typical_spread(scenario) or (ensemble_spread(ensemble) if ensemble is not None else None)
-    return error_estimate(summary, None if s is None else simulate(s, source=source).summary, spread)
+    if spread is None and s is not None and spread_members and summary["status"] == "completed":
+        spread = start_spread(scenario, spread_members, workers=workers, model=model, source=source,
+                              progress=progress)
+    why = NO_SPREAD if spread_members else "none: --spread-members 0"
+    if summary["status"] != "completed":
+        why = f"none: the run ended {summary['status']} (a run that completes gets one)"
+    return error_estimate(summary, None if s is None else simulate(s, source=source).summary, spread, why)
 
 
 # ---------------------------------------------------------------------------- validation
 
 
 def validate(scenario, reference, n: int = 8, *, seed: int = VALIDATION_SEED, workers: int | None = None,
-             progress: bool = False) -> list[dict]:
+             progress: bool = False, spread_members: int = SPREAD_MEMBERS) -> list[dict]:
     """Check the estimate against a converged reference from n perturbed starts (members 1..n
     of `ensemble`'s, seeded; member 0, the unperturbed start, is every seed's, so it is among
     the study's behind `typical_spread`): one row per member, grasp and quantity with the
     run's value, the companion's, the estimate, uncertainty and bound, the reference's, the
     true error |run - reference| and whether it lies within each. `reference`: the scenario
-    at a converged setting."""
-    from .ensemble import ensemble
+    at a converged setting. The spread is the study's for a studied scenario; for another,
+    each member's own, measured around its start as `spotsim run` measures it (`start_spread`,
+    `spread_members` starts; 0: none)."""
+    from .ensemble import ensemble, member_scenario
 
     other = companion(scenario)
     if other is None:
@@ -195,13 +230,17 @@ def validate(scenario, reference, n: int = 8, *, seed: int = VALIDATION_SEED, wo
     for run, comp, ref in zip(*runs, strict=True):
         if not (run.summary and comp.summary and ref.summary):
             continue
+        own = spread
+        if own is None and spread_members and run.summary["status"] == "completed":
+            own = start_spread(member_scenario(scenario, run.start), spread_members, workers=workers)
         truth = quantities(ref.summary)
-        for g, entry in enumerate(error_estimate(run.summary, comp.summary, spread)["grasps"]):
+        for g, entry in enumerate(error_estimate(run.summary, comp.summary, own)["grasps"]):
             for name, q in entry.items():
                 r = truth[g].get(name) if g < len(truth) else None
                 error = None if q["value"] is None or r is None else abs(q["value"] - r)
                 known = error is not None and q["estimate"] is not None
-                rows.append({"member": run.index, "grasp": g + 1, "quantity": name, "value": q["value"],
+                rows.append({"member": run.index, "spread": None if own is None else own["source"],
+                             "grasp": g + 1, "quantity": name, "value": q["value"],
                              "companion": q["companion"], "estimate": q["estimate"], "uncertainty": q["uncertainty"],
                              "chance": q["chance"], "bound": q["bound"], "reference": r, "error": error,
                              "distribution": q["distribution"],
