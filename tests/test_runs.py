@@ -327,9 +327,31 @@ def test_a_finger_past_its_groove_ends_on_the_land_not_diverged(case_I):
     law: the lower finger comes down on the land beside its groove, and its flank's edge meets
     the groove flank's edge side-on as it slides. With Eq. (8) uncapped, that pair jumped into
     contact 0.14 mm deep and the adaptive step fell below its least size; capped side-on, the
-    grasp ends with the finger on the land: not captured, the run complete."""
+    grasp closes with the finger on the land: not captured, the run ended on its physics."""
     s = spotsim.replace(case_I, module={"initial_offset_mm": [12.0, 0.0, 0.0]}, end_effector={"start_gap_mm": 12.0},
                         contact={"normal_direction": "gradient"})
     r = spotsim.simulate(s)
-    assert r.status == "completed", r.summary["message"]
+    assert r.status == "not captured", r.summary["message"]
     assert r.grasp["in_grooves"] is False and r.grasp["residual_offset_norm_mm"] > 10.0
+
+
+def test_a_grasp_that_closes_with_a_finger_outside_its_groove_is_not_captured(tmp_path):
+    """A start 11 mm off along y_a (beyond the claimed 10 mm) closes with a finger on a land:
+    not captured, exit 5, in a run, an ensemble and a sweep point alike (a sweep's own exit
+    code says the sweep ran: its verdict column carries the point's outcome)."""
+    from spotsim.studies import sweep as sw
+
+    off = ["--set", "module.initial_offset_mm=[0,-11,0]", "--set", "end_effector.start_gap_mm=15"]
+    out = tmp_path / "run"
+    assert main(["run", str(CASE_I), *off, "--out", str(out), "--quiet", "--no-figures", "--no-error-estimate"]) == 5
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "not captured" and "with a finger outside its groove" in summary["message"]
+    assert summary["grasps"][0]["in_grooves"] is False and summary["grasps"][0]["completed_s"] is not None
+    ens = tmp_path / "ensemble"
+    assert main(["run", str(CASE_I), *off, "--ensemble", "2", "--workers", "1", "--out", str(ens), "--quiet",
+                 "--no-error-estimate"]) == 5
+    assert json.loads((ens / "ensemble.json").read_text())["classes"]["grasp"]["not captured"]["count"] == 2
+    spec = sw.SweepSpec(points=[{"module.initial_offset_mm.1": -11.0}], sets=["end_effector.start_gap_mm=15"])
+    record = sw.run_point(sw.resolve_points(CASE_I, spec)[0], with_estimate=False)
+    assert record["status"] == "not captured"
+    assert sw.verdict(record["status"], record["summary"]) == sw.NOT_CAPTURED

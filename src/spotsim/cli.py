@@ -17,11 +17,13 @@ from pathlib import Path
 
 from .errors import ScenarioError, SpotsimError
 from .measures import CAMERA_HZ
+from .status import COMPLETED, DIVERGED, EXCEPTION, INCOMPLETE, INTERRUPTED, NOT_CAPTURED, REJECTED
 from .studies.ensemble import ALL_AXES, FAMILIES
 from .studies.estimate import MIN_SPREAD_COUNT, SPREAD_MEMBERS
 
 DEFAULT_SCENARIO = "single_arm_case_I.yaml"
-EXIT = {"completed": 0, "incomplete": 3, "diverged": 4, "interrupted": 130}
+#: `run`'s exit code by the run's status (`status`).
+EXIT = {COMPLETED: 0, INCOMPLETE: 3, DIVERGED: 4, NOT_CAPTURED: 5, INTERRUPTED: 130}
 
 
 class _Parser(argparse.ArgumentParser):
@@ -88,7 +90,7 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--spread-members", type=_spread_members, default=SPREAD_MEMBERS, metavar="N",
                      help=f"a completed run of a scenario that no study has seen: its spread over N starts around "
                           f"its own, which gives its error bound (default {SPREAD_MEMBERS}; 0: none)")
-    run.add_argument("--quiet", action="store_true", help="no progress bar")
+    run.add_argument("--quiet", action="store_true", help="no progress bar, and one line: the run's verdict")
     run.add_argument("--replay", action="store_true", help="replay the run in Meshcat when it ends")
     run.add_argument("--zmq-url", help="with --replay: the Meshcat server to use (default: start one)")
     run.add_argument("--ensemble", type=COUNT, metavar="N",
@@ -544,7 +546,7 @@ def _replay(result_dir, args, run_code=None) -> int:
 
 
 #: `run --ensemble`'s exit code: that of the worst member status present, in this order.
-ENSEMBLE_EXIT = (("interrupted", 130), ("exception", 1), ("rejected", 1), ("diverged", 4), ("incomplete", 3))
+ENSEMBLE_EXIT = ((INTERRUPTED, 130), (EXCEPTION, 1), (REJECTED, 1), (DIVERGED, 4), (NOT_CAPTURED, 5), (INCOMPLETE, 3))
 
 
 def ensemble_exit(statuses: dict[str, int], interrupted: bool) -> int:
@@ -601,6 +603,33 @@ def _ensemble(args, scenario, model, path: Path, out: Path) -> int:
     if e.interrupted:
         print("interrupted: the members that finished are kept", file=sys.stderr)
     return ensemble_exit(e.statuses, e.interrupted)
+
+
+def verdict_line(s: dict) -> str:
+    """A run in one line: its status and why, then per closed grasp its residual offset e, tilt
+    (the larger of |roll| and |pitch|) and peak |F|, each with how far it may lie from the
+    converged run from its start (the error estimate's bound: its step error, 3 x the
+    estimate, plus the start-to-start scatter, the chance range) where there is one."""
+    estimate = (s.get("error_estimate") or {}).get("grasps") or []
+    parts = []
+    for g, grasp in enumerate(s["grasps"]):
+        if grasp["completed_s"] is None:
+            continue
+        q = estimate[g] if g < len(estimate) else {}
+
+        def within(name, unit, fmt):
+            b = q.get(name) or {}
+            if b.get("bound") is None:
+                return ""
+            return (f" (within {b['bound']:{fmt}} {unit} of a converged run: {b['uncertainty']:{fmt}} step error + "
+                    f"{b['chance']:{fmt}} start-to-start scatter)")
+
+        tilt = max(abs(x) for x in grasp["residual_rpy_deg"][:2])
+        label = f"{grasp['module']}: " if len(s["grasps"]) > 1 else ""
+        parts.append(f"{label}e = {grasp['residual_offset_norm_mm']:.4f} mm"
+                     f"{within('residual_offset_norm_mm', 'mm', '.2g')}, tilt {tilt:.2f} deg, peak |F| "
+                     f"{grasp['peak_force_norm_N']:.1f} N{within('peak_force_norm_N', 'N', '.3g')}")
+    return f"{s['scenario']}: {s['status']} - {s['message']}" + "".join(f"; {p}" for p in parts)
 
 
 def estimate_lines(entry: dict) -> str:
@@ -744,7 +773,9 @@ def main(argv=None) -> int:
     except SpotsimError as e:
         return _bad_input(e)
     s = result.summary
-    print(f"{s['scenario']}: {s['status']} - {s['message']}")
+    print(verdict_line(s))
+    if args.quiet:
+        return _replay(out, args, run_code=EXIT[s["status"]]) if args.replay else EXIT[s["status"]]
     for g in s["grasps"]:
         when = lambda t: "never" if t is None else f"at {t:.4f} s"
         print(f"  {g['end_effector']} on {g['module']}: first contact {when(g['contact_onset_s'])}, "

@@ -31,14 +31,12 @@ from .sim.recorder import Recorder
 from .sim.stability import ENERGY_GROWTH, stability_warnings
 from .sim.step import step
 from .sim.tree import kinematics
+from .status import COMPLETED, DIVERGED, INCOMPLETE, INTERRUPTED, NOT_CAPTURED, WALL_LIMIT
 from .tables import APPROACH, PHASE_NAMES, SELF_CENTRING, TRANSMISSION_STATES
 from .version import __version__
 
-COMPLETED, INCOMPLETE, DIVERGED, INTERRUPTED = "completed", "incomplete", "diverged", "interrupted"
 #: The layout of summary.json and timeseries.npz; a reader refuses any other (`results.read_results`).
 RESULTS_FORMAT = 1
-#: A run stopped when its wall-time budget was spent (`simulate(wall_limit_s=...)`): no verdict.
-WALL_LIMIT = "wall limit"
 
 
 @dataclass
@@ -319,6 +317,11 @@ def _summary(s, model, v, rec, series, status, message, wall, welds) -> dict:
         done = _time(v.t_complete[len(model.grasps) - 1])
         if samples is not None and done is not None:
             rig["dynamometer"]["after_grasp"] = instrument.after_grasp(samples, done)
+    outside = [g + 1 for g, entry in enumerate(grasps) if entry["in_grooves"] is False]
+    if status == COMPLETED and outside:
+        status = NOT_CAPTURED
+        message = "; ".join(f"grasp {g} closed at t = {grasps[g - 1]['completed_s']:.4f} s with a finger outside "
+                            f"its groove, e = {grasps[g - 1]['residual_offset_norm_mm']:.3f} mm" for g in outside)
     return {
         "scenario": s.name,
         "spotsim_version": __version__,

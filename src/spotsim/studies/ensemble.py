@@ -30,6 +30,7 @@ import numpy as np
 
 from ..errors import SpotsimError
 from ..scenario import modules_of, replace
+from ..status import EXCEPTION, NOT_CAPTURED, REJECTED
 
 #: Default perturbation of each module's start: +-10 um on each axis of the offset and
 #: +-0.01 deg on each of roll, pitch, yaw, well below any tolerance a drawing would state and
@@ -57,9 +58,6 @@ WEDGED_TILT_DEG = 1.25
 WEDGED_OFFSET_MM = 0.38
 SEATED, WEDGED = "seated", "wedged"
 
-#: What a member ended as besides the simulator's statuses: its start interpenetrates
-#: (`rejected`), or something raised out of the run (`exception`: a bug to report).
-REJECTED, EXCEPTION = "rejected", "exception"
 #: Statuses of members that did not run to an outcome of their own: left out of every share.
 NOT_RUN = ("interrupted",)
 
@@ -320,10 +318,13 @@ def statistics(values) -> dict:
 
 
 def classify(status: str, grasp: dict | None) -> str:
-    """A grasp's outcome class: `seated` or `wedged` when it completed (WEDGED_TILT_DEG,
-    WEDGED_OFFSET_MM), else its member's status (`incomplete`, `diverged`, ...)."""
+    """A grasp's outcome class: `seated` or `wedged` when it completed within its grooves
+    (WEDGED_TILT_DEG, WEDGED_OFFSET_MM), `not captured` when it closed with a finger outside
+    them, else its member's status (`incomplete`, `diverged`, ...)."""
     if grasp is None or grasp.get("completed_s") is None:
-        return "incomplete" if status == "completed" else status
+        return "incomplete" if status in ("completed", NOT_CAPTURED) else status
+    if grasp.get("in_grooves") is False:
+        return NOT_CAPTURED
     roll, pitch, _ = grasp["residual_rpy_deg"]
     wedged = max(abs(roll), abs(pitch)) > WEDGED_TILT_DEG or grasp["residual_offset_norm_mm"] > WEDGED_OFFSET_MM
     return WEDGED if wedged else SEATED
@@ -428,9 +429,9 @@ def summarise(e: EnsembleResult) -> dict:
 
 
 def classification_rule() -> str:
-    return (f"a completed grasp is wedged when max(|roll|, |pitch|) of its residual exceeds {WEDGED_TILT_DEG:g} "
-            f"deg or its residual offset exceeds {WEDGED_OFFSET_MM:g} mm, else seated; a grasp that did not "
-            f"complete is classed by its member's status")
+    return (f"a completed grasp with a finger outside its groove is not captured; else wedged when max(|roll|, "
+            f"|pitch|) of its residual exceeds {WEDGED_TILT_DEG:g} deg or its residual offset exceeds "
+            f"{WEDGED_OFFSET_MM:g} mm, else seated; a grasp that did not complete is classed by its member's status")
 
 
 def ensemble_json(e: EnsembleResult) -> dict:

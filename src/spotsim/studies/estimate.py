@@ -39,6 +39,7 @@ from importlib import resources
 from typing import NamedTuple
 
 from ..scenario import fingerprint, modules_of
+from ..status import COMPLETED, NOT_CAPTURED
 from .ensemble import grasp_key, headline_statistics
 from .runs import step_scaled
 
@@ -65,6 +66,8 @@ VALIDATION_SEED = 2
 #: A lone run's spread over starts (`start_spread`): as many starts as a range needs, drawn with
 #: a seed of their own (not the studies' 0, 1 or 2).
 SPREAD_MEMBERS, SPREAD_SEED = MIN_SPREAD_COUNT, 3
+#: The statuses of a run whose grasps all closed: those that get a spread around their start.
+CLOSED = (COMPLETED, NOT_CAPTURED)
 #: Why a run has no spread over starts, by default.
 NO_SPREAD = ("none: no ensemble and no study of this scenario, and none measured around its start (`spotsim run` "
              "measures one, --spread-members, for a run that completes)")
@@ -196,12 +199,12 @@ def estimate(scenario, summary: dict, source: str = "<scenario>", ensemble=None,
 
     s = companion(scenario)
     spread = typical_spread(scenario) or (ensemble_spread(ensemble) if ensemble is not None else None)
-    if spread is None and s is not None and spread_members and summary["status"] == "completed":
+    if spread is None and s is not None and spread_members and summary["status"] in CLOSED:
         spread = start_spread(scenario, spread_members, workers=workers, model=model, source=source,
                               progress=progress)
     why = NO_SPREAD if spread_members else "none: --spread-members 0"
-    if summary["status"] != "completed":
-        why = f"none: the run ended {summary['status']} (a run that completes gets one)"
+    if summary["status"] not in CLOSED:
+        why = f"none: the run ended {summary['status']} (a run whose grasps all close gets one)"
     return error_estimate(summary, None if s is None else simulate(s, source=source).summary, spread, why)
 
 
@@ -231,7 +234,7 @@ def validate(scenario, reference, n: int = 8, *, seed: int = VALIDATION_SEED, wo
         if not (run.summary and comp.summary and ref.summary):
             continue
         own = spread
-        if own is None and spread_members and run.summary["status"] == "completed":
+        if own is None and spread_members and run.summary["status"] in CLOSED:
             own = start_spread(member_scenario(scenario, run.start), spread_members, workers=workers)
         truth = quantities(ref.summary)
         for g, entry in enumerate(error_estimate(run.summary, comp.summary, own)["grasps"]):

@@ -17,14 +17,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import SpotsimError
-from ..run import WALL_LIMIT
 from ..scenario import modules_of, replace, to_dict
-
-#: What a run ended as, besides the simulator's statuses.
-REJECTED, EXCEPTION = "rejected", "exception"
-#: Statuses whose record may be compared with the reference's.
-COMPARABLE = ("completed", "incomplete")
-
+from ..status import COMPARABLE, COMPLETED, EXCEPTION, NOT_CAPTURED, REJECTED, WALL_LIMIT
 
 # ----------------------------------------------------------------------------- one run
 
@@ -154,7 +148,7 @@ def _run_once(scenario, source: str) -> Outcome:
     done = [g["completed_s"] for g in s["grasps"]]
     return Outcome(
         s["status"], s["message"], s["wall_time_s"], s["sim_time_s"],
-        done[-1] if s["status"] == "completed" else math.nan,
+        done[-1] if s["status"] in (COMPLETED, NOT_CAPTURED) else math.nan,  # every grasp closed
         s["steps"], integrator.get("force_evaluations", s["steps"]), integrator.get("rejected_steps", 0),
         [None if g["final_offset_mm"] is None else np.array(g["final_offset_mm"]) for g in s["grasps"]],
         [g["peak_force_norm_N"] for g in s["grasps"]],

@@ -14,12 +14,9 @@ import numpy as np
 from ..errors import SpotsimError
 from ..files import atomic_write, prepare
 from ..scenario import TOLERANCE_DEG, TOLERANCE_OFFSET_MM, modules_of, replace, to_dict
+from ..status import COMPARABLE, COMPLETED, EXCEPTION, NOT_CAPTURED, REJECTED, WALL_LIMIT
 from ..tables import ADAPTIVE
 from .runs import (
-    COMPARABLE,
-    EXCEPTION,
-    REJECTED,
-    WALL_LIMIT,
     Outcome,
     RowWriter,
     markdown_table,
@@ -239,7 +236,7 @@ def verdict(o: Outcome) -> str:
     simulator that the study exists to catch (an exception, a silent NaN)."""
     if o.status in COMPARABLE and not o.finite:
         return "FAILED: silent NaN"
-    if o.status == "completed" and not all(x for x in o.in_grooves if x is not None):
+    if o.status == NOT_CAPTURED:
         return "not captured (on a land)"
     if o.status == "completed" and max(float(np.linalg.norm(x)) for x in o.offsets if x is not None) > CENTRED_MM:
         return "converged, off centre"
@@ -286,7 +283,7 @@ def stability_row(case: Case, o: Outcome, changed=None, fine: Outcome | None = N
             "damping_h": math.nan if p is None else p.damping_rate_1_s * p.step_s,
             "predicted_stable": "n/a" if p is None else ("yes" if p.stable else "no"),
             "verdict": v, "prediction_held": held, "status": o.status, "completed_s": o.completed_s,
-            "residual_offset_mm": max(finals) if o.status == "completed" else math.nan,
+            "residual_offset_mm": max(finals) if o.status in (COMPLETED, NOT_CAPTURED) else math.nan,
             "final_offset_mm": max(finals, default=math.nan), "peak_force_N": max(o.peaks, default=math.nan),
             "sim_time_s": o.sim_time_s, "wall_time_s": o.wall_time_s,
             "finite": "n/a" if o.status not in COMPARABLE else ("yes" if o.finite else "no"),

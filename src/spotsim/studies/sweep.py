@@ -54,17 +54,14 @@ import yaml
 from ..errors import ScenarioError, SpotsimError
 from ..files import atomic_write
 from ..jit import add_sources
-from ..run import WALL_LIMIT
 from ..scenario import from_dict, modules_of, parse_yaml, read_yaml, set_value, to_dict, to_yaml
+from ..status import DIVERGED, EXCEPTION, NOT_CAPTURED, REJECTED, WALL_LIMIT, WORKER_DIED
 from .ensemble import Member, Start, grasp_prefix, member_row
 
-#: What a point ended as besides the run's own statuses (completed, incomplete, diverged,
-#: wall limit): its scenario was invalid or its start interpenetrates; the run raised; its
-#: worker died twice.
-REJECTED, EXCEPTION, WORKER_DIED = "rejected", "exception", "worker died"
 #: Verdicts of a point that ran: every grasp seated within the precision; complete but off
-#: centre; a grasp not complete by the time-out; diverged. Points that did not run have none.
-CONVERGED, OFF_CENTRE, NOT_CAPTURED, DIVERGED = "converged", "off centre", "not captured", "diverged"
+#: centre; a grasp not complete by the time-out, or closed with a finger outside its groove;
+#: diverged. Points that did not run (`status`) have none.
+CONVERGED, OFF_CENTRE = "converged", "off centre"
 #: The residual offset norm under which a complete grasp counts as converged, mm.
 PRECISION_MM = 0.3
 #: A point's default wall-time budget (its run and its error estimate's companion), s.
@@ -438,7 +435,7 @@ def verdict(status: str, summary: dict | None, precision_mm: float = PRECISION_M
     """A point's verdict (module docstring): '' when it did not run to a verdict."""
     if status == "diverged":
         return DIVERGED
-    if summary is None or status not in ("completed", "incomplete"):
+    if summary is None or status not in ("completed", "incomplete", NOT_CAPTURED):
         return ""
     if status == "incomplete" or not all(g.get("in_grooves", True) is not False for g in summary["grasps"]):
         return NOT_CAPTURED  # never closed, or closed with a finger on a land beside its groove
