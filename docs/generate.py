@@ -2,6 +2,7 @@
 
     python docs/generate.py results   # rerun what the tables need: writes docs/results/
     python docs/generate.py ensembles # rerun only the ensemble accuracy studies (~25 min), then spreads
+    python docs/generate.py unseen    # rerun only the error bound's check on unseen scenarios (~30 min)
     python docs/generate.py spreads   # the studied configs' typical spreads over starts, from those
                                       # studies (package data: src/spotsim/studies/typical_spread.json)
     python docs/generate.py drives [DRIVE ...]  # rerun only the drive comparison's ensembles
@@ -72,6 +73,18 @@ STUDIES = [
     ("estimate", name, [f"config/{name}.yaml", "--members", "8"])
     for name in ("single_arm_case_I", "single_arm_case_II", "single_arm_case_III", "dual_arm_sequential")
 ]
+#: The error bound on scenarios that no study has seen: each a shipped config with one key changed
+#: (a closing speed, the bevels, a drive parameter), 32 starts (seed 2), each run's spread
+#: measured around its own start as `spotsim run` measures it: `python docs/generate.py unseen`.
+UNSEEN_STUDIES = [
+    ("estimate_unseen", f"{config}_{tag}", [f"config/{config}.yaml", *[a for s in sets for a in ("--set", s)],
+                                            "--members", "32"])
+    for config, tag, sets in (
+        ("single_arm_case_I", "speed17", ["end_effector.closing_speed_m_s=0.017"]),
+        ("single_arm_case_I", "bevel40", ["geometry.upper_bevel_deg=40", "geometry.lower_bevel_deg=40"]),
+        ("single_arm_case_I", "current0p25", ["end_effector.motor.current_limit_A=0.25"]),
+        ("dual_arm_sequential", "speed17", ["end_effector.closing_speed_m_s=0.017"]))]
+UNSEEN_LABELS = {"speed17": "closing at 17 mm/s", "bevel40": "bevels 40 deg", "current0p25": "current limit 0.25 A"}
 #: The ensemble accuracy studies: 32 members (seed 0) per setting, 2 workers, against symplectic
 #: Euler at 0.78125 us confirmed by 0.390625 us (the dual arm's confirmation on its first 16
 #: members). Measured at 927a7d2, 3.125 us does not hold Case II's peak force: its median goes
@@ -124,7 +137,8 @@ def drive_dir(drive: str, setting: str, family: str = "all") -> str:
 
 
 #: The `spotsim study` verb of each kind of study.
-VERB = {"accuracy": "accuracy", "accuracy_ensemble": "accuracy", "stability": "stability", "estimate": "estimate"}
+VERB = {"accuracy": "accuracy", "accuracy_ensemble": "accuracy", "stability": "stability", "estimate": "estimate",
+        "estimate_unseen": "estimate"}
 #: Files of a study's output directory (and of its subdirectories) kept in docs/results/.
 KEEP = ("*.csv", "*.md")
 
@@ -352,7 +366,8 @@ def runs_command(keep_ensembles: bool = True) -> None:
     kept = []
     if keep_ensembles and (RESULTS / "meta.json").exists():
         outs = {str((RESULTS / kind / name).relative_to(ROOT)) for kind, name, _ in ENSEMBLE_STUDIES}
-        separate = tuple(str((RESULTS / kind).relative_to(ROOT)) + "/" for kind in ("drives", "envelope", "rig"))
+        separate = tuple(str((RESULTS / kind).relative_to(ROOT)) + "/"
+                         for kind in ("drives", "envelope", "rig", "estimate_unseen"))
         kept = [x for x in json.loads((RESULTS / "meta.json").read_text())["studies"]
                 if x.get("out") in outs or x.get("out", "").startswith(separate)]
     meta = {"spotsim_version": spotsim.__version__, "commit": commit,
@@ -373,15 +388,27 @@ def runs_command(keep_ensembles: bool = True) -> None:
     print(f"results in {RESULTS.relative_to(ROOT)}; now run `{GENERATE} pages`")
 
 
-def ensembles_command() -> None:
-    """Rerun only the ensemble accuracy studies (about 22 min on 2 cores) and replace their
-    entries in docs/results/meta.json, each stamped with its own commit."""
+def rerun_studies(studies: list) -> None:
+    """Run `studies` (kind, name, args) again and replace their entries in docs/results/meta.json,
+    each stamped with its own commit."""
     meta = json.loads((RESULTS / "meta.json").read_text())
-    done = [run_study(kind, name, args) for kind, name, args in ENSEMBLE_STUDIES]
+    done = [run_study(kind, name, args) for kind, name, args in studies]
     outs = {d["out"] for d in done}
     meta["studies"] = [s for s in meta["studies"] if s.get("out") not in outs] + done
     write_json(RESULTS / "meta.json", meta)
+
+
+def ensembles_command() -> None:
+    """Rerun only the ensemble accuracy studies (about 22 min on 2 cores) and their spreads."""
+    rerun_studies(ENSEMBLE_STUDIES)
     spreads_command()
+    print(f"results in {RESULTS.relative_to(ROOT)}; now run `{GENERATE} pages`")
+
+
+def unseen_command() -> None:
+    """Rerun only the error bound's studies on unseen scenarios (UNSEEN_STUDIES; about 30 min on 2
+    cores, most of it the dual arm's converged references)."""
+    rerun_studies(UNSEEN_STUDIES)
     print(f"results in {RESULTS.relative_to(ROOT)}; now run `{GENERATE} pages`")
 
 
@@ -1174,19 +1201,13 @@ def estimate_table(r: Results) -> str:
     the study does (`studies.estimate.validation_table`)."""
     from spotsim.studies.estimate import validation_table
 
-    def row(x: dict) -> dict:  # estimate.csv's row as `validate` made it
-        x = blanks_none(x)
-        return {**x, "grasp": int(x["grasp"]), "within": x["within"] == "True",
-                "within_uncertainty": x["within_uncertainty"] == "True",
-                "within_bound": {"True": True, "False": False}.get(x["within_bound"])}
-
     rows = []
     for name in ("single_arm_case_I", "single_arm_case_II", "single_arm_case_III", "dual_arm_sequential"):
         path = RESULTS / "estimate" / name / "estimate.csv"
         if not path.exists():
             continue
         label = PAPER_CASES[name]["label"] if name in PAPER_CASES else "dual arm"
-        found = validation_table([row(x) for x in read_csv(path)])
+        found = validation_table([estimate_row(x) for x in read_csv(path)])
         for q in sorted(found, key=lambda q: (q["grasp"], list(ESTIMATE_QUANTITIES).index(q["quantity"]))):
             rows.append([label + (f", grasp {q['grasp']}" if name == "dual_arm_sequential" else ""),
                          ESTIMATE_QUANTITIES.get(q["quantity"], q["quantity"]), num(q["median_estimate"]),
@@ -1198,6 +1219,49 @@ def estimate_table(r: Results) -> str:
         return f"No error-estimate study in docs/results/estimate/: run `{GENERATE} runs`."
     return table(["case", "quantity", "median estimate", "median bound", "median true error",
                   "error within the estimate", "within the uncertainty (3x)", "within the bound"], rows)
+
+
+def estimate_row(x: dict) -> dict:
+    """estimate.csv's row as `studies.estimate.validate` made it."""
+    x = blanks_none(x)
+    return {**x, "grasp": int(x["grasp"]), "within": x["within"] == "True",
+            "within_uncertainty": x["within_uncertainty"] == "True",
+            "within_bound": {"True": True, "False": False}.get(x["within_bound"])}
+
+
+def unseen_table(r: Results) -> str:
+    """The bound on scenarios no study has seen (UNSEEN_STUDIES, docs/results/estimate_unseen/):
+    per scenario and quantity, for how many starts the true error lay within the bound, the
+    largest share of its bound it took, the median bound and true error, and what the spread
+    around each start cost."""
+    import numpy as np
+
+    rows, total, within = [], 0, 0
+    for _, name, _ in UNSEEN_STUDIES:
+        path = RESULTS / "estimate_unseen" / name / "estimate.csv"
+        if not path.exists():
+            continue
+        config, tag = name.rsplit("_", 1)
+        label = (PAPER_CASES[config]["label"] if config in PAPER_CASES else "dual arm") + ", " + UNSEEN_LABELS[tag]
+        found = [estimate_row(x) for x in read_csv(path)]
+        n_grasps = max(x["grasp"] for x in found)
+        for key in dict.fromkeys((x["grasp"], x["quantity"]) for x in found):
+            group = [x for x in found if (x["grasp"], x["quantity"]) == key and x["within_bound"] is not None]
+            if not group:
+                continue
+            share = max(float(x["error"]) / float(x["bound"]) for x in group)
+            total += len(group)
+            within += sum(x["within_bound"] for x in group)
+            rows.append([label + (f", grasp {key[0]}" if n_grasps > 1 else ""),
+                         ESTIMATE_QUANTITIES.get(key[1], key[1]), f"{sum(x['within_bound'] for x in group)} of "
+                         f"{len(group)}", fixed(share, 2), num(float(np.median([float(x["bound"]) for x in group]))),
+                         num(float(np.median([float(x["error"]) for x in group])))])
+    if not rows:
+        return f"No study of unseen scenarios in docs/results/estimate_unseen/: run `{GENERATE} unseen`."
+    return (table(["scenario", "quantity", "true error within the bound", "largest error / bound", "median bound",
+                   "median true error"], rows)
+            + f"\n\nIn all: {within} of {total} runs and quantities within their bounds "
+              f"({100 * within / total:.1f} %).")
 
 
 def spreads_table(r: Results) -> str:
@@ -1801,6 +1865,7 @@ RENDER = {
     "motor-convergence-table": motor_convergence_table,
     "sensitivity-table": sensitivity_table,
     "estimate-table": estimate_table,
+    "estimate-unseen-table": unseen_table,
     "typical-spreads": spreads_table,
     "stability-table": stability_table,
     "envelope-table": envelope_table,
@@ -1843,8 +1908,8 @@ def pages_command() -> None:
 
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("command", choices=["results", "runs", "ensembles", "spreads", "drives", "envelope",
-                                            "sensitivity", "rig", "pages"])
+    parser.add_argument("command", choices=["results", "runs", "ensembles", "unseen", "spreads", "drives",
+                                            "envelope", "sensitivity", "rig", "pages"])
     parser.add_argument("drives", nargs="*", metavar="DRIVE", help=f"drives: only these ({', '.join(DRIVES)})")
     args = parser.parse_args(argv)
     if args.drives and args.command != "drives":
@@ -1852,8 +1917,8 @@ def main(argv=None) -> None:
     if args.command == "drives":
         drives_command(tuple(args.drives))
         return
-    {"results": results_command, "runs": runs_command, "ensembles": ensembles_command, "spreads": spreads_command,
-     "envelope": envelope_command, "sensitivity": sensitivity_command, "rig": rig_command,
+    {"results": results_command, "runs": runs_command, "ensembles": ensembles_command, "unseen": unseen_command,
+     "spreads": spreads_command, "envelope": envelope_command, "sensitivity": sensitivity_command, "rig": rig_command,
      "pages": pages_command}[args.command]()
 
 

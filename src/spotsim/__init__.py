@@ -6,11 +6,12 @@
     print(result.grasp["residual_offset_mm"])
     spotsim.write_results(result, "results/case_I")
     summary, timeseries = spotsim.read_results("results/case_I")
+    spotsim.run_scenario(scenario, "results/case_I")  # as `spotsim run`: with its error estimate
 """
 
 from .assemble.model import Model, build_model
 from .errors import ModelError, ScenarioError, SimulationError, SpotsimError
-from .results import read_results, write_results
+from .results import read_results, run_scenario, write_results
 from .run import Result, simulate
 from .scenario import Scenario, from_dict, load_scenario, replace, to_yaml
 from .studies.ensemble import EnsembleResult, ensemble
@@ -32,6 +33,7 @@ __all__ = [
     "load_scenario",
     "read_results",
     "replace",
+    "run_scenario",
     "simulate",
     "sweep",
     "to_yaml",

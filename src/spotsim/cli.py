@@ -740,9 +740,7 @@ def main(argv=None) -> int:
         print(to_yaml(scenario), end="")
         return 0
 
-    from .files import prepare
-    from .results import SUMMARY, disk_need, write_results
-    from .run import simulate
+    from .results import run_scenario
 
     if args.replay:  # before the run: a missing meshcat is bad input, found before anything ran
         try:
@@ -755,21 +753,9 @@ def main(argv=None) -> int:
         return _ensemble(args, scenario, model, path, out)
     out = Path(args.out) if args.out else Path("results") / scenario.name
     try:
-        prepare(out, SUMMARY, disk_need(scenario))
-    except SpotsimError as e:
-        return _bad_input(e)
-    result = simulate(scenario, model=model, progress=not args.quiet, source=str(path))
-    if not args.no_error_estimate and result.status != "interrupted":
-        from .studies.estimate import estimate
-
-        try:
-            result.summary["error_estimate"] = estimate(scenario, result.summary, source=str(path), model=model,
-                                                        spread_members=args.spread_members,
-                                                        progress=not args.quiet)
-        except KeyboardInterrupt:
-            result.summary["error_estimate"] = {"note": "interrupted by the user"}
-    try:
-        write_results(result, out, figures=not args.no_figures, sample_hz=args.sample_hz)
+        result = run_scenario(scenario, out, model=model, source=str(path), error_estimate=not args.no_error_estimate,
+                              spread_members=args.spread_members, figures=not args.no_figures,
+                              sample_hz=args.sample_hz, progress=not args.quiet)
     except SpotsimError as e:
         return _bad_input(e)
     s = result.summary

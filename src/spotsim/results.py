@@ -30,6 +30,33 @@ def disk_need(scenario) -> float:
     return scenario.simulation.duration_s / scenario.simulation.dt_s * DISK_PER_RECORD_B + DISK_FIXED_B
 
 
+def run_scenario(scenario, out_dir: str | Path, *, model=None, source: str = "<scenario>", error_estimate: bool = True,
+                 spread_members: int | None = None, figures: bool = True, sample_hz: float = measures.CAMERA_HZ,
+                 progress: bool = False) -> Result:
+    """What `spotsim run` does, from Python: check that `out_dir` can take the results (before
+    anything runs; SpotsimError), run the scenario (`simulate`), estimate its error unless told
+    not to (`studies.estimate.estimate`: the companion run, and, where no study or ensemble gives
+    one, the spread over `spread_members` starts around the run's own, default 16; 0: none) and
+    write the results directory (`write_results`). Returns the Result, its summary with its
+    `error_estimate`. `simulate` and `write_results` alone give none."""
+    from .assemble.model import build_model
+    from .run import INTERRUPTED, simulate
+    from .studies.estimate import SPREAD_MEMBERS, estimate
+
+    prepare(Path(out_dir), SUMMARY, disk_need(scenario))
+    model = build_model(scenario, source) if model is None else model  # the start's: the spread's runs share it
+    result = simulate(scenario, model=model, progress=progress, source=source)
+    if error_estimate and result.status != INTERRUPTED:
+        try:
+            result.summary["error_estimate"] = estimate(
+                scenario, result.summary, source=source, model=model,
+                spread_members=SPREAD_MEMBERS if spread_members is None else spread_members, progress=progress)
+        except KeyboardInterrupt:
+            result.summary["error_estimate"] = {"note": "interrupted by the user"}
+    write_results(result, out_dir, figures=figures, sample_hz=sample_hz)
+    return result
+
+
 def write_results(result: Result, out_dir: str | Path, figures: bool = True,
                   sample_hz: float = measures.CAMERA_HZ) -> Path:
     """Write timeseries.npz/.csv, replay.npz, scenario.yaml, a dual-arm run's markers.csv (its

@@ -70,6 +70,9 @@ WALL_LIMIT_S = 600.0
 #: `Cluster.max_points`): each is a whole run of a second or more, so a larger count is far
 #: more often a mistyped range than a plan; it is refused before any point is built.
 MAX_POINTS = 10_000
+#: Why a point's error estimate has no spread over starts, and so no bound.
+SWEEP_NO_SPREAD = ("none: a sweep point (its spread would take 16 more runs a point); `spotsim run` of the point's "
+                   "scenario measures it and gives the bound")
 #: Models a worker keeps, the least recently used dropped first.
 MODELS_KEPT = 8
 SAMPLERS = ("sobol", "lhs")
@@ -414,7 +417,7 @@ def run_point(point: Point, wall_limit_s: float | None = WALL_LIMIT_S, with_esti
             stage = "the error estimate's companion"
             left = None if wall_limit_s is None else max(wall_limit_s - (time.perf_counter() - t0), 1e-3)
             comp = simulate(other, model=model_for(other, source), source=source, wall_limit_s=left)
-            summary["error_estimate"] = error_estimate(summary, comp.summary)
+            summary["error_estimate"] = error_estimate(summary, comp.summary, no_spread=SWEEP_NO_SPREAD)
     except SpotsimError as e:
         if stage != "the start":
             raise
