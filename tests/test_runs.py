@@ -4,6 +4,7 @@ import json
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -355,3 +356,17 @@ def test_a_grasp_that_closes_with_a_finger_outside_its_groove_is_not_captured(tm
     record = sw.run_point(sw.resolve_points(CASE_I, spec)[0], with_estimate=False)
     assert record["status"] == "not captured"
     assert sw.verdict(record["status"], record["summary"]) == sw.NOT_CAPTURED
+
+
+def test_a_run_with_overrides_gets_a_results_directory_of_its_own():
+    """Without --out, --set names the directory after the changes: a changed run never lands in
+    (and overwrites) the scenario's own results; a long list ends in a hash of it."""
+    from spotsim.paths import CHANGES_NAME_MAX, results_dir
+
+    assert results_dir("single_arm_case_I") == Path("results/single_arm_case_I")
+    assert results_dir("single_arm_case_I", ["end_effector.closing_speed_m_s=0.018"], "ensemble") == Path(
+        "results/single_arm_case_I+closing_speed_m_s=0.018/ensemble")
+    assert results_dir("x", ["module.initial_offset_mm=[0, -2, 0]"]).name == "x+initial_offset_mm=0,-2,0"
+    many = [f"contact.k{i}=1" for i in range(20)]
+    long = results_dir("x", many).name
+    assert len(long) == len("x+") + CHANGES_NAME_MAX and long != results_dir("x", many[:-1]).name

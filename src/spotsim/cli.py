@@ -17,6 +17,7 @@ from pathlib import Path
 
 from .errors import ScenarioError, SpotsimError
 from .measures import CAMERA_HZ
+from .paths import results_dir
 from .status import COMPLETED, DIVERGED, EXCEPTION, INCOMPLETE, INTERRUPTED, NOT_CAPTURED, REJECTED
 from .studies.ensemble import ALL_AXES, FAMILIES
 from .studies.estimate import MIN_SPREAD_COUNT, SPREAD_MEMBERS
@@ -80,8 +81,8 @@ def _parser() -> argparse.ArgumentParser:
     run = sub.add_parser("run", help="run a scenario and write its results")
     run.add_argument("config", nargs="?", help=f"scenario YAML, or a shipped scenario's name (`spotsim list`; "
                                               f"default: config/{DEFAULT_SCENARIO})")
-    run.add_argument("--out", help="results directory (default: results/<scenario name>, with --ensemble "
-                                   "results/<scenario name>/ensemble)")
+    run.add_argument("--out", help="results directory (default: results/<scenario name>, with --set "
+                                   "results/<scenario name>+<the changes>; with --ensemble, its ensemble/)")
     run.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE",
                      help="override a scenario key, validated like the file (repeatable)")
     run.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
@@ -184,7 +185,7 @@ def _envelope(args) -> int:
             if not getattr(args, name) > 0:
                 raise ScenarioError([f"--{name.replace('_', '-')} = {getattr(args, name)}: must be positive"])
         cluster = _cluster(args)
-        out = Path(args.out) if args.out else Path("results") / load_scenario(path, args.set).name / "envelope"
+        out = Path(args.out) if args.out else results_dir(load_scenario(path, args.set).name, args.set, "envelope")
         search = Search(axes, planes, args.rays, {"mm": args.resolution_mm, "deg": args.resolution_deg},
                         {"mm": args.limit_mm, "deg": args.limit_deg}, args.precision_mm, args.members, args.seed)
         report = envelope(path, out, search, cluster=cluster, sets=args.set)
@@ -263,7 +264,7 @@ def _sweep(args) -> int:
         path = _config_path(args.config)
         cluster = _cluster(args)
         spec = spec_of(args.vary, args.spec, args.set, cluster.max_points)
-        out = Path(args.out) if args.out else Path("results") / load_scenario(path, spec.sets).name / "sweep"
+        out = Path(args.out) if args.out else results_dir(load_scenario(path, spec.sets).name, spec.sets, "sweep")
         report = run_sweep(path, spec, out, cluster=cluster, precision_mm=args.precision_mm,
                            error_estimate=not args.no_error_estimate)
     except SpotsimError as e:
@@ -404,7 +405,7 @@ def _study(args) -> int:
     if loaded is None:
         return 2
     scenario, _ = loaded
-    out = Path(args.out) if args.out else Path("results") / "study" / scenario.name
+    out = Path(args.out) if args.out else Path("results", "study", results_dir(scenario.name, args.set).name)
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as e:
@@ -749,9 +750,9 @@ def main(argv=None) -> int:
             print(f"--replay needs meshcat ({e}); install it with `pip install meshcat`", file=sys.stderr)
             return 2
     if args.ensemble is not None:  # by default beside the single run's files, not among them
-        out = Path(args.out) if args.out else Path("results") / scenario.name / "ensemble"
+        out = Path(args.out) if args.out else results_dir(scenario.name, args.set, "ensemble")
         return _ensemble(args, scenario, model, path, out)
-    out = Path(args.out) if args.out else Path("results") / scenario.name
+    out = Path(args.out) if args.out else results_dir(scenario.name, args.set)
     try:
         result = run_scenario(scenario, out, model=model, source=str(path), error_estimate=not args.no_error_estimate,
                               spread_members=args.spread_members, figures=not args.no_figures,

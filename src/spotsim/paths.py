@@ -58,3 +58,29 @@ def scenario_file(arg: str | Path) -> Path:
     if path.suffix not in (".yaml", ".yml"):
         raise ScenarioError([f"{arg}: no such file, and no shipped scenario of that name (`spotsim list` names them)"])
     return path
+
+
+#: The longest name of the overrides in a default results directory; longer ones end in a hash.
+CHANGES_NAME_MAX = 60
+
+
+def results_dir(name: str, sets=(), *sub: str) -> Path:
+    """The default results directory of a scenario `name` run with the overrides `sets`
+    (`--set key.path=value`): results/<name>, or, with overrides, results/<name>+<each key's
+    last part=value, joined by +>, so that a changed run never lands in (and overwrites) the
+    scenario's own directory; a name over CHANGES_NAME_MAX characters is cut and ends in a hash
+    of the overrides. `sub`: further parts (ensemble, sweep, envelope)."""
+    import hashlib
+    import re
+
+    if sets:
+        parts = []
+        for s in sets:
+            key, _, value = str(s).partition("=")
+            parts.append(re.sub(r"[^A-Za-z0-9._=,+-]", "", f"{key.strip().rsplit('.', 1)[-1]}={value.strip()}"))
+        changes = "+".join(parts)
+        if len(changes) > CHANGES_NAME_MAX:
+            digest = hashlib.sha256("\n".join(map(str, sets)).encode()).hexdigest()[:8]
+            changes = f"{changes[:CHANGES_NAME_MAX - 9]}-{digest}"
+        name = f"{name}+{changes}"
+    return Path("results", name, *sub)

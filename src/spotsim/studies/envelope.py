@@ -305,13 +305,14 @@ def _chances(todo, raw0, search: Search, done: dict, out: Path, cluster: Cluster
 def _on_dask(todo, probe, settle, cluster: Cluster, source: str, scenario) -> None:
     """Bisect every ray at once on `cluster`: each ray's next probe submitted as its last ends."""
     from distributed import as_completed
-    from tqdm import tqdm
+
+    from ..run import progress_bar
 
     with dask_client(cluster) as client:
         warm(client, scenario, source)
         pending = as_completed()
         where = {}
-        bar = tqdm(unit="probe", disable=not cluster.progress)
+        bar = progress_bar(None, cluster.progress, what="envelope", unit="probe")
 
         def submit(ray):
             nxt = probe(ray)

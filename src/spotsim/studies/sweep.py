@@ -678,11 +678,12 @@ def sweep(config, *, vary=(), spec: SweepSpec | str | Path | None = None, sets=(
     Cluster(workers=2)`, `precision_mm`, ...) and return its table as a pandas DataFrame, a
     row per point; `table.attrs['report']` is the SweepReport. out_dir: by default
     results/<scenario name>/sweep."""
+    from ..paths import results_dir
     from ..scenario import load_scenario
 
     spec = spec_of(vary, spec, sets, options.get("cluster", Cluster()).max_points)
     if out_dir is None:
-        out_dir = Path("results") / load_scenario(config, spec.sets).name / "sweep"
+        out_dir = results_dir(load_scenario(config, spec.sets).name, spec.sets, "sweep")
     report = run_sweep(config, spec, out_dir, **options)
     table = report.table
     table.attrs["report"] = report
@@ -770,11 +771,12 @@ def _run_on_dask(todo: list[Point], out: Path, done: dict, cluster: Cluster, sou
     """Run the points `todo` on `cluster`, each record appended to out's points file and put
     in `done` as it ends (then `on_record(record)`); returns how many ran."""
     from distributed import as_completed
-    from tqdm import tqdm
+
+    from ..run import progress_bar
 
     ran = 0
     with dask_client(cluster) as client:
-        bar = tqdm(total=len(todo), unit="point", disable=not cluster.progress, smoothing=0.1)
+        bar = progress_bar(len(todo), cluster.progress, what="sweep", unit="point")
         try:
             first = next((p.scenario for p in todo if p.scenario is not None), None)
             if first is not None:
