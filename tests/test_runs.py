@@ -352,6 +352,8 @@ def test_a_grasp_that_closes_with_a_finger_outside_its_groove_is_not_captured(tm
     assert main(["run", str(CASE_I), *off, "--ensemble", "2", "--workers", "1", "--out", str(ens), "--quiet",
                  "--no-error-estimate"]) == 5
     assert json.loads((ens / "ensemble.json").read_text())["classes"]["grasp"]["not captured"]["count"] == 2
+    assert main(["plot", str(ens)]) == 0  # an ensemble's directory: its histograms
+    assert (ens / "figures" / "ensemble.png").read_bytes().startswith(b"\x89PNG")
     spec = sw.SweepSpec(points=[{"module.initial_offset_mm.1": -11.0}], sets=["end_effector.start_gap_mm=15"])
     record = sw.run_point(sw.resolve_points(CASE_I, spec)[0], with_estimate=False)
     assert record["status"] == "not captured"

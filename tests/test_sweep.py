@@ -178,6 +178,8 @@ def test_a_sweep_writes_a_row_per_point_with_its_verdict_and_error_estimate(loca
     assert t["peak_force_error_N"].notna().all() and t["residual_error_mm"].notna().all()
     assert (local.out / "sweep.parquet").exists() and (local.out / "sweep.csv").exists()
     assert (local.out / "spec.yaml").exists()
+    assert main(["plot", str(local.out)]) == 0  # a sweep's directory: its points against the varied key
+    assert (local.out / "figures" / "sweep.png").read_bytes().startswith(b"\x89PNG")
 
 
 def test_a_finished_sweep_started_again_runs_nothing(local):

@@ -111,7 +111,8 @@ def _parser() -> argparse.ArgumentParser:
     sub.add_parser("list", help="the shipped scenarios: their names (which run, validate, sweep, envelope and "
                                 "study take in place of a file) and descriptions")
     val.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE")
-    plot = sub.add_parser("plot", help="regenerate the figures of a run's results directory")
+    plot = sub.add_parser("plot", help="regenerate the figures of a run's results directory, or draw an ensemble's "
+                                       "or a sweep's")
     plot.add_argument("result_dir")
     plot.add_argument("--sample-hz", type=_rate, default=CAMERA_HZ, metavar="HZ",
                       help=f"the camera rate of the displacement figure's samples (default {CAMERA_HZ:g} Hz)")
