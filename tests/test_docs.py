@@ -80,3 +80,18 @@ def test_the_shipped_typical_spreads_are_the_studies():
     gen = generator()
     assert json.loads(gen.SPREADS.read_text()) == gen.typical_spreads_from_results(), (
         "typical_spread.json is out of date: run `python docs/generate.py spreads`")
+
+
+#: Counts the README spells out, as words.
+WORDS = {w: n for n, w in enumerate(("zero one two three four five six seven eight nine ten eleven twelve thirteen "
+                                     "fourteen fifteen").split())}
+
+
+def test_the_readmes_counts_are_the_trees():
+    """The number of shipped configs and of examples the README gives is what the tree holds."""
+    text = (ROOT / "README.md").read_text()
+    configs = re.search(r"(\w+) ship in \[`config/`\]", text)
+    examples = re.search(r"\[`examples/`\]\(examples/\) has (\w+) runnable scripts", text)
+    assert configs and examples, "the README no longer states its counts where this test reads them"
+    assert WORDS[configs.group(1)] == len(list((ROOT / "config").glob("*.yaml")))
+    assert WORDS[examples.group(1)] == len(list((ROOT / "examples").glob("*.py")))
