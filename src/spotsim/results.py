@@ -128,6 +128,13 @@ def _axes_note(normal) -> str:
     return f"x_T {x}, y_T {y}, normal {z} (world)"
 
 
+def time_label(ts: dict) -> str:
+    """A figure's time axis, with its sampling: the record's interval, and that summary.json's
+    peaks are taken over every dynamics step, between the records too."""
+    dt = float(np.median(np.diff(ts["t"]))) if len(ts["t"]) > 1 else float("nan")
+    return f"time (s): a record every {dt * 1e3:.3g} ms; summary.json's peaks are over every step"
+
+
 def plot_figures(ts: dict, fig_dir: Path, title: str, summary: dict | None = None,
                  sample_hz: float = measures.CAMERA_HZ, markers=None) -> None:
     """The paper's Fig. 11 (offset of O_b from O_a per axis) and Fig. 12 (combined force); for
@@ -148,7 +155,7 @@ def plot_figures(ts: dict, fig_dir: Path, title: str, summary: dict | None = Non
     fig, ax = plt.subplots(figsize=(7, 3.5))
     ax.plot(ts["t"], ts["pairs_slipping"], lw=1, color="tab:red", label="slipping")
     ax.plot(ts["t"], ts["pairs_sticking"], lw=1, color="tab:cyan", label="sticking")
-    ax.set_xlabel("time (s)")
+    ax.set_xlabel(time_label(ts))
     ax.set_ylabel("sphere pairs in contact (count)")
     ax.set_title(f"{title}: active pairs by state (Fig. 9)")
     ax.grid(alpha=0.3)
@@ -166,7 +173,7 @@ def plot_figures(ts: dict, fig_dir: Path, title: str, summary: dict | None = Non
             ax.set_ylabel(f"{'xyz'[i]} ({unit})")
             ax.grid(alpha=0.3)
         axes[0].set_title(f"{title}: {label}")
-        axes[-1].set_xlabel("time (s)")
+        axes[-1].set_xlabel(time_label(ts))
         fig.tight_layout()
         save_figure(fig, fig_dir / f"{name}.png")
         plt.close(fig)
@@ -202,7 +209,7 @@ def _dual_arm_figures(ts: dict, fig_dir: Path, title: str, plt) -> None:
         for i, axis in enumerate("xyz"):
             ax.plot(ts["t"][rows], d[:, i], lw=1, label=axis)
         ax.set_title(f"grasp {g + 1}: robot centroid displacement")
-        ax.set_xlabel("time (s)")
+        ax.set_xlabel(time_label(ts))
         ax.set_ylabel("displacement (mm)")
         ax.grid(alpha=0.3)
         ax.legend()
@@ -222,7 +229,7 @@ def _dual_arm_figures(ts: dict, fig_dir: Path, title: str, plt) -> None:
             ax.grid(alpha=0.3)
             ax.legend()
         axes[0, col].set_title(f"grasp {g + 1}")
-        axes[1, col].set_xlabel("time (s)")
+        axes[1, col].set_xlabel(time_label(ts))
     fig.suptitle(f"{title}: contact forces and torques per grasp (Fig. 21)")
     fig.tight_layout()
     save_figure(fig, fig_dir / "contact_forces_torques.png")
