@@ -1,10 +1,10 @@
 """The generated parts of spotsim's documentation.
 
     python docs/generate.py results   # rerun what the tables need: writes docs/results/
-    python docs/generate.py ensembles # rerun only the ensemble accuracy studies (~25 min), then spreads
+    python docs/generate.py ensembles # rerun only the ensemble accuracy studies (~25 min); then
+                                      # `spotsim study spreads ...` (SPREADS_COMMAND) writes their
+                                      # spreads (package data: src/spotsim/studies/typical_spread.json)
     python docs/generate.py unseen    # rerun only the error bound's check on unseen scenarios (~30 min)
-    python docs/generate.py spreads   # the studied configs' typical spreads over starts, from those
-                                      # studies (package data: src/spotsim/studies/typical_spread.json)
     python docs/generate.py drives [DRIVE ...]  # rerun only the drive comparison's ensembles
                                       # (~40 min; only the named drives, if any)
     python docs/generate.py envelope  # rerun only Case I's capture envelopes (about a minute)
@@ -342,10 +342,11 @@ def extras(results: dict) -> dict:
 
 def results_command() -> None:
     """Everything the pages need: the runs and single-run studies, the ensemble studies and their
-    spreads, the runs and single-run studies again (the error-estimate studies' bounds use those
-    spreads), and the drive comparison."""
+    spreads (the library's `spotsim study spreads`), the runs and single-run studies again (the
+    error-estimate studies' bounds use those spreads), and the drive comparison."""
     runs_command(keep_ensembles=False)
     ensembles_command()
+    subprocess.run([sys.executable, "-m", "spotsim.cli", *SPREADS_COMMAND.split()[1:]], cwd=ROOT, check=True)
     runs_command()
     drives_command()
 
@@ -399,10 +400,9 @@ def rerun_studies(studies: list) -> None:
 
 
 def ensembles_command() -> None:
-    """Rerun only the ensemble accuracy studies (about 22 min on 2 cores) and their spreads."""
+    """Rerun only the ensemble accuracy studies (about 22 min on 2 cores)."""
     rerun_studies(ENSEMBLE_STUDIES)
-    spreads_command()
-    print(f"results in {RESULTS.relative_to(ROOT)}; now run `{GENERATE} pages`")
+    print(f"results in {RESULTS.relative_to(ROOT)}; now run `{SPREADS_COMMAND}`, then `{GENERATE} pages`")
 
 
 def unseen_command() -> None:
@@ -412,50 +412,12 @@ def unseen_command() -> None:
     print(f"results in {RESULTS.relative_to(ROOT)}; now run `{GENERATE} pages`")
 
 
-#: The studied configs' typical spreads over starts: package data that a run's error estimate reads
-#: (`spotsim.studies.estimate.typical_spread`).
-SPREADS = ROOT / "src" / "spotsim" / "studies" / "typical_spread.json"
-
-
-def typical_spreads_from_results() -> dict:
-    """SPREADS' content: each ensemble-studied config's typical spread over starts
-    (`studies.estimate.study_spread`), from its ensemble accuracy study in docs/results/: the
-    members at the config's own setting and at the reference, pooled; keyed by the config's
-    `scenario.fingerprint`, which must be the config's as the study ran it."""
-    import spotsim
-    from spotsim.scenario import fingerprint, from_dict
-    from spotsim.studies.accuracy import parse_setting, setting_of
-    from spotsim.studies.accuracy_ensemble import slug
-    from spotsim.studies.estimate import study_spread
-
-    studies = {s["out"]: s for s in json.loads((RESULTS / "meta.json").read_text())["studies"]}
-    reference = parse_setting(ENSEMBLE_ARGS[ENSEMBLE_ARGS.index("--reference") + 1])
-    seed = ENSEMBLE_ARGS[ENSEMBLE_ARGS.index("--seed") + 1]
-    scenarios = {}
-    for kind, name, args in ENSEMBLE_STUDIES:
-        scenario = spotsim.load_scenario(ROOT / args[0])
-        out = RESULTS / kind / name
-        dt = scenario.simulation.dt_s
-        own, ref = (setting_of(scenario).label(dt), reference.label(dt))
-        rows = [[blanks_none(row) for row in read_csv(out / "members" / f"{slug(label)}.csv")] for label in (own, ref)]
-        study = studies[str(out.relative_to(ROOT))]
-        ran = from_dict(yaml.safe_load(git("show", f"{study['commit']}:{args[0]}")), args[0])
-        if fingerprint(ran) != fingerprint(scenario):
-            raise SystemExit(f"{args[0]} has changed since its study ran at {study['commit']}: run `{GENERATE} "
-                             f"ensembles`")
-        about = (f"the ensemble accuracy study's {len(rows[0])} starts (seed {seed}) at {own} and at the converged "
-                 f"{ref}, pooled ({study['out']}, commit {study['commit']})")
-        scenarios[fingerprint(scenario)] = study_spread(scenario, *rows, about)
-    return {"about": "written by `python docs/generate.py spreads`; read by spotsim.studies.estimate.typical_spread",
-            "scenarios": scenarios}
-
-
-def spreads_command() -> None:
-    """Write SPREADS (`typical_spreads_from_results`)."""
-    spreads = typical_spreads_from_results()
-    write_json(SPREADS, spreads)
-    for entry in spreads["scenarios"].values():
-        print(f"  {entry['scenario']}: {entry['about']}")
+#: The command that writes the studied configs' typical spreads over starts (package data that a
+#: run's error estimate reads) from the ensemble accuracy studies' results: a library command, run
+#: after `ensembles`; this script only reads the file (`spreads_table`).
+SPREADS_COMMAND = ("spotsim study spreads " + " ".join(f"{args[0]}={(RESULTS / kind / name).relative_to(ROOT)}"
+                                                        for kind, name, args in ENSEMBLE_STUDIES)
+                   + " --out src/spotsim/studies/typical_spread.json")
 
 
 def timed_run(cmd: list[str], shown: str, out: Path, ok: tuple[int, ...] = (0,)) -> dict:
@@ -1277,7 +1239,7 @@ def unseen_table(r: Results) -> str:
 
 def spreads_table(r: Results) -> str:
     """The typical spreads over starts that single runs of the studied configs report
-    (SPREADS, `spotsim.studies.estimate.typical_spread`): per quantity its median [p10, p90],
+    (`spotsim.studies.estimate.typical_spread`, written by SPREADS_COMMAND): per quantity its median [p10, p90],
     smallest and largest value and chance range."""
     from spotsim.studies.estimate import QUANTITIES, chance_range, typical_spreads
 
@@ -1986,8 +1948,8 @@ def pages_command() -> None:
 
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("command", choices=["results", "runs", "ensembles", "unseen", "spreads", "drives",
-                                            "envelope", "sensitivity", "rig", "pages"])
+    parser.add_argument("command", choices=["results", "runs", "ensembles", "unseen", "drives", "envelope",
+                                            "sensitivity", "rig", "pages"])
     parser.add_argument("drives", nargs="*", metavar="DRIVE", help=f"drives: only these ({', '.join(DRIVES)})")
     args = parser.parse_args(argv)
     if args.drives and args.command != "drives":
@@ -1996,7 +1958,7 @@ def main(argv=None) -> None:
         drives_command(tuple(args.drives))
         return
     {"results": results_command, "runs": runs_command, "ensembles": ensembles_command, "unseen": unseen_command,
-     "spreads": spreads_command, "envelope": envelope_command, "sensitivity": sensitivity_command, "rig": rig_command,
+     "envelope": envelope_command, "sensitivity": sensitivity_command, "rig": rig_command,
      "pages": pages_command}[args.command]()
 
 

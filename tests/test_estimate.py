@@ -234,3 +234,21 @@ def test_a_run_takes_the_studys_spread_where_there_is_one_else_its_ensembles(cas
     unfinished = {**summary(grasp(0.1)), "status": "incomplete"}
     assert "ended incomplete" in estimate_module.estimate(other, unfinished)["spread"]["about"]
     assert len(measured) == 1
+
+
+def test_the_shipped_spreads_are_what_the_library_collects_from_the_studies(tmp_path):
+    """`spotsim study spreads` over the ensemble accuracy studies in docs/results/ gives the
+    package's typical spreads, statistic for statistic, each with its provenance."""
+    from conftest import ROOT
+
+    studies = [f"{name}={ROOT / 'docs/results/accuracy_ensemble' / name}" for name in
+               ("single_arm_case_I", "single_arm_case_II", "single_arm_case_III", "dual_arm_sequential")]
+    out = tmp_path / "spreads.json"
+    assert main(["study", "spreads", *studies, "--out", str(out)]) == 0
+    made = json.loads(out.read_text())["scenarios"]
+    shipped = estimate_module.typical_spreads()
+    assert set(made) == set(shipped)
+    for key, entry in made.items():
+        assert entry["grasps"] == shipped[key]["grasps"]
+        assert entry["provenance"]["fingerprint"] == key and entry["provenance"]["members"] == [32, 32]
+    assert main(["study", "spreads", f"single_arm_case_I={tmp_path}", "--out", str(out)]) == 2

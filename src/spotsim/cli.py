@@ -285,6 +285,13 @@ def _study_parser(sub) -> None:
     acc = verbs.add_parser("accuracy", help="work-precision: a confirmed reference, then integrator x step")
     stab = verbs.add_parser("stability", help="stiff and extreme cases: predicted stable step and verdict")
     est = verbs.add_parser("estimate", help="each run's error estimate against a converged reference, over starts")
+    spreads = verbs.add_parser("spreads", help="the typical spreads over starts of studied scenarios, from their "
+                                               "ensemble accuracy studies: the file a run's bound reads")
+    spreads.add_argument("studies", nargs="+", metavar="CONFIG=STUDY_DIR",
+                         help="a scenario (file or shipped name) and the directory of its `spotsim study accuracy "
+                              "--ensemble N`, which ran it at its own setting")
+    spreads.add_argument("--out", required=True, metavar="FILE",
+                         help="the spreads file to write (spotsim's own: src/spotsim/studies/typical_spread.json)")
     for v in (acc, stab, est):
         v.add_argument("config", nargs="?", help=f"scenario YAML, or a shipped scenario's name (default: "
                                                  f"config/{DEFAULT_SCENARIO})")
@@ -344,9 +351,33 @@ def _numbers(text: str | None, kind, what: str):
     return values
 
 
+def _spreads(args) -> int:
+    """`spotsim study spreads`: write the spreads file of the studies given; exit 2 on bad input."""
+    from .scenario import load_scenario
+    from .studies.estimate import spread_from_study, write_spreads
+
+    try:
+        entries = []
+        for pair in args.studies:
+            config, sep, study_dir = pair.partition("=")
+            if not sep or not config or not study_dir:
+                raise ScenarioError([f"{pair}: must read CONFIG=STUDY_DIR"])
+            path = _config_path(config)
+            entries.append(spread_from_study(load_scenario(path), study_dir))
+        write_spreads(entries, args.out)
+    except SpotsimError as e:
+        return _bad_input(e)
+    for e in entries:
+        print(f"{e['scenario']}: {e['about']}")
+    print(f"  {args.out}")
+    return 0
+
+
 def _study(args) -> int:
-    """`spotsim study accuracy|stability`: exit 2 on bad input, 130 if interrupted, 1 if a
-    stability case failed, else 0."""
+    """`spotsim study accuracy|stability|estimate` (and `spreads`): exit 2 on bad input, 130 if
+    interrupted, 1 if a stability case failed, else 0."""
+    if args.study == "spreads":
+        return _spreads(args)
     from .studies import accuracy, stability
     from .tables import ADAPTIVE, METHODS
 

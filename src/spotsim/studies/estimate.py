@@ -22,10 +22,10 @@ draws from the distribution over starts, which no companion run can measure. Eac
 `spread` over starts says how large it can be, and its `chance` range (largest minus smallest
 over those starts) bounds it: the `bound` is the uncertainty plus the chance range. For a
 scenario that the ensemble accuracy study ran, the spread is that study's: its members at the
-run's own setting and at the converged reference, pooled (TYPICAL_SPREAD, written by `python
-docs/generate.py spreads`). For another scenario run as an ensemble (`spotsim run --ensemble
-N`, whose member 0 is estimated), it is the ensemble's own. For a lone run of any other
-scenario that completed, it is measured around the run's own start (`start_spread`):
+run's own setting and at the converged reference, pooled (TYPICAL_SPREAD, written with its
+provenance by `spotsim study spreads`, `spread_from_study`). For another scenario run as an
+ensemble (`spotsim run --ensemble N`, whose member 0 is estimated), it is the ensemble's own.
+For a lone run of any other scenario that completed, it is measured around the run's own start (`start_spread`):
 SPREAD_MEMBERS starts within the ensembles' tolerances of it, at its own setting. A range needs
 MIN_SPREAD_COUNT runs: a smaller ensemble has no bound. `spotsim study estimate` counts how
 often the true error lies within the estimate, the uncertainty and the bound.
@@ -38,6 +38,7 @@ import math
 from importlib import resources
 from typing import NamedTuple
 
+from ..errors import SpotsimError
 from ..scenario import fingerprint, modules_of
 from ..status import COMPLETED, NOT_CAPTURED
 from .ensemble import grasp_key, headline_statistics
@@ -175,6 +176,72 @@ def study_spread(scenario, run_rows: list[dict], reference_rows: list[dict], abo
     stats = headline_statistics(run_rows + reference_rows, len(modules_of(scenario)))
     return {"source": "study", "about": about, "scenario": scenario.name,
             "grasps": {g: {c: st for c, st in by.items() if c in columns} for g, by in stats.items()}}
+
+
+def read_members(path) -> list[dict]:
+    """A members table written by an ensemble (members.csv, or a study's members/<setting>.csv)
+    read back: numbers as floats, empty cells None."""
+    import csv
+
+    def value(text: str):
+        if text == "":
+            return None
+        try:
+            return float(text)
+        except ValueError:
+            return text
+
+    with open(path, newline="") as f:
+        return [{k: value(v) for k, v in row.items()} for row in csv.DictReader(f)]
+
+
+def spread_from_study(scenario, study_dir, source: str | None = None) -> dict:
+    """`scenario`'s typical spread from the directory of its ensemble accuracy study (`spotsim
+    study accuracy --ensemble N`): the members at the scenario's own setting and at the study's
+    reference (its `accuracy_ensemble.csv`'s reference row), pooled (`study_spread`), with its
+    provenance: the study's directory (or `source`), the two settings, the members per setting,
+    the scenario's fingerprint and the spotsim that collected it."""
+    from pathlib import Path
+
+    from ..version import __version__
+    from .accuracy import setting_of
+    from .accuracy_ensemble import slug
+
+    d = Path(study_dir)
+    try:
+        table = read_members(d / "accuracy_ensemble.csv")
+        reference = next(str(r["setting"]) for r in table if r["role"] == "reference")
+    except (OSError, StopIteration, KeyError) as e:
+        raise SpotsimError(f"{d}: not an ensemble accuracy study's directory (its accuracy_ensemble.csv with a "
+                           f"reference row): {e}") from None
+    own = setting_of(scenario).label(scenario.simulation.dt_s)
+    rows = []
+    for label in (own, reference):
+        path = d / "members" / f"{slug(label)}.csv"
+        if not path.is_file():
+            raise SpotsimError(f"{d}: the study has no members at {label} ({path.name}): the scenario's own setting "
+                               "must be among the study's")
+        rows.append(read_members(path))
+    seeds = sorted({int(r["seed"]) for r in table if r.get("seed") is not None})
+    about = (f"the ensemble accuracy study's {len(rows[0])} starts (seed {', '.join(map(str, seeds))}) at {own} and "
+             f"at the converged {reference}, pooled ({source or d})")
+    return {**study_spread(scenario, *rows, about),
+            "provenance": {"study": str(source or d), "settings": [own, reference],
+                           "members": [len(rows[0]), len(rows[1])], "fingerprint": fingerprint(scenario),
+                           "collected_by": f"spotsim {__version__} (spotsim study spreads)"}}
+
+
+def write_spreads(entries: list[dict], path) -> dict:
+    """The typical-spreads file (the format `typical_spreads` reads) of `entries`
+    (`spread_from_study`), keyed by each scenario's fingerprint, written whole to `path`."""
+    from pathlib import Path
+
+    from ..files import atomic_write
+
+    doc = {"about": "written by `spotsim study spreads`; read by spotsim.studies.estimate.typical_spread",
+           "scenarios": {e["provenance"]["fingerprint"]: e for e in entries}}
+    atomic_write(Path(path), json.dumps(doc, indent=2) + "\n")
+    return doc
 
 
 def typical_spreads() -> dict:
