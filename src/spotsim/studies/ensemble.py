@@ -22,7 +22,6 @@ import multiprocessing
 import os
 import signal
 import sys
-import traceback
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -148,26 +147,19 @@ def run_member(index: int, start: Start, model=None, source: str = "<ensemble>")
     start swapped in (`assemble.model.with_start`). Never raises but on the user's Ctrl-C: a
     rejected start or an exception is the member's status."""
     from ..assemble.model import with_start
-    from ..run import check_start, simulate
+    from .runs import attempt, raised
 
     if model is None:  # in a pool worker
         model, source = _WORKER["model"], _WORKER["source"]
-    stage = "the start"
     try:
         scenario = member_scenario(model.scenario, start)
         mine = with_start(model, scenario)
-        check_start(mine, source)
-        stage = "simulate"
-        result = simulate(scenario, model=mine, source=source)
     except SpotsimError as e:  # the perturbed start's own problem, found before anything ran
-        if stage != "the start":
-            raise
         return Member(index, start, REJECTED, str(e).replace("\n", "; "))
     except Exception as e:  # nothing here should raise: the member reports it, the others go on
-        where = traceback.extract_tb(e.__traceback__)[-1]
-        return Member(index, start, EXCEPTION, f"{type(e).__name__} raised by {stage}: {e} "
-                                               f"({Path(where.filename).name}:{where.lineno})")
-    return Member(index, start, result.status, result.summary["message"], result.summary)
+        return Member(index, start, EXCEPTION, raised(e, "the start"))
+    status, message, result = attempt(scenario, mine, source)
+    return Member(index, start, status, message, None if result is None else result.summary)
 
 
 def _run_task(task) -> Member:

@@ -23,6 +23,33 @@ from ..status import COMPARABLE, COMPLETED, EXCEPTION, NOT_CAPTURED, REJECTED, W
 # ----------------------------------------------------------------------------- one run
 
 
+def attempt(scenario, model, source: str = "<study>", wall_limit_s: float | None = None,
+            stage: str = "simulate"):
+    """Check `model`'s start and simulate `scenario` on it: (status, message, Result or None).
+    The one place a study's run never raises but on the user's Ctrl-C: a start whose fingers and
+    groove interpenetrate is `rejected`, anything raised out of the run is `exception` (a bug the
+    study reports, named with `stage` and where it was raised)."""
+    from ..run import check_start, simulate
+
+    try:
+        check_start(model, source)
+    except SpotsimError as e:  # the start's own problem, found before anything ran
+        return REJECTED, str(e).replace("\n", "; "), None
+    try:
+        result = simulate(scenario, model=model, source=source, wall_limit_s=wall_limit_s)
+    except Exception as e:  # simulate must never raise: the study reports it rather than dies of it
+        if _caused_by_ctrl_c(e):
+            raise KeyboardInterrupt from e
+        return EXCEPTION, raised(e, stage), None
+    return result.status, result.summary["message"], result
+
+
+def raised(e: BaseException, stage: str) -> str:
+    """The message of an exception out of a run's `stage`: its type, text and where."""
+    where = traceback.extract_tb(e.__traceback__)[-1]
+    return f"{type(e).__name__} raised by {stage}: {e} ({Path(where.filename).name}:{where.lineno})"
+
+
 @dataclass
 class Outcome:
     """What a study keeps of one run. Per grasp: the offset of O_b from O_a at the end (the
@@ -123,24 +150,16 @@ def _caused_by_ctrl_c(e: BaseException) -> bool:
 
 def _run_once(scenario, source: str) -> Outcome:
     from ..assemble.model import build_model
-    from ..run import check_start, simulate
     from ..sim.stability import predict_step
 
-    prediction = None
     try:
         model = build_model(scenario, source)
-        prediction = predict_step(model)
-        check_start(model, source)
     except SpotsimError as e:  # the scenario's own problem, found before anything ran
-        return Outcome(REJECTED, str(e).replace("\n", "; "), prediction=prediction)
-    try:
-        result = simulate(scenario, model=model, source=source)
-    except Exception as e:  # simulate must never raise: the study reports it rather than dies of it
-        if _caused_by_ctrl_c(e):
-            raise KeyboardInterrupt from e
-        where = traceback.extract_tb(e.__traceback__)[-1]
-        return Outcome(EXCEPTION, f"{type(e).__name__} raised by simulate: {e} "
-                                  f"({Path(where.filename).name}:{where.lineno})", prediction=prediction)
+        return Outcome(REJECTED, str(e).replace("\n", "; "))
+    prediction = predict_step(model)
+    status, message, result = attempt(scenario, model, source)
+    if result is None:
+        return Outcome(status, message, prediction=prediction)
     s = result.summary
     if s["status"] == "interrupted":
         raise KeyboardInterrupt  # the user's Ctrl-C: the study stops

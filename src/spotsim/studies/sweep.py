@@ -42,7 +42,6 @@ import logging
 import math
 import os
 import time
-import traceback
 from collections import Counter, OrderedDict
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -390,8 +389,9 @@ def run_point(point: Point, wall_limit_s: float | None = WALL_LIMIT_S, with_esti
     grow_gap: a start whose fingers and groove interpenetrate runs with the start gap that
     clears it (`stability.clearing_gap`, the time the longer travel takes added), recorded as
     `start_gap_mm`."""
-    from ..run import check_start, initial_contacts, simulate
+    from ..run import initial_contacts
     from .estimate import companion, error_estimate
+    from .runs import attempt, raised
     from .stability import clearing_gap, widened
 
     t0 = time.perf_counter()
@@ -399,7 +399,12 @@ def run_point(point: Point, wall_limit_s: float | None = WALL_LIMIT_S, with_esti
               "worker": os.getpid(), "start_gap_mm": None}
     if point.scenario is None:
         return {**record, "status": REJECTED, "message": "; ".join(point.problems), "wall_time_s": 0.0}
-    stage, scenario = "the start", point.scenario
+
+    def ended(status, message, summary=None):
+        return {**record, "status": status, "message": message, "summary": summary,
+                "wall_time_s": time.perf_counter() - t0}
+
+    scenario = point.scenario
     try:
         model = model_for(scenario, source)
         if grow_gap and initial_contacts(model):
@@ -408,27 +413,26 @@ def run_point(point: Point, wall_limit_s: float | None = WALL_LIMIT_S, with_esti
                 scenario = widened(scenario, gap)
                 model = model_for(scenario, source)
                 record["start_gap_mm"] = gap
-        check_start(model, source)
-        stage = "simulate"
-        result = simulate(scenario, model=model, source=source, wall_limit_s=wall_limit_s)
-        summary = result.summary
-        other = companion(scenario) if with_estimate and summary["status"] != WALL_LIMIT else None
-        if other is not None:
-            stage = "the error estimate's companion"
-            left = None if wall_limit_s is None else max(wall_limit_s - (time.perf_counter() - t0), 1e-3)
-            comp = simulate(other, model=model_for(other, source), source=source, wall_limit_s=left)
-            summary["error_estimate"] = error_estimate(summary, comp.summary, no_spread=SWEEP_NO_SPREAD)
-    except SpotsimError as e:
-        if stage != "the start":
-            raise
-        return {**record, "status": REJECTED, "message": str(e).replace("\n", "; "),
-                "wall_time_s": time.perf_counter() - t0}
+    except SpotsimError as e:  # the point's own scenario cannot be built
+        return ended(REJECTED, str(e).replace("\n", "; "))
     except Exception as e:  # the point reports it; the sweep goes on
-        where = traceback.extract_tb(e.__traceback__)[-1]
-        return {**record, "status": EXCEPTION, "wall_time_s": time.perf_counter() - t0,
-                "message": f"{type(e).__name__} raised by {stage}: {e} ({Path(where.filename).name}:{where.lineno})"}
-    return {**record, "status": summary["status"], "message": summary["message"], "summary": summary,
-            "wall_time_s": time.perf_counter() - t0}
+        return ended(EXCEPTION, raised(e, "the start"))
+    status, message, result = attempt(scenario, model, source, wall_limit_s)
+    if result is None:
+        return ended(status, message)
+    summary = result.summary
+    other = companion(scenario) if with_estimate and summary["status"] != WALL_LIMIT else None
+    if other is not None:
+        left = None if wall_limit_s is None else max(wall_limit_s - (time.perf_counter() - t0), 1e-3)
+        try:
+            comp_model = model_for(other, source)
+        except Exception as e:  # noqa: BLE001 - the companion's scene is the run's: a bug to report
+            return ended(EXCEPTION, raised(e, "the error estimate's companion"))
+        c_status, c_message, comp = attempt(other, comp_model, source, left, stage="the error estimate's companion")
+        if comp is None:
+            return ended(c_status, c_message)
+        summary["error_estimate"] = error_estimate(summary, comp.summary, no_spread=SWEEP_NO_SPREAD)
+    return ended(summary["status"], summary["message"], summary)
 
 
 # ----------------------------------------------------------------------------- rows
