@@ -40,13 +40,11 @@ from .sweep import (
     SchedulerLost,
     _append,
     check_budget,
-    dask_client,
     read_records,
-    run_point,
+    run_on_cluster,
+    run_points,
     scenario_key,
-    task_record,
     verdict,
-    warm,
 )
 
 #: The misalignment axes: key path of the module's start, unit.
@@ -252,7 +250,7 @@ def envelope(config, out_dir, search: Search = Search(), *, cluster: Cluster = C
                 while (p := probe(ray)) is not None:
                     settle(ray, p[0], run(p[1]))
         else:
-            _on_dask(todo, probe, settle, cluster, str(config), scenario)
+            _on_dask(todo, probe, settle, cluster, str(config))
         if search.members > 1:
             state["runs"] += _chances(todo, raw0, search, done, out, cluster, str(config), store, run)
     except KeyboardInterrupt:
@@ -272,7 +270,6 @@ def _chances(todo, raw0, search: Search, done: dict, out: Path, cluster: Cluster
     fractions into `Ray.chance`. New records go through `store` (by `run`) or straight into
     the points file and `done` (on the cluster). Returns the runs made on the cluster."""
     from .ensemble import member_scenario, perturbed_starts
-    from .sweep import _run_on_dask
 
     plan = []  # (ray, magnitude, point)
     for ray in todo:
@@ -291,7 +288,7 @@ def _chances(todo, raw0, search: Search, done: dict, out: Path, cluster: Cluster
         for p in missing:
             store(run(p))
     elif missing:
-        ran = _run_on_dask(missing, out, done, cluster, source, error_estimate=False, grow_gap=True)
+        ran = run_points(missing, out, done, cluster, source, error_estimate=False, grow_gap=True)
     for ray, m, p in plan:
         rec = done.get(p.key)
         if rec is None:
@@ -302,38 +299,25 @@ def _chances(todo, raw0, search: Search, done: dict, out: Path, cluster: Cluster
     return ran
 
 
-def _on_dask(todo, probe, settle, cluster: Cluster, source: str, scenario) -> None:
-    """Bisect every ray at once on `cluster`: each ray's next probe submitted as its last ends."""
-    from distributed import as_completed
+def _on_dask(todo, probe, settle, cluster: Cluster, source: str) -> None:
+    """Bisect every ray at once on `cluster` (`sweep.run_on_cluster`): each ray's next probe
+    submitted as its last ends."""
+    where = {}
 
-    from ..run import progress_bar
+    def next_of(ray) -> list:
+        nxt = probe(ray)
+        if nxt is None:
+            return []
+        where[nxt[1].key] = (ray, nxt[0])
+        return [nxt[1]]
 
-    with dask_client(cluster) as client:
-        warm(client, scenario, source)
-        pending = as_completed()
-        where = {}
-        bar = progress_bar(None, cluster.progress, what="envelope", unit="probe")
+    def finished(point, record):
+        ray, m = where.pop(point.key)
+        settle(ray, m, record)
+        return next_of(ray)
 
-        def submit(ray):
-            nxt = probe(ray)
-            if nxt is not None:
-                m, point = nxt
-                fut = client.submit(run_point, point, cluster.wall_limit_s, False, source, True,
-                                    key=f"probe-{point.key}", pure=False)
-                where[fut.key] = (ray, m, point)
-                pending.add(fut)
-
-        try:
-            for ray in todo:
-                submit(ray)
-            for fut in pending:
-                ray, m, point = where.pop(fut.key)
-                record = task_record(point, fut)
-                settle(ray, m, record)
-                bar.update(1)
-                submit(ray)
-        finally:
-            bar.close()
+    run_on_cluster([p for ray in todo for p in next_of(ray)], cluster, source, finished, error_estimate=False,
+                   grow_gap=True, what="envelope")
 
 
 # ----------------------------------------------------------------------------- output

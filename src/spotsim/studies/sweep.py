@@ -642,7 +642,7 @@ def run_sweep(config, spec: SweepSpec, out_dir, *, cluster: Cluster = Cluster(),
     lost = None
     if todo:
         try:
-            ran = _run_on_dask(todo, out, done, cluster, str(config), error_estimate=error_estimate,
+            ran = run_points(todo, out, done, cluster, str(config), error_estimate=error_estimate,
                                on_record=on_record)
         except KeyboardInterrupt:
             interrupted = True
@@ -770,32 +770,53 @@ def failed_record(point: Point, error: BaseException) -> dict:
             "message": f"{type(error).__name__}: {error}", "wall_time_s": math.nan}
 
 
-def _run_on_dask(todo: list[Point], out: Path, done: dict, cluster: Cluster, source: str, *,
-                 error_estimate: bool = True, grow_gap: bool = False, on_record=None) -> int:
-    """Run the points `todo` on `cluster`, each record appended to out's points file and put
-    in `done` as it ends (then `on_record(record)`); returns how many ran."""
+def run_on_cluster(first: list[Point], cluster: Cluster, source: str, finished, *, error_estimate: bool = True,
+                   grow_gap: bool = False, what: str = "sweep", total: int | None = None) -> int:
+    """Run points on `cluster` (`run_point`, every worker warmed first): the points `first`, then
+    whatever `finished(point, record)` returns for each that ends (a list of more points: none
+    for a sweep, a ray's next probe for the envelope). A point's failure is its record
+    (`task_record`); a lost scheduler is SchedulerLost. Returns how many points ran."""
     from distributed import as_completed
 
     from ..run import progress_bar
 
     ran = 0
     with dask_client(cluster) as client:
-        bar = progress_bar(len(todo), cluster.progress, what="sweep", unit="point")
+        bar = progress_bar(total, cluster.progress, what=what, unit="point")
         try:
-            first = next((p.scenario for p in todo if p.scenario is not None), None)
-            if first is not None:
-                warm(client, first, source)
-            futures = {client.submit(run_point, p, cluster.wall_limit_s, error_estimate, source, grow_gap,
-                                     key=f"point-{p.key}", pure=False): p for p in todo}
-            for fut in as_completed(futures):
-                p = futures[fut]
+            scenario = next((p.scenario for p in first if p.scenario is not None), None)
+            if scenario is not None:
+                warm(client, scenario, source)
+            pending, points = as_completed(), {}
+
+            def submit(batch):
+                for p in batch:
+                    fut = client.submit(run_point, p, cluster.wall_limit_s, error_estimate, source, grow_gap,
+                                        key=f"point-{p.key}", pure=False)
+                    points[fut.key] = p
+                    pending.add(fut)
+
+            submit(first)
+            for fut in pending:
+                p = points.pop(fut.key)
                 record = task_record(p, fut)
-                _append(out / POINTS_FILE, record)
-                done[p.key] = record
                 ran += 1
                 bar.update(1)
-                if on_record is not None:
-                    on_record(record)
+                submit(finished(p, record) or [])
         finally:
             bar.close()
     return ran
+
+
+def run_points(todo: list[Point], out: Path, done: dict, cluster: Cluster, source: str, *,
+                 error_estimate: bool = True, grow_gap: bool = False, on_record=None) -> int:
+    """Run the points `todo` on `cluster`, each record appended to out's points file and put
+    in `done` as it ends (then `on_record(record)`); returns how many ran."""
+    def finished(p, record):
+        _append(out / POINTS_FILE, record)
+        done[p.key] = record
+        if on_record is not None:
+            on_record(record)
+
+    return run_on_cluster(todo, cluster, source, finished, error_estimate=error_estimate, grow_gap=grow_gap,
+                          total=len(todo))
