@@ -713,7 +713,7 @@ def dask_client(cluster: Cluster):
         else:
             # started empty, then scaled: a worker lost while it starts is started again by the
             # cluster instead of failing its construction
-            local = LocalCluster(n_workers=0, threads_per_worker=1, processes=True, dashboard_address=None,
+            local = LocalCluster(n_workers=0, threads_per_worker=1, processes=True, dashboard_address=":0",
                                  silence_logs=logging.CRITICAL)
             client = Client(local)
             local.scale(cluster.workers or os.cpu_count() or 1)
