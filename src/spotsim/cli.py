@@ -629,7 +629,8 @@ def _ensemble(args, scenario, model, path: Path, out: Path) -> int:
     for line in report_lines(e):
         print(line)
     if e.error_estimate is not None:
-        print(estimate_lines(e.error_estimate).replace("a companion run", "member 0 against a companion run"))
+        print(estimate_lines(e.error_estimate).replace("  error estimate, per quantity", "  member 0's error estimate, "
+                                                                                     "per quantity", 1))
     print(f"  wall time {e.wall_time_s:.2f} s on {e.workers} worker{'s' if e.workers > 1 else ''}")
     for f in files:
         print(f"  {f}")
@@ -666,23 +667,25 @@ def verdict_line(s: dict) -> str:
 
 
 def estimate_lines(entry: dict) -> str:
-    """The error estimate of a run, for the terminal."""
+    """The error estimate of a run, for the terminal, in words."""
     if "grasps" not in entry:
-        return f"  discretisation error: {entry['note']}"
+        return f"  error estimate: {entry['note']}"
     names = {"residual_offset_norm_mm": ("e", "mm"), "peak_force_norm_N": ("peak |F|", "N"),
              "peak_torque_norm_Nm": ("peak |T|", "N m"), "robot_centroid_displacement_norm_mm": ("|centroid d|", "mm")}
     spread = entry.get("spread") or {}
-    lines = ["  discretisation error, estimate (+-uncertainty), from a companion run with twice the step; chance: "
-             "the range over starts; bound (uncertainty + chance): how far the run may lie from the converged run "
-             "from its start",
-             f"  spread over starts: {spread.get('about', 'none')}"]
+    lines = ["  error estimate, per quantity: its value; its step error (how far it moved in a companion run with "
+             "steps twice as long) and that error's uncertainty (3 x); the start-to-start scatter (the range over "
+             "starts a few micrometres apart); and the bound (uncertainty + scatter): how far the value may lie from "
+             "the converged run from the same start",
+             f"  starts: {spread.get('about', 'none')}"]
     for g, grasp in enumerate(entry["grasps"]):
         cells = []
         for name, q in grasp.items():
             label, unit = names[name]
             if q["estimate"] is not None:
-                bound = "" if q["bound"] is None else f", chance {q['chance']:.3g}, bound {q['bound']:.3g}"
-                cells.append(f"{label} ~{q['estimate']:.3g} (+-{q['uncertainty']:.3g}{bound}) {unit}")
+                bound = "" if q["bound"] is None else f", scatter {q['chance']:.3g}, bound {q['bound']:.3g}"
+                cells.append(f"{label} = {q['value']:.4g} {unit}: step error {q['estimate']:.3g} (uncertainty "
+                             f"{q['uncertainty']:.3g}){bound}")
         lines.append(f"    grasp {g + 1}: " + ("; ".join(cells) or "not estimated (incomplete)"))
     return "\n".join(lines)
 
