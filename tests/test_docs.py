@@ -2,7 +2,6 @@
 scenario keys, and every relative link in README.md and docs/*.md resolves."""
 
 import importlib.util
-import json
 import re
 from pathlib import Path
 
@@ -72,14 +71,6 @@ def test_the_pages_link_to_something():
     """The link check sees the README's links into docs/ (it is not vacuous)."""
     targets = links(ROOT / "README.md")
     assert "docs/usage.md" in targets and "docs/images/replay.png" in targets
-
-
-def test_the_shipped_typical_spreads_are_the_studies():
-    """src/spotsim/studies/typical_spread.json is what `docs/generate.py spreads` makes from the
-    ensemble accuracy studies in docs/results/ (each config as its study ran it)."""
-    gen = generator()
-    assert json.loads(gen.SPREADS.read_text()) == gen.typical_spreads_from_results(), (
-        "typical_spread.json is out of date: run `python docs/generate.py spreads`")
 
 
 #: Counts the README spells out, as words.

@@ -48,14 +48,21 @@ def both_searches(model, data, near, pair_list):
     return grid_search(model.sim, x, x.near), listed, kept, not np.shares_memory(kept.gap, pair_list.gap)
 
 
+#: The pair-list check compares the searches at every CHECK_EVERY-th step of the run (the list
+#: lives across steps either way; along Case I's contact 3 gives about 38,000 pairs compared,
+#: 1,500 rebuilt lists and 3,000 reused ones): every step took 50 s of the suite.
+CHECK_EVERY = 3
+
+
 def test_pair_list_finds_exactly_the_grid_search_pairs(model_I):
     """Along Case I's self-centring, the pairs tested from the kept pair list are exactly the
-    grid search's, step by step, and the list is reused between its rebuilds."""
+    grid search's at every third step, and the list is reused between its rebuilds."""
     stepper = Stepper(model_I)
-    reused = rebuilt = found = 0
+    reused = rebuilt = found = steps = 0
     while stepper.data.t < 0.75:
         v = stepper.data.view()
-        if v.t > 0.42 and len(v.near):
+        steps += 1
+        if v.t > 0.42 and len(v.near) and steps % CHECK_EVERY == 0:
             snap = stepper.data.copy()
             kinematics(model_I.sim, snap)
             grid, listed, _, fresh = both_searches(model_I, snap, v.near, v.pair_list)
