@@ -1301,6 +1301,36 @@ def drives_paper_table(r: Results) -> str:
             + table(["case", "quantity", "paper", *(name for name, _ in PAPER_DRIVES)], rows))
 
 
+def distributions_table(r: Results) -> str:
+    """usage.md's measured distributions: each case's 32-member ensemble (seed 0) with the default
+    drive, at the default integrator and at the finer fixed step (the drive comparison's
+    `motor_default` and `motor_finer`, docs/results/drives/)."""
+    def spread(st, digits=3):
+        if not st or not st["count"]:
+            return "–"
+        return f"{num(st['median'], digits)} [{num(st['p10'], digits)}, {num(st['p90'], digits)}]"
+
+    label = {"default": "default (adaptive Euler)", "finer": "symplectic Euler, 0.78 µs"}
+    rows = []
+    for case in DRIVE_CASES:
+        for setting in ("default", "finer"):
+            e = r.drives.get((case, drive_dir("motor", setting)))
+            if e is None:
+                continue
+            for grasp, st in e["statistics"].items():
+                classes = e["classes"][grasp]
+                shares = " / ".join(f"{classes.get(c, {}).get('fraction', 0.0) * 100:.0f} %"
+                                    for c in ("seated", "wedged"))
+                name = PAPER_CASES[case]["label"] if case in PAPER_CASES else "dual arm"
+                rows.append([name + ("" if grasp == "grasp" else f", {grasp.replace('_', ' ')}"), label[setting],
+                             spread(st["residual_norm_mm"]), spread(st["residual_tilt_deg"], 2),
+                             spread(st["peak_force_norm_N"]), spread(st["completed_s"], 4), shares])
+    if not rows:
+        return f"No drive comparison in docs/results/drives/: run `{GENERATE} drives`."
+    return table(["case", "integrator", "residual offset e (mm)", "residual tilt (°)", "peak force |F| (N)",
+                  "completion (s)", "seated / wedged"], rows)
+
+
 def drives_table(r: Results) -> str:
     """The finger drives side by side: each case's 32-member ensemble with each drive, at the
     default integrator and at fine fixed steps (docs/results/drives/), the default start family."""
@@ -1839,6 +1869,7 @@ RENDER = {
     "motor-convergence-table": motor_convergence_table,
     "sensitivity-table": sensitivity_table,
     "estimate-table": estimate_table,
+    "measured-distributions": distributions_table,
     "estimate-unseen-table": unseen_table,
     "typical-spreads": spreads_table,
     "stability-table": stability_table,
