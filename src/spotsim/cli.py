@@ -379,7 +379,6 @@ def _study(args) -> int:
     if args.study == "spreads":
         return _spreads(args)
     from .studies import accuracy, stability
-    from .tables import ADAPTIVE, METHODS
 
     overrides = list(args.set)
     duration = args.duration
@@ -388,15 +387,11 @@ def _study(args) -> int:
             raise ValueError(f"--duration {duration}: must be > 0")
         if args.study == "accuracy":
             grid = accuracy.GRIDS["quick" if args.quick else args.grid]
-            methods = args.methods.split(",") if args.methods else None
-            bad = [m for m in methods or () if m not in METHODS]
-            if bad:
-                raise ValueError(f"--methods {args.methods}: unknown {', '.join(bad)}; valid: {', '.join(METHODS)}")
-            substeps = _numbers(args.substeps, int, "--substeps")
-            rtols = _numbers(args.rtols, float, "--rtols")
-            tols = _numbers(args.tols, float, "--tols")
-            scales = _numbers(args.sphere_scales, float, "--sphere-scales")
-            reference = accuracy.parse_setting(args.reference) if args.reference else grid.reference
+            chosen = accuracy.narrowed(
+                grid, args.methods.split(",") if args.methods else None, _numbers(args.substeps, int, "--substeps"),
+                _numbers(args.rtols, float, "--rtols"), _numbers(args.tols, float, "--tols"),
+                _numbers(args.sphere_scales, float, "--sphere-scales"),
+                accuracy.parse_setting(args.reference) if args.reference else None)
             if args.wall_limit is not None and not args.wall_limit > 0:
                 raise ValueError(f"--wall-limit {args.wall_limit}: must be > 0")
             if args.ensemble is None:
@@ -407,14 +402,6 @@ def _study(args) -> int:
             else:
                 if args.wall_limit is not None:
                     raise ValueError("--wall-limit: not with --ensemble")
-            fixed = {m: substeps or n for m, n in grid.substeps.items()}
-            if substeps:  # a method the grid leaves out is swept too when asked for by name
-                fixed.update({m: substeps for m in methods or () if m not in ADAPTIVE})
-            if methods:
-                fixed = {m: n for m, n in fixed.items() if m in methods}
-            chosen = accuracy.Grid(fixed, (rtols or grid.rtols) if not methods or "dopri5" in methods else (),
-                                reference, scales or grid.sphere_scales,
-                                tols=(tols or grid.tols) if not methods or "adaptive_euler" in methods else ())
             duration = duration or grid.duration_s
         elif args.study == "estimate":
             reference = accuracy.parse_setting(args.reference)

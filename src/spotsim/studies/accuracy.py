@@ -178,6 +178,25 @@ class Grid:
         return out
 
 
+def narrowed(grid: Grid, methods=None, substeps=None, rtols=None, tols=None, sphere_scales=None,
+             reference: Setting | None = None) -> Grid:
+    """`grid` with the user's choices: only `methods` (a method the grid leaves out is swept too,
+    at `substeps`, when named), these `substeps` for every fixed-step method, these `rtols`
+    (dopri5), `tols` (adaptive_euler), `sphere_scales` and `reference`. ValueError for an
+    unknown method."""
+    bad = [m for m in methods or () if m not in METHODS]
+    if bad:
+        raise ValueError(f"--methods {','.join(methods)}: unknown {', '.join(bad)}; valid: {', '.join(METHODS)}")
+    fixed = {m: substeps or n for m, n in grid.substeps.items()}
+    if substeps:  # a method the grid leaves out is swept too when asked for by name
+        fixed.update({m: substeps for m in methods or () if m not in ADAPTIVE})
+    if methods:
+        fixed = {m: n for m, n in fixed.items() if m in methods}
+    return Grid(fixed, (rtols or grid.rtols) if not methods or "dopri5" in methods else (),
+                reference or grid.reference, sphere_scales or grid.sphere_scales, grid.duration_s,
+                tols=(tols or grid.tols) if not methods or "adaptive_euler" in methods else ())
+
+
 #: adaptive_euler's default tolerance, which the quick grid runs as the default setting
 DEFAULT_TOL = Integrator().velocity_tol_m_s
 
