@@ -51,6 +51,17 @@ def test_a_grid_is_every_combination_of_its_axes_in_order():
     assert points[-1] == {"module.initial_offset_mm.0": 1, "module.initial_rpy_deg.2": 5.0}
 
 
+def test_a_joined_axis_sets_its_keys_together():
+    """`--vary a+b=...` is one axis: both key paths take each value together (both bevels of a
+    groove), crossed with the other axes."""
+    spec = sw.spec_of(["geometry.upper_bevel_deg+geometry.lower_bevel_deg=30:60:3", "module.initial_offset_mm.1=0,1"])
+    assert spec.count() == 6
+    assert spec.keys() == ["geometry.upper_bevel_deg", "geometry.lower_bevel_deg", "module.initial_offset_mm.1"]
+    points = sw.resolve_points(CASE_I, spec)
+    bevels = [(p.scenario.geometry.upper_bevel_deg, p.scenario.geometry.lower_bevel_deg) for p in points]
+    assert bevels == [(30.0, 30.0), (30.0, 30.0), (45.0, 45.0), (45.0, 45.0), (60.0, 60.0), (60.0, 60.0)]
+
+
 def test_space_filling_samples_are_seeded_and_fill_their_ranges(tmp_path):
     """A Latin hypercube puts exactly one of its n points in each of n equal bins of every
     axis; a Sobol sample is reproducible from its seed and stays within its ranges."""

@@ -74,6 +74,8 @@ def plot_sweep(d: Path) -> list[Path]:
     t = pd.read_parquet(d / f"{TABLE}.parquet")
     if not keys or not len(t):
         raise SpotsimError(f"{d}: the sweep has no points to plot")
+    # a joined axis (`--vary a+b=...`) sets its keys alike: draw it once, by its first key
+    keys = [k for i, k in enumerate(keys) if not any(t[k].equals(t[j]) for j in keys[:i])]
     verdict = t["verdict"].where(t["verdict"] != "", t["status"])
     kinds = sorted(verdict.unique())
     colours = {k: plt.cm.tab10(i % 10) for i, k in enumerate(kinds)}

@@ -75,6 +75,9 @@ SWEEP_NO_SPREAD = ("none: a sweep point (its spread would take 16 more runs a po
 #: Models a worker keeps, the least recently used dropped first.
 MODELS_KEPT = 8
 SAMPLERS = ("sobol", "lhs")
+#: A grid axis that sets several keys to the same values, together: `--vary a+b=LO:HI:N` (both
+#: bevels of a groove, say), not a product of two axes.
+JOINED = "+"
 POINTS_FILE, SPEC_FILE, TABLE = "points.jsonl", "spec.yaml", "sweep"
 
 
@@ -113,7 +116,8 @@ def check_budget(count: int, most: int, what: str) -> None:
 
 
 def parse_vary(assignment: str, most: int = MAX_POINTS) -> tuple[str, list]:
-    """`key.path=LO:HI:N` or `key.path=A,B,C` as (key path, values), at most `most` of them."""
+    """`key.path=LO:HI:N` or `key.path=A,B,C` as (key path, values), at most `most` of them;
+    `a.path+b.path=...` sets both key paths to each value together (one axis)."""
     if "=" not in assignment:
         raise ScenarioError([f"--vary: {assignment}: must read key.path=LO:HI:N or key.path=A,B,C"])
     path, text = (x.strip() for x in assignment.split("=", 1))
@@ -191,8 +195,9 @@ class SweepSpec:
         return len(self.points)
 
     def keys(self) -> list[str]:
+        """The key paths the points set (a grid axis `a+b` sets both a and b)."""
         if self.grid:
-            return list(self.grid)
+            return [k for axis in self.grid for k in axis.split(JOINED)]
         if self.sample is not None:
             return [str(k) for k in self.sample["ranges"]]
         return list(dict.fromkeys(str(k) for p in self.points for k in p))
@@ -201,8 +206,9 @@ class SweepSpec:
         """Every point as key path -> value, in the spec's order."""
         self.check()
         if self.grid:
-            keys = list(self.grid)
-            return [dict(zip(keys, combo, strict=True)) for combo in itertools.product(*self.grid.values())]
+            axes = [axis.split(JOINED) for axis in self.grid]
+            return [{k: v for keys, v in zip(axes, combo, strict=True) for k in keys}
+                    for combo in itertools.product(*self.grid.values())]
         if self.sample is not None:
             from scipy.stats import qmc
 
