@@ -223,6 +223,8 @@ def ensemble(scenario, n: int, *, seed: int = 0, offset_tol_mm: float = OFFSET_T
         if not (math.isfinite(tol) and tol >= 0):
             raise SpotsimError(f"{name} = {tol}: must be finite and >= 0")
     workers = min(int(workers or os.cpu_count() or 1), n)
+    if multiprocessing.current_process().daemon:  # a pool's or Dask's worker may not start children
+        workers = 1
     if workers < 1:
         raise SpotsimError(f"workers = {workers}: must be >= 1")
     fork = sys.platform.startswith("linux")  # elsewhere the pool spawns: each worker builds its Model
