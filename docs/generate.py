@@ -1301,15 +1301,22 @@ def drives_paper_table(r: Results) -> str:
             + table(["case", "quantity", "paper", *(name for name, _ in PAPER_DRIVES)], rows))
 
 
+def median_range(st, digits: int = 3) -> str:
+    """An ensemble statistic as `median [p10, p90]`, or – when no member reached it."""
+    if not st or not st["count"]:
+        return "–"
+    return f"{num(st['median'], digits)} [{num(st['p10'], digits)}, {num(st['p90'], digits)}]"
+
+
+def class_shares(classes: dict) -> str:
+    """An ensemble grasp's seated and wedged shares, `S % / W %`."""
+    return " / ".join(f"{classes.get(c, {}).get('fraction', 0.0) * 100:.0f} %" for c in ("seated", "wedged"))
+
+
 def distributions_table(r: Results) -> str:
     """usage.md's measured distributions: each case's 32-member ensemble (seed 0) with the default
     drive, at the default integrator and at the finer fixed step (the drive comparison's
     `motor_default` and `motor_finer`, docs/results/drives/)."""
-    def spread(st, digits=3):
-        if not st or not st["count"]:
-            return "–"
-        return f"{num(st['median'], digits)} [{num(st['p10'], digits)}, {num(st['p90'], digits)}]"
-
     label = {"default": "default (adaptive Euler)", "finer": "symplectic Euler, 0.78 µs"}
     rows = []
     for case in DRIVE_CASES:
@@ -1318,13 +1325,11 @@ def distributions_table(r: Results) -> str:
             if e is None:
                 continue
             for grasp, st in e["statistics"].items():
-                classes = e["classes"][grasp]
-                shares = " / ".join(f"{classes.get(c, {}).get('fraction', 0.0) * 100:.0f} %"
-                                    for c in ("seated", "wedged"))
+                shares = class_shares(e["classes"][grasp])
                 name = PAPER_CASES[case]["label"] if case in PAPER_CASES else "dual arm"
                 rows.append([name + ("" if grasp == "grasp" else f", {grasp.replace('_', ' ')}"), label[setting],
-                             spread(st["residual_norm_mm"]), spread(st["residual_tilt_deg"], 2),
-                             spread(st["peak_force_norm_N"]), spread(st["completed_s"], 4), shares])
+                             median_range(st["residual_norm_mm"]), median_range(st["residual_tilt_deg"], 2),
+                             median_range(st["peak_force_norm_N"]), median_range(st["completed_s"], 4), shares])
     if not rows:
         return f"No drive comparison in docs/results/drives/: run `{GENERATE} drives`."
     return table(["case", "integrator", "residual offset e (mm)", "residual tilt (°)", "peak force |F| (N)",
@@ -1336,12 +1341,6 @@ def drives_table(r: Results) -> str:
     default integrator and at fine fixed steps (docs/results/drives/), the default start family."""
     if not r.drives:
         return f"No drive comparison in docs/results/drives/: run `{GENERATE} drives`."
-
-    def spread(st, digits=3):
-        if not st or not st["count"]:
-            return "–"
-        return f"{num(st['median'], digits)} [{num(st['p10'], digits)}, {num(st['p90'], digits)}]"
-
     rows = []
     for case in DRIVE_CASES:
         for setting in DRIVE_SETTINGS:
@@ -1350,15 +1349,13 @@ def drives_table(r: Results) -> str:
                 if e is None:
                     continue
                 for grasp, st in e["statistics"].items():
-                    classes = e["classes"][grasp]
-                    shares = " / ".join(f"{classes.get(c, {}).get('fraction', 0.0) * 100:.0f} %"
-                                        for c in ("seated", "wedged"))
+                    shares = class_shares(e["classes"][grasp])
                     d = st.get("centroid_displacement_norm_mm")
                     rows.append([case.replace("single_arm_", "").replace("_", " "), setting, drive.replace("_", " "),
-                                 grasp,
-                                 spread(st["drive_resumes"]), spread(st["drive_largest_speed_step_mm_s"], 2),
-                                 spread(st["residual_norm_mm"]), shares, spread(st["peak_force_norm_N"]),
-                                 spread(st["completed_s"]), spread(d) if d else "–"])
+                                 grasp, median_range(st["drive_resumes"]),
+                                 median_range(st["drive_largest_speed_step_mm_s"], 2),
+                                 median_range(st["residual_norm_mm"]), shares, median_range(st["peak_force_norm_N"]),
+                                 median_range(st["completed_s"]), median_range(d) if d else "–"])
     header = ["case", "setting", "drive", "grasp", "resumes", "largest speed step (mm/s)", "residual e (mm)",
               "seated / wedged", "peak force (N)", "completed (s)", "robot centroid displacement (mm)"]
     return ("Each cell: median [10th, 90th percentile] over 32 members (seed 0). Resumes: the drive closing "

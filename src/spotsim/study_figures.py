@@ -23,6 +23,18 @@ def _number(x) -> float:
         return math.nan
 
 
+def _saved(fig, d: Path, name: str) -> Path:
+    """`fig`, laid out, as d/figures/`name` (whole or not at all), and closed."""
+    import matplotlib.pyplot as plt
+
+    fig.tight_layout()
+    path = d / "figures" / name
+    path.parent.mkdir(exist_ok=True)
+    save_figure(fig, path)
+    plt.close(fig)
+    return path
+
+
 def plot_ensemble(d: Path) -> list[Path]:
     """figures/ensemble.png: per grasp (a row), a histogram of each of QUANTITIES over the
     members whose grasp completed, titled with its classes."""
@@ -50,12 +62,7 @@ def plot_ensemble(d: Path) -> list[Path]:
         axes[g][0].set_title(f"{key}: {classes}", loc="left", fontsize=9)
     fig.suptitle(f"{e['scenario']}: ensemble of {e['members']} (seed {e['seed']}), members whose grasp completed",
                  fontsize=10)
-    fig.tight_layout()
-    path = d / "figures" / "ensemble.png"
-    path.parent.mkdir(exist_ok=True)
-    save_figure(fig, path)
-    plt.close(fig)
-    return [path]
+    return [_saved(fig, d, "ensemble.png")]
 
 
 def plot_sweep(d: Path) -> list[Path]:
@@ -105,9 +112,4 @@ def plot_sweep(d: Path) -> list[Path]:
         if len(keys) > 2:
             ax.set_title(f"over the first two of {len(keys)} varied keys", fontsize=9)
     fig.suptitle(f"sweep of {len(t)} points: {d}", fontsize=10)
-    fig.tight_layout()
-    path = d / "figures" / "sweep.png"
-    path.parent.mkdir(exist_ok=True)
-    save_figure(fig, path)
-    plt.close(fig)
-    return [path]
+    return [_saved(fig, d, "sweep.png")]
