@@ -112,7 +112,7 @@ def test_every_shipped_config_smoke_runs(path, tmp_path):
     """Each config runs 0.3 s through the CLI, ends incomplete on the time-out (exit 3), and
     writes the whole results contract: a summary of the right shape, finite records up to
     0.3 s (at the config's record interval), the CSV with the same rows, the resolved scenario
-    and the figures."""
+    and the figures; and the run replays to an HTML page."""
     out = tmp_path / "out"
     code = main(["run", str(path), "--out", str(out), "--quiet", "--set", "simulation.duration_s=0.3"])
     summary = json.loads((out / "summary.json").read_text())
@@ -132,6 +132,11 @@ def test_every_shipped_config_smoke_runs(path, tmp_path):
     records = round(0.3 / scenario.simulation.dt_s) + 1
     assert len(ts["t"]) == records and ts["t"][-1] == pytest.approx(0.3, abs=1e-9)
     assert all(np.isfinite(ts[k]).all() for k in ts.files)
+    # and it replays to a self-contained HTML page, whatever the scene (testbed included)
+    page = tmp_path / "replay.html"
+    assert main(["replay", str(out), "--html", str(page)]) == 0
+    text = page.read_text()
+    assert text.lstrip().lower().startswith("<!doctype html") and len(text) > 100_000
     rows = (out / "timeseries.csv").read_text().splitlines()
     assert len(rows) == records + 1 and rows[0].startswith("t,module_pos_m_x")
     written = spotsim.load_scenario(out / "scenario.yaml")
