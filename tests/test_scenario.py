@@ -123,7 +123,8 @@ def test_unwritable_results_directory_is_a_clear_error(tmp_path, capsys):
 
 def test_shipped_scenarios_are_found_by_name_from_any_directory(tmp_path, monkeypatch, capsys):
     """A shipped scenario by its name, or by the end of it after an underscore when only one
-    ends so; `spotsim list` names them all; an ambiguous or unknown name is one clear error."""
+    ends so, in load_scenario, validate, run and sweep; `spotsim list` names them all; an
+    ambiguous or unknown name is one clear error."""
     from spotsim.paths import shipped_scenarios
 
     monkeypatch.chdir(tmp_path)
@@ -136,6 +137,13 @@ def test_shipped_scenarios_are_found_by_name_from_any_directory(tmp_path, monkey
     listed = capsys.readouterr().out
     assert all(name in listed for name in shipped)
     assert main(["validate", "case_I"]) == 0 and "name: single_arm_case_I" in capsys.readouterr().out
+    assert main(["run", "case_I", "--set", "simulation.duration_s=0.05", "--no-error-estimate", "--no-figures",
+                 "--quiet", "--out", str(tmp_path / "run")]) == 3  # the time-out: it ran
+    assert (tmp_path / "run" / "summary.json").exists()
+    capsys.readouterr()
+    # a sweep by name: found, then refused by its budget before anything runs
+    assert main(["sweep", "case_I", "--vary", "friction.mu_k=0.1,0.2", "--max-points", "1"]) == 2
+    assert f"{shipped['single_arm_case_I']}: the sweep: 2 runs, more than the budget of 1" in capsys.readouterr().err
     assert main(["validate", "3mm"]) == 2
     assert "spot_offset_3mm, spot_testbed_3mm" in capsys.readouterr().err
     assert main(["validate", "no_such_case"]) == 2
