@@ -29,8 +29,9 @@ from pathlib import Path
 import numpy as np
 
 import spotsim
+from spotsim.status import SEATED, WEDGED
 from spotsim.studies.accuracy_ensemble import BOOTSTRAP
-from spotsim.studies.ensemble import SEATED, WEDGED, ensemble, finite
+from spotsim.studies.ensemble import ensemble, finite
 
 CONFIG = Path(__file__).resolve().parents[1] / "config" / "single_arm_case_I.yaml"
 BASE = ["end_effector.drive=motor"]

@@ -5,7 +5,7 @@ import pytest
 from conftest import ROOT
 
 import spotsim
-from spotsim.studies.ensemble import SEATED, classify
+from spotsim.status import SEATED, grasp_outcome
 
 DUAL = ROOT / "config" / "dual_arm_sequential.yaml"
 #: The issue's bound on total linear momentum drift, relative to the largest body momentum.
@@ -52,7 +52,7 @@ def test_both_grasps_complete_with_sub_millimetre_offsets(run):
     classes' offset and tilt) with both fingers in their grooves."""
     assert run.status == "completed", run.summary["message"]
     assert len(run.summary["welds_s"]) == 1
-    assert [classify(run.status, g) for g in run.summary["grasps"]] == [SEATED, SEATED]
+    assert [grasp_outcome(run.status, g) for g in run.summary["grasps"]] == [SEATED, SEATED]
     assert all(g["in_grooves"] for g in run.summary["grasps"])
 
 

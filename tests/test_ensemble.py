@@ -156,7 +156,9 @@ def test_statistics_and_classes_of_hand_made_members(case_I):
     """On five completed members (two wedged by offset or by tilt), one incomplete, one diverged
     and one interrupted: percentiles by linear interpolation over the completed; classes over
     the members that ran, the interrupted left out."""
-    tilt, off = ens.WEDGED_TILT_DEG, ens.WEDGED_OFFSET_MM
+    from spotsim.status import WEDGED_OFFSET_MM, WEDGED_TILT_DEG
+
+    tilt, off = WEDGED_TILT_DEG, WEDGED_OFFSET_MM
     members = [_member(0, "completed", 0.1, peak=10), _member(1, "completed", 0.2, peak=20),
                _member(2, "completed", 0.15, roll=-1.5 * tilt, peak=30),  # tilted: wedged
                _member(3, "completed", 1.5 * off, peak=40),  # off centre: wedged

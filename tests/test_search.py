@@ -86,7 +86,8 @@ def test_a_finger_beside_its_groove_lands_on_the_adapter_and_both_searches_agree
     the all-pairs search's."""
     import spotsim
     from spotsim.run import Stepper
-    from spotsim.studies.sweep import NOT_CAPTURED, verdict
+    from spotsim.status import NOT_CAPTURED
+    from spotsim.studies.sweep import verdict
 
     s = spotsim.replace(case_I, module={"initial_offset_mm": (0.0, 12.0, 0.0)},
                         end_effector={"start_gap_mm": 12.0})

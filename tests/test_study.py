@@ -10,6 +10,7 @@ from conftest import CASE_I
 
 import spotsim
 from spotsim.cli import main
+from spotsim.status import WEDGED_OFFSET_MM
 from spotsim.studies import accuracy as acc
 from spotsim.studies import runs
 from spotsim.studies import stability as stab
@@ -101,8 +102,8 @@ def test_stability_study_fills_every_column(stability):
             assert float(r[column]) >= 0.0 and math.isfinite(float(r[column])), (r["case"], column)
         assert float(r["dynamics_step_ms"]) > 0 and float(r["predicted_stable_step_ms"]) > 0
         assert r["predicted_stable"] in ("yes", "no") and r["finite"] in ("yes", "no", "n/a")  # n/a: never ran
-        assert r["verdict"] in ("converged", "converged, off centre", "not captured", "not captured (on a land)",
-                                "diverged (detected)", "rejected at start", "FAILED: exception", "FAILED: silent NaN")
+        assert r["verdict"] in ("seated", "wedged", "not captured", "incomplete", "diverged", "rejected at start",
+                                "FAILED: exception", "FAILED: silent NaN")
     assert (out / "stability.md").exists()
 
 
@@ -112,7 +113,7 @@ def test_stability_verdicts(stability):
     predicted stable step shrinks with E."""
     _, _, rows = stability
     by = {r["case"]: r for r in rows}
-    assert by["baseline"]["verdict"] == "converged" and float(by["baseline"]["residual_offset_mm"]) < stab.CENTRED_MM
+    assert by["baseline"]["verdict"] == "seated" and float(by["baseline"]["residual_offset_mm"]) < WEDGED_OFFSET_MM
     assert by["y_a +10 mm"]["verdict"] == "rejected at start"
     assert "interpenetrate" in by["y_a +10 mm"]["message"]
     assert by["y_a +10 mm, gap 12 mm"]["verdict"] != "rejected at start"
@@ -225,18 +226,17 @@ def test_settings_refine_and_parse():
 
 
 def test_verdicts_name_what_a_run_ended_as():
-    """A completed run is converged (off centre beyond 0.3 mm), an incomplete one not captured,
-    a diverged one detected; a non-finite record in a run not reported diverged is a failure."""
-    import numpy as np
+    """A run's verdict is its outcome (seated, wedged, not captured, incomplete, diverged: the
+    same words as every study's); a non-finite record in a run not reported diverged is a
+    failure; a rejected start is said so."""
+    def outcome(status, said="", finite=True):
+        return runs.Outcome(status, "", finite=finite, outcome=said)
 
-    def outcome(status, e_mm=0.05, finite=True):
-        return runs.Outcome(status, "", offsets=[np.array([0.0, e_mm, 0.0])], finite=finite)
-
-    assert stab.verdict(outcome("completed")) == "converged"
-    assert stab.verdict(outcome("completed", e_mm=2.0)) == "converged, off centre"
-    assert stab.verdict(outcome("incomplete")) == "not captured"
-    assert stab.verdict(outcome("diverged", finite=False)) == "diverged (detected)"
-    assert stab.verdict(outcome("completed", finite=False)) == "FAILED: silent NaN"
+    assert stab.verdict(outcome("completed", "seated")) == "seated"
+    assert stab.verdict(outcome("completed", "wedged")) == "wedged"
+    assert stab.verdict(outcome("incomplete", "incomplete")) == "incomplete"
+    assert stab.verdict(outcome("diverged", "diverged", finite=False)) == "diverged"
+    assert stab.verdict(outcome("completed", "seated", finite=False)) == "FAILED: silent NaN"
     assert stab.verdict(runs.Outcome(runs.REJECTED, "")) == "rejected at start"
 
 

@@ -16,7 +16,17 @@ from conftest import CASE_I
 
 from spotsim import ScenarioError, SpotsimError, load_scenario
 from spotsim.cli import main
-from spotsim.run import WALL_LIMIT
+from spotsim.status import (
+    DIVERGED,
+    EXCEPTION,
+    INCOMPLETE,
+    NOT_CAPTURED,
+    REJECTED,
+    SEATED,
+    WALL_LIMIT,
+    WEDGED,
+    WORKER_DIED,
+)
 from spotsim.studies import sweep as sw
 
 #: Three short Case I points, x_a offset -1, 0 and 1 mm (each ~0.2 s and its companion).
@@ -127,16 +137,24 @@ def test_one_sequence_component_is_set_by_its_index():
 
 
 def test_verdicts():
-    def summary(*residuals):
-        return {"grasps": [{"residual_offset_norm_mm": r} for r in residuals]}
+    """A point's verdict is its run's outcome, the worst of its grasps', by the ensembles'
+    thresholds (offset 0.38 mm, or `precision_mm`; tilt 1.25 deg)."""
+    def grasp(e, tilt=0.01, done=True, in_grooves=True):
+        return {"completed_s": 1.0 if done else None, "residual_offset_norm_mm": e, "in_grooves": in_grooves,
+                "residual_rpy_deg": [tilt, 0.0, 0.0]}
 
-    assert sw.verdict("completed", summary(0.01, 0.29)) == sw.CONVERGED
-    assert sw.verdict("completed", summary(0.01, 0.31)) == sw.OFF_CENTRE
-    assert sw.verdict("completed", summary(0.31), precision_mm=0.5) == sw.CONVERGED
-    assert sw.verdict("incomplete", summary(None)) == sw.NOT_CAPTURED
-    assert sw.verdict("diverged", None) == sw.DIVERGED
+    def summary(*grasps):
+        return {"grasps": list(grasps)}
+
+    assert sw.verdict("completed", summary(grasp(0.01), grasp(0.37))) == SEATED
+    assert sw.verdict("completed", summary(grasp(0.01), grasp(0.39))) == WEDGED
+    assert sw.verdict("completed", summary(grasp(0.01, tilt=-1.3))) == WEDGED
+    assert sw.verdict("completed", summary(grasp(0.45)), precision_mm=0.5) == SEATED
+    assert sw.verdict("not captured", summary(grasp(0.01), grasp(12.0, in_grooves=False))) == NOT_CAPTURED
+    assert sw.verdict("incomplete", summary(grasp(0.01), grasp(None, done=False))) == INCOMPLETE
+    assert sw.verdict("diverged", None) == DIVERGED
     assert sw.verdict(WALL_LIMIT, summary(0.1)) == ""
-    assert sw.verdict(sw.EXCEPTION, None) == ""
+    assert sw.verdict(EXCEPTION, None) == ""
 
 
 def test_a_points_file_cut_by_a_kill_loses_only_its_last_line(tmp_path):
@@ -167,7 +185,7 @@ def test_a_point_that_raises_is_recorded_with_its_status(monkeypatch):
     monkeypatch.setattr(run, "simulate", broken)
     point = sw.resolve_points(CASE_I, sw.spec_of(VARY))[0]
     record = sw.run_point(point)
-    assert record["status"] == sw.EXCEPTION and "RuntimeError raised by simulate: a bug" in record["message"]
+    assert record["status"] == EXCEPTION and "RuntimeError raised by simulate: a bug" in record["message"]
 
 
 # ----------------------------------------------------------------------------- on Dask
@@ -184,7 +202,7 @@ def test_a_sweep_writes_a_row_per_point_with_its_verdict_and_error_estimate(loca
     t = local.table
     assert len(t) == 3 and local.ran == 3 and not local.interrupted
     assert list(t["module.initial_offset_mm.0"]) == [-1.0, 0.0, 1.0]
-    assert set(t["status"]) == {"completed"} and set(t["verdict"]) == {sw.CONVERGED}
+    assert set(t["status"]) == {"completed"} and set(t["verdict"]) == {SEATED}
     assert (t["residual_norm_mm"] < sw.PRECISION_MM).all() and (t["peak_force_norm_N"] > 0).all()
     assert t["peak_force_error_N"].notna().all() and t["residual_error_mm"].notna().all()
     assert (local.out / "sweep.parquet").exists() and (local.out / "sweep.csv").exists()
@@ -290,8 +308,8 @@ def test_killed_workers_leave_every_point_in_the_table_exactly_once(local, tmp_p
     keys = [json.loads(line)["key"] for line in (tmp_path / sw.POINTS_FILE).read_text().splitlines()]
     assert len(keys) == len(set(keys)) == 5
     assert sorted(report.table["key"]) == sorted(keys)
-    ran = report.table[report.table["status"] != sw.WORKER_DIED]
-    assert set(ran["verdict"]) == {sw.CONVERGED}
+    ran = report.table[report.table["status"] != WORKER_DIED]
+    assert set(ran["verdict"]) == {SEATED}
 
 
 def test_an_interrupted_sweep_resumes_with_only_its_missing_points(local, tmp_path):
@@ -318,7 +336,7 @@ def test_failed_points_get_their_status_and_the_sweep_exits_0(tmp_path, capsys):
     import pandas as pd
 
     t = pd.read_parquet(tmp_path / "out" / "sweep.parquet")
-    assert list(t["status"]) == [sw.REJECTED, WALL_LIMIT]
+    assert list(t["status"]) == [REJECTED, WALL_LIMIT]
     assert "mass_kg" in t["message"][0] and "wall-time budget of 0.001 s spent" in t["message"][1]
 
 
@@ -360,7 +378,9 @@ def fake_run(boundary: dict):
     inside its `boundary`, else not captured; no simulation."""
     def run(point):
         inside = all(abs(point.values[sw_axis(a)]) < b for a, b in boundary.items())
-        summary = {"grasps": [{"residual_offset_norm_mm": 0.01 if inside else None}]}
+        summary = {"grasps": [{"residual_offset_norm_mm": 0.01, "completed_s": 1.0, "in_grooves": True,
+                               "residual_rpy_deg": [0.01, 0.0, 0.0]} if inside else
+                              {"residual_offset_norm_mm": None, "completed_s": None}]}
         return {"key": point.key, "index": point.index, "values": point.values, "summary": summary,
                 "status": "completed" if inside else "incomplete", "message": "", "wall_time_s": 0.0,
                 "worker": None, "start_gap_mm": None}
@@ -386,7 +406,7 @@ def test_bisection_finds_a_known_boundary_in_log_runs(tmp_path):
         r = by[name]
         assert r.lo < true <= r.hi and r.hi - r.lo <= r.resolution
         assert len(r.probes) == 1 + math.ceil(math.log2(r.limit / r.resolution))
-        assert r.beyond == sw.NOT_CAPTURED
+        assert r.beyond == INCOMPLETE  # its fake run never closed
     again = env.envelope(CASE_I, tmp_path, env.Search(axes=("x", "roll"), planes=()), run=asym)
     assert again.runs == 0 and [r.boundary for r in again.rays] == [r.boundary for r in report.rays]
     text = (tmp_path / "envelope.md").read_text()

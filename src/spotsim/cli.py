@@ -18,7 +18,7 @@ from pathlib import Path
 from .errors import ScenarioError, SpotsimError
 from .measures import CAMERA_HZ
 from .paths import results_dir
-from .status import COMPLETED, DIVERGED, EXCEPTION, INCOMPLETE, INTERRUPTED, NOT_CAPTURED, REJECTED
+from .status import COMPLETED, DIVERGED, EXCEPTION, INCOMPLETE, INTERRUPTED, NOT_CAPTURED, REJECTED, run_outcome
 from .studies.ensemble import ALL_AXES, FAMILIES
 from .studies.estimate import MIN_SPREAD_COUNT, SPREAD_MEMBERS
 
@@ -151,7 +151,8 @@ def _envelope_parser(sub) -> None:
     en.add_argument("--limit-mm", type=float, default=LIMIT["mm"], metavar="MM", help="farthest offset searched")
     en.add_argument("--limit-deg", type=float, default=LIMIT["deg"], metavar="DEG", help="farthest angle searched")
     en.add_argument("--precision-mm", type=float, default=PRECISION_MM, metavar="MM",
-                    help=f"a grasp within it is captured (converged; default {PRECISION_MM:g})")
+                    help=f"a closed grasp's residual offset within it (and its tilt within 1.25 deg) is seated, "
+                         f"captured (default {PRECISION_MM:g}, the ensembles')")
     en.add_argument("--out", help="output directory (default results/<scenario name>/envelope); started again "
                                   "over it, probes already run are not run again")
     en.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="an existing Dask scheduler")
@@ -223,7 +224,8 @@ def _sweep_parser(sub) -> None:
     sw.add_argument("--max-points", type=COUNT, default=MAX_POINTS, metavar="N",
                     help=f"refuse a sweep of more points (default {MAX_POINTS})")
     sw.add_argument("--precision-mm", type=float, default=PRECISION_MM, metavar="MM",
-                    help=f"a complete grasp within it is converged, else off centre (default {PRECISION_MM:g})")
+                    help=f"a closed grasp's residual offset within it (and its tilt within 1.25 deg) is seated, "
+                         f"else wedged (default {PRECISION_MM:g}, the ensembles')")
     sw.add_argument("--no-error-estimate", action="store_true", help="skip each point's companion run")
     sw.add_argument("--quiet", action="store_true", help="no progress bar")
 
@@ -650,7 +652,9 @@ def verdict_line(s: dict) -> str:
         parts.append(f"{label}e = {grasp['residual_offset_norm_mm']:.4f} mm"
                      f"{within('residual_offset_norm_mm', 'mm', '.2g')}, tilt {tilt:.2f} deg, peak |F| "
                      f"{grasp['peak_force_norm_N']:.1f} N{within('peak_force_norm_N', 'N', '.3g')}")
-    return f"{s['scenario']}: {s['status']} - {s['message']}" + "".join(f"; {p}" for p in parts)
+    outcome = run_outcome(s["status"], s)
+    said = f" ({outcome})" if outcome and outcome != s["status"] else ""
+    return f"{s['scenario']}: {s['status']}{said} - {s['message']}" + "".join(f"; {p}" for p in parts)
 
 
 def estimate_lines(entry: dict) -> str:

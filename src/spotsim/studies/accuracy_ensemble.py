@@ -42,11 +42,10 @@ import numpy as np
 
 from ..files import atomic_write, prepare, save_figure
 from ..scenario import modules_of
+from ..status import SEATED, WEDGED
 from .ensemble import (
     OFFSET_TOL_MM,
     RPY_TOL_DEG,
-    SEATED,
-    WEDGED,
     EnsembleResult,
     ensemble,
     finite,

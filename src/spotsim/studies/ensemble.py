@@ -29,7 +29,7 @@ import numpy as np
 
 from ..errors import SpotsimError
 from ..scenario import modules_of, replace
-from ..status import EXCEPTION, NOT_CAPTURED, REJECTED
+from ..status import EXCEPTION, REJECTED, WEDGED_OFFSET_MM, WEDGED_TILT_DEG, grasp_outcome
 
 #: Default perturbation of each module's start: +-10 um on each axis of the offset and
 #: +-0.01 deg on each of roll, pitch, yaw, well below any tolerance a drawing would state and
@@ -44,18 +44,6 @@ FAMILIES = {ALL_AXES: "uniform in [-tol, tol] on each of x, y, z and roll, pitch
             ONE_AXIS: "uniform in [-tol, tol] on one of x, y, z, roll, pitch, yaw of each module's start, "
                       "member i on the (i - 1) mod 6-th"}
 
-#: The outcome of a completed grasp: `wedged` when its residual tilt max(|roll|, |pitch|)
-#: exceeds WEDGED_TILT_DEG or its residual offset exceeds WEDGED_OFFSET_MM; else `seated`.
-#: Measured at a converged step (12.5 us; 287 completed members of Cases I-III,
-#: docs/usage.md#ensembles), completed grasps fall in two groups with nothing between: seated,
-#: 0.09-0.30 mm off and rolled 0.27-0.99 deg, and wedged, 0.46-0.51 mm off and rolled
-#: 1.57-1.71 deg. The module rolls about x_a as it is left off along y_a (3.0-3.4 deg per mm in
-#: both groups, pitch under 0.03 deg), so each threshold sits in the middle of the same empty
-#: gap: either one alone separates the measured groups, and both guard a scene where the two
-#: decouple.
-WEDGED_TILT_DEG = 1.25
-WEDGED_OFFSET_MM = 0.38
-SEATED, WEDGED = "seated", "wedged"
 
 #: Statuses of members that did not run to an outcome of their own: left out of every share.
 NOT_RUN = ("interrupted",)
@@ -311,19 +299,6 @@ def statistics(values) -> dict:
             "max": float(x.max()), "count": int(len(x))}
 
 
-def classify(status: str, grasp: dict | None) -> str:
-    """A grasp's outcome class: `seated` or `wedged` when it completed within its grooves
-    (WEDGED_TILT_DEG, WEDGED_OFFSET_MM), `not captured` when it closed with a finger outside
-    them, else its member's status (`incomplete`, `diverged`, ...)."""
-    if grasp is None or grasp.get("completed_s") is None:
-        return "incomplete" if status in ("completed", NOT_CAPTURED) else status
-    if grasp.get("in_grooves") is False:
-        return NOT_CAPTURED
-    roll, pitch, _ = grasp["residual_rpy_deg"]
-    wedged = max(abs(roll), abs(pitch)) > WEDGED_TILT_DEG or grasp["residual_offset_norm_mm"] > WEDGED_OFFSET_MM
-    return WEDGED if wedged else SEATED
-
-
 def member_row(m: Member, n_grasps: int, centroid: bool) -> dict:
     """The members table's row of one member: its start, status and each grasp's headline
     quantities (None where the grasp did not complete) and class; with `centroid` (a
@@ -339,7 +314,7 @@ def member_row(m: Member, n_grasps: int, centroid: bool) -> dict:
         entry = grasps[g] if g < len(grasps) else None
         p = grasp_prefix(g, n_grasps)
         done = entry is not None and entry["completed_s"] is not None
-        row[f"{p}class"] = classify(m.status, entry)
+        row[f"{p}class"] = grasp_outcome(m.status, entry)
         row[f"{p}completed_s"] = entry["completed_s"] if done else None
         res = entry["residual_offset_mm"] if done else [None] * 3
         for axis, x in zip("xyz", res, strict=True):

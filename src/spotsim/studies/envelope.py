@@ -4,17 +4,18 @@ From the centred start, a ray is a direction in the module's misalignment (x_a, 
 roll, pitch, yaw in degrees): along each axis both ways, and fanned over the (x_a, y_a) plane
 and the roll-yaw plane. Along a ray the start is moved by a magnitude r; a probe at r runs the
 scenario from there (`sweep.run_point`, the start gap grown where the misaligned start would
-interpenetrate) and is captured when its verdict is `converged` (every grasp complete within
-the precision). Each ray probes its search limit first (a ray captured there has its boundary
-beyond it), then bisects between its largest captured and smallest uncaptured magnitudes
-until they are `resolution` apart: about log2(limit / resolution) + 1 runs a ray, where a grid
-of the same resolution along the ray takes limit / resolution, and a plane's grid the square.
+interpenetrate) and is captured when its verdict is `seated` (closed within its grooves, its
+residual offset and tilt within the precision, `status.grasp_outcome`). Each ray probes its
+search limit first (a ray captured there has its boundary beyond it), then bisects between its
+largest captured and smallest uncaptured magnitudes until they are `resolution` apart: about
+log2(limit / resolution) + 1 runs a ray, where a grid of the same resolution along the ray
+takes limit / resolution, and a plane's grid the square.
 
 Bisection takes the captured set along a ray to be an interval from the centre. Near the
 boundary the outcome is also a matter of chance (model.md Sec. 9): with `members` > 1, each
-ray's last captured and first uncaptured probes are run again as ensembles of `members`
-starts perturbed as `spotsim run --ensemble` perturbs them, and the capture fraction at each
-is reported (`Ray.chance`).
+ray's last captured and first uncaptured probes are run again as ensembles of `members` starts
+perturbed as `spotsim run --ensemble` perturbs them, and the capture fraction at each is
+reported (`Ray.chance`).
 
 Probes are sweep points (the same keys, files and resumption: `points.jsonl` in the output
 directory), run on the same Dask cluster.
@@ -31,8 +32,8 @@ import numpy as np
 from ..errors import ScenarioError
 from ..files import atomic_write, prepare, save_figure
 from ..scenario import TOLERANCE_DEG, TOLERANCE_OFFSET_MM, from_dict, set_value
+from ..status import SEATED
 from .sweep import (
-    CONVERGED,
     POINTS_FILE,
     PRECISION_MM,
     Cluster,
@@ -89,7 +90,7 @@ class Ray:
 
     def record(self, magnitude: float, verdict_: str, key: str) -> None:
         self.probes.append((magnitude, verdict_, key))
-        if verdict_ == CONVERGED:
+        if verdict_ == SEATED:
             self.lo = max(self.lo, magnitude)
         elif self.hi is None or magnitude < self.hi:
             self.hi, self.beyond = magnitude, verdict_
@@ -165,7 +166,7 @@ class EnvelopeReport:
 class Search:
     """What an envelope searches: both ways along `axes`, `plane_rays` rays around each of
     `planes`, to `resolution` and out to `limit` (per unit, over RESOLUTION and LIMIT), a
-    probe captured when it converges within `precision_mm`; with `members` > 1, each bracket's
+    probe captured when it ends seated within `precision_mm`; with `members` > 1, each bracket's
     ends again from that many starts perturbed with `seed`."""
 
     axes: tuple = tuple(AXES)
@@ -294,8 +295,8 @@ def _chances(todo, raw0, search: Search, done: dict, out: Path, cluster: Cluster
         if rec is None:
             continue
         captured, n = ray.chance.get(m, (0, 0))
-        converged = verdict(rec["status"], rec.get("summary"), search.precision_mm) == CONVERGED
-        ray.chance[m] = (captured + converged, n + 1)
+        seated = verdict(rec["status"], rec.get("summary"), search.precision_mm) == SEATED
+        ray.chance[m] = (captured + seated, n + 1)
     return ran
 
 
@@ -360,7 +361,7 @@ def _fraction(chance) -> str:
 
 def plot_envelope(report: EnvelopeReport, path: Path) -> None:
     """The planes in the paper's Fig. 16 style: every probe coloured by its residual offset
-    (converged) or marked by its verdict, the boundary joined around the rays, and the
+    (seated) or marked by its verdict, the boundary joined around the rays, and the
     claimed tolerance rectangle."""
     import matplotlib
 
@@ -383,8 +384,8 @@ def plot_envelope(report: EnvelopeReport, path: Path) -> None:
                 g = (s.get("grasps") or [{}])[0]
                 xs.append(m * da)
                 ys.append(m * db)
-                res.append(g.get("residual_offset_norm_mm") if v == CONVERGED else np.nan)
-                if v != CONVERGED:
+                res.append(g.get("residual_offset_norm_mm") if v == SEATED else np.nan)
+                if v != SEATED:
                     ax.plot(m * da, m * db, "x", color="0.3", ms=5)
             edge = min(r.boundary, r.limit)
             bx.append((math.atan2(db, da), edge * da, edge * db))
@@ -397,7 +398,7 @@ def plot_envelope(report: EnvelopeReport, path: Path) -> None:
         ax.plot([-ca, ca, ca, -ca, -ca], [-cb, -cb, cb, cb, -cb], "--", color="k", label="claimed tolerance")
         ax.set_xlabel(f"{a} ({ua})")
         ax.set_ylabel(f"{b} ({ub})")
-        ax.set_title(f"capture envelope, {a}-{b} (x: not converged)")
+        ax.set_title(f"capture envelope, {a}-{b} (x: not seated)")
         ax.legend(loc="upper right", fontsize=8)
         fig.colorbar(sc, ax=ax, label="residual offset (mm)")
     fig.tight_layout()

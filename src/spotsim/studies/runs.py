@@ -18,7 +18,7 @@ import numpy as np
 
 from ..errors import SpotsimError
 from ..scenario import modules_of, replace, to_dict
-from ..status import COMPARABLE, COMPLETED, EXCEPTION, NOT_CAPTURED, REJECTED, WALL_LIMIT
+from ..status import COMPARABLE, COMPLETED, EXCEPTION, NOT_CAPTURED, REJECTED, WALL_LIMIT, run_outcome
 
 # ----------------------------------------------------------------------------- one run
 
@@ -72,6 +72,7 @@ class Outcome:
     finite: bool = True  # every recorded number finite
     prediction: object = None  # stability.StepPrediction of the run's model
     in_grooves: list = field(default_factory=list)  # per grasp, the summary's (None where not completed)
+    outcome: str = ""  # the run's (`status.run_outcome`): '' when it did not end on its physics
 
     @property
     def comparable(self) -> bool:
@@ -176,7 +177,7 @@ def _run_once(scenario, source: str) -> Outcome:
         s["momentum"]["linear_drift_rel"], s["momentum"]["angular_drift_rel"],
         all(bool(np.all(np.isfinite(a))) for a in result.timeseries.values()
             if np.issubdtype(np.asarray(a).dtype, np.floating)),
-        prediction, [g["in_grooves"] for g in s["grasps"]])
+        prediction, [g["in_grooves"] for g in s["grasps"]], run_outcome(s["status"], s))
 
 
 # ----------------------------------------------------------------------------- comparing

@@ -1,6 +1,6 @@
 """The stability study: stiff and extreme variants of a scenario, each with the predicted
-stable step, the verdict (converged / not captured / diverged (detected) / rejected at start)
-and the run's outcome."""
+stable step and its verdict: the run's outcome (seated / wedged / not captured / incomplete /
+diverged), rejected at start, or a failure of the simulator."""
 
 from __future__ import annotations
 
@@ -14,7 +14,16 @@ import numpy as np
 from ..errors import SpotsimError
 from ..files import atomic_write, prepare
 from ..scenario import TOLERANCE_DEG, TOLERANCE_OFFSET_MM, modules_of, replace, to_dict
-from ..status import COMPARABLE, COMPLETED, EXCEPTION, NOT_CAPTURED, REJECTED, WALL_LIMIT
+from ..status import (
+    COMPARABLE,
+    COMPLETED,
+    EXCEPTION,
+    NOT_CAPTURED,
+    REJECTED,
+    WALL_LIMIT,
+    WEDGED_OFFSET_MM,
+    WEDGED_TILT_DEG,
+)
 from ..tables import ADAPTIVE
 from .runs import (
     Outcome,
@@ -225,23 +234,15 @@ def select_cases(names: list[str]) -> list[Case]:
     return [c for c in cases if _key(c.name) in wanted or c.group in wanted]
 
 
-#: A completed grasp left farther off than this, mm, is "converged, off centre": the suite's
-#: bound on Case I, a tenfold reduction of its 3 mm start.
-CENTRED_MM = 0.3
-
-
 def verdict(o: Outcome) -> str:
-    """converged (or converged, off centre) / not captured (incomplete, or complete with a finger
-    on a land beside its groove) / diverged (detected) / rejected at start, or a failure of the
-    simulator that the study exists to catch (an exception, a silent NaN)."""
+    """The run's outcome (`status.run_outcome`: seated, wedged, not captured, incomplete,
+    diverged), or rejected at start, or no verdict (its wall-time budget spent), or a failure
+    of the simulator that the study exists to catch (an exception, a silent NaN)."""
     if o.status in COMPARABLE and not o.finite:
         return "FAILED: silent NaN"
-    if o.status == NOT_CAPTURED:
-        return "not captured (on a land)"
-    if o.status == "completed" and max(float(np.linalg.norm(x)) for x in o.offsets if x is not None) > CENTRED_MM:
-        return "converged, off centre"
-    return {"completed": "converged", "incomplete": "not captured", "diverged": "diverged (detected)",
-            REJECTED: "rejected at start", WALL_LIMIT: "no verdict: wall limit",
+    if o.outcome:
+        return o.outcome
+    return {REJECTED: "rejected at start", WALL_LIMIT: "no verdict: wall limit",
             EXCEPTION: "FAILED: exception"}.get(o.status, o.status)
 
 
@@ -386,10 +387,10 @@ def stability_markdown(scenario, report: StabilityReport) -> str:
     text = [f"# Stability study: {report.scenario}", "",
             (f"Dynamics step {sig(step)} ms ({scenario.simulation.integrator.method}). The predicted stable step "
              f"is stability.predict_step's; ω·h is the stiffest contact mode times the step (the integrator's "
-             f"limit on the imaginary axis is 2 for symplectic Euler). A converged grasp left more than "
-             f"{CENTRED_MM:g} mm off is \"converged, off centre\". A diverged case runs again with a step "
-             f"{FINER} times smaller: if it still diverges, the step is not the cause; and with the "
-             f"energy-consistent pair law (contact.normal_direction: gradient)."), "",
+             f"limit on the imaginary axis is 2 for symplectic Euler). A closed grasp is seated or wedged "
+             f"by the ensembles' thresholds ({WEDGED_OFFSET_MM:g} mm, {WEDGED_TILT_DEG:g} deg). A diverged case "
+             f"runs again with a step {FINER} times smaller: if it still diverges, the step is not the "
+             f"cause; and with the energy-consistent pair law (contact.normal_direction: gradient)."), "",
             "- verdicts: " + ", ".join(f"{n} {v}" for v, n in counts.items())]
     if report.failures:
         text.append(f"- **{len(report.failures)} case(s) FAILED** (an exception or a silent NaN): "

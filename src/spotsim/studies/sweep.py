@@ -54,15 +54,20 @@ from ..errors import ScenarioError, SpotsimError
 from ..files import atomic_write
 from ..jit import add_sources
 from ..scenario import from_dict, modules_of, parse_yaml, read_yaml, set_value, to_dict, to_yaml
-from ..status import DIVERGED, EXCEPTION, NOT_CAPTURED, REJECTED, WALL_LIMIT, WORKER_DIED
+from ..status import (
+    EXCEPTION,
+    REJECTED,
+    WALL_LIMIT,
+    WEDGED_OFFSET_MM,
+    WORKER_DIED,
+    run_outcome,
+)
 from .ensemble import Member, Start, grasp_prefix, member_row
 
-#: Verdicts of a point that ran: every grasp seated within the precision; complete but off
-#: centre; a grasp not complete by the time-out, or closed with a finger outside its groove;
-#: diverged. Points that did not run (`status`) have none.
-CONVERGED, OFF_CENTRE = "converged", "off centre"
-#: The residual offset norm under which a complete grasp counts as converged, mm.
-PRECISION_MM = 0.3
+#: A point's verdict is its run's outcome (`status.run_outcome`: seated, wedged, not captured,
+#: incomplete, diverged), with the residual offset beyond which a closed grasp is wedged: by
+#: default the ensembles' (`status.WEDGED_OFFSET_MM`). Points that did not run have none.
+PRECISION_MM = WEDGED_OFFSET_MM
 #: A point's default wall-time budget (its run and its error estimate's companion), s.
 WALL_LIMIT_S = 600.0
 #: The most runs a sweep or an envelope makes unless told otherwise (`--max-points`,
@@ -445,15 +450,8 @@ def run_point(point: Point, wall_limit_s: float | None = WALL_LIMIT_S, with_esti
 
 
 def verdict(status: str, summary: dict | None, precision_mm: float = PRECISION_MM) -> str:
-    """A point's verdict (module docstring): '' when it did not run to a verdict."""
-    if status == "diverged":
-        return DIVERGED
-    if summary is None or status not in ("completed", "incomplete", NOT_CAPTURED):
-        return ""
-    if status == "incomplete" or not all(g.get("in_grooves", True) is not False for g in summary["grasps"]):
-        return NOT_CAPTURED  # never closed, or closed with a finger on a land beside its groove
-    worst = max(g["residual_offset_norm_mm"] for g in summary["grasps"])
-    return CONVERGED if worst <= precision_mm else OFF_CENTRE
+    """A point's verdict: its run's outcome (`status.run_outcome`), '' when it did not run to one."""
+    return run_outcome(status, summary, precision_mm)
 
 
 #: Error estimate columns: summary quantity -> column suffix.
