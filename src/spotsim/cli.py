@@ -18,7 +18,17 @@ from pathlib import Path
 from .errors import ScenarioError, SpotsimError
 from .measures import CAMERA_HZ
 from .paths import results_dir
-from .status import COMPLETED, DIVERGED, EXCEPTION, INCOMPLETE, INTERRUPTED, NOT_CAPTURED, REJECTED, run_outcome
+from .status import (
+    COMPLETED,
+    DIVERGED,
+    EXCEPTION,
+    INCOMPLETE,
+    INTERRUPTED,
+    NOT_CAPTURED,
+    REJECTED,
+    WEDGED_TILT_DEG,
+    run_outcome,
+)
 from .studies.ensemble import ALL_AXES, FAMILIES
 from .studies.estimate import MIN_SPREAD_COUNT, SPREAD_MEMBERS
 
@@ -151,8 +161,8 @@ def _envelope_parser(sub) -> None:
     en.add_argument("--limit-mm", type=float, default=LIMIT["mm"], metavar="MM", help="farthest offset searched")
     en.add_argument("--limit-deg", type=float, default=LIMIT["deg"], metavar="DEG", help="farthest angle searched")
     en.add_argument("--precision-mm", type=float, default=PRECISION_MM, metavar="MM",
-                    help=f"a closed grasp's residual offset within it (and its tilt within 1.25 deg) is seated, "
-                         f"captured (default {PRECISION_MM:g}, the ensembles')")
+                    help=f"a closed grasp's residual offset within it (and its tilt within {WEDGED_TILT_DEG:g} deg) "
+                         f"is seated, captured (default {PRECISION_MM:g}, the ensembles')")
     en.add_argument("--out", help="output directory (default results/<scenario name>/envelope); started again "
                                   "over it, probes already run are not run again")
     en.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="an existing Dask scheduler")
@@ -224,8 +234,8 @@ def _sweep_parser(sub) -> None:
     sw.add_argument("--max-points", type=COUNT, default=MAX_POINTS, metavar="N",
                     help=f"refuse a sweep of more points (default {MAX_POINTS})")
     sw.add_argument("--precision-mm", type=float, default=PRECISION_MM, metavar="MM",
-                    help=f"a closed grasp's residual offset within it (and its tilt within 1.25 deg) is seated, "
-                         f"else wedged (default {PRECISION_MM:g}, the ensembles')")
+                    help=f"a closed grasp's residual offset within it (and its tilt within {WEDGED_TILT_DEG:g} deg) "
+                         f"is seated, else wedged (default {PRECISION_MM:g}, the ensembles')")
     sw.add_argument("--no-error-estimate", action="store_true", help="skip each point's companion run")
     sw.add_argument("--quiet", action="store_true", help="no progress bar")
 
@@ -657,6 +667,37 @@ def verdict_line(s: dict) -> str:
     return f"{s['scenario']}: {s['status']}{said} - {s['message']}" + "".join(f"; {p}" for p in parts)
 
 
+def print_details(s: dict, out: Path) -> None:
+    """What `spotsim run` prints after its verdict line (not with --quiet): each grasp's times,
+    residual, peaks and drive, the dynamometer's peaks, the error estimate, the wall time."""
+    for g in s["grasps"]:
+        when = lambda t: "never" if t is None else f"at {t:.4f} s"
+        print(f"  {g['end_effector']} on {g['module']}: first contact {when(g['contact_onset_s'])}, "
+              f"complete {when(g['completed_s'])}")
+        if g["residual_offset_mm"] is not None:
+            x, y, z = g["residual_offset_mm"]
+            print(f"    residual offset [{x:.4f}, {y:.4f}, {z:.4f}] mm, e = {g['residual_offset_norm_mm']:.4f} mm")
+        print(f"    peak force {json.dumps([round(f, 3) for f in g['peak_force_N']])} N")
+        if s["drive"] == "motor":  # its records (run summary), not a prescribed speed's
+            states = ", ".join(f"{k} {v:.3f} s" for k, v in g["transmission_time_s"].items())
+            print(f"    finger drive (motor): peak current {g['motor_peak_current_A']:.3f} A, transmission "
+                  f"{states}, {g['transmission_stops']} stops")
+        else:
+            print(f"    finger drive ({s['drive']}): {g['drive_resumes']} resumes, largest speed step "
+                  f"{g['drive_largest_speed_step_mm_s']:.2f} mm/s")
+        if "robot_centroid_displacement_mm" in g:
+            print(f"    robot centroid displacement "
+                  f"{json.dumps([round(d, 4) for d in g['robot_centroid_displacement_mm']])} mm")
+    if "peak_force_N" in s.get("dynamometer", {}):
+        dyn = s["dynamometer"]
+        print(f"  dynamometer ({dyn['filter_cutoff_Hz']:g} Hz low-pass, {dyn['sampling_Hz']:g} Hz): peak force "
+              f"{json.dumps([round(f, 3) for f in dyn['peak_force_N']])} N (axes of O_a)")
+    if "error_estimate" in s:
+        print(estimate_lines(s["error_estimate"]))
+    print(f"  wall time {s['wall_time_s']:.2f} s for {s['sim_time_s']:.3f} s simulated")
+    print(f"  results in {out}")
+
+
 def estimate_lines(entry: dict) -> str:
     """The error estimate of a run, for the terminal, in words."""
     if "grasps" not in entry:
@@ -787,34 +828,8 @@ def main(argv=None) -> int:
         return _bad_input(e)
     s = result.summary
     print(verdict_line(s))
-    if args.quiet:
-        return _replay(out, args, run_code=EXIT[s["status"]]) if args.replay else EXIT[s["status"]]
-    for g in s["grasps"]:
-        when = lambda t: "never" if t is None else f"at {t:.4f} s"
-        print(f"  {g['end_effector']} on {g['module']}: first contact {when(g['contact_onset_s'])}, "
-              f"complete {when(g['completed_s'])}")
-        if g["residual_offset_mm"] is not None:
-            x, y, z = g["residual_offset_mm"]
-            print(f"    residual offset [{x:.4f}, {y:.4f}, {z:.4f}] mm, e = {g['residual_offset_norm_mm']:.4f} mm")
-        print(f"    peak force {json.dumps([round(f, 3) for f in g['peak_force_N']])} N")
-        if s["drive"] == "motor":  # its records (run summary), not a prescribed speed's
-            states = ", ".join(f"{k} {v:.3f} s" for k, v in g["transmission_time_s"].items())
-            print(f"    finger drive (motor): peak current {g['motor_peak_current_A']:.3f} A, transmission "
-                  f"{states}, {g['transmission_stops']} stops")
-        else:
-            print(f"    finger drive ({s['drive']}): {g['drive_resumes']} resumes, largest speed step "
-                  f"{g['drive_largest_speed_step_mm_s']:.2f} mm/s")
-        if "robot_centroid_displacement_mm" in g:
-            print(f"    robot centroid displacement "
-                  f"{json.dumps([round(d, 4) for d in g['robot_centroid_displacement_mm']])} mm")
-    if "peak_force_N" in s.get("dynamometer", {}):
-        dyn = s["dynamometer"]
-        print(f"  dynamometer ({dyn['filter_cutoff_Hz']:g} Hz low-pass, {dyn['sampling_Hz']:g} Hz): peak force "
-              f"{json.dumps([round(f, 3) for f in dyn['peak_force_N']])} N (axes of O_a)")
-    if "error_estimate" in s:
-        print(estimate_lines(s["error_estimate"]))
-    print(f"  wall time {s['wall_time_s']:.2f} s for {s['sim_time_s']:.3f} s simulated")
-    print(f"  results in {out}")
+    if not args.quiet:
+        print_details(s, out)
     if args.replay:
         return _replay(out, args, run_code=EXIT[s["status"]])
     return EXIT[s["status"]]

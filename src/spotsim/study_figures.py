@@ -3,7 +3,6 @@ hold, drawn. A run's own figures are `results.plot_figures`."""
 
 from __future__ import annotations
 
-import csv
 import json
 import math
 from pathlib import Path
@@ -14,13 +13,6 @@ from .files import save_figure
 #: The quantities drawn per grasp: members-table column (`ensemble.member_row`), label.
 QUANTITIES = (("residual_norm_mm", "residual offset e (mm)"), ("peak_force_norm_N", "peak contact force |F| (N)"),
               ("completed_s", "completion time (s)"))
-
-
-def _number(x) -> float:
-    try:
-        return float(x)
-    except (TypeError, ValueError):
-        return math.nan
 
 
 def _saved(fig, d: Path, name: str) -> Path:
@@ -44,9 +36,10 @@ def plot_ensemble(d: Path) -> list[Path]:
     import matplotlib.pyplot as plt
 
     from .studies.ensemble import ENSEMBLE_JSON, grasp_prefix
+    from .studies.estimate import read_members
 
     e = json.loads((d / ENSEMBLE_JSON).read_text())
-    rows = list(csv.DictReader((d / "members.csv").open()))
+    rows = read_members(d / "members.csv")
     grasps = list(e["classes"])
     fig, axes = plt.subplots(len(grasps), len(QUANTITIES), figsize=(4 * len(QUANTITIES), 3 * len(grasps)),
                              squeeze=False)
@@ -54,7 +47,7 @@ def plot_ensemble(d: Path) -> list[Path]:
         p = grasp_prefix(g, len(grasps))
         classes = ", ".join(f"{c} {v['count']}" for c, v in e["classes"][key].items())
         for ax, (column, label) in zip(axes[g], QUANTITIES, strict=True):
-            values = [v for v in (_number(r.get(f"{p}{column}")) for r in rows) if math.isfinite(v)]
+            values = [v for v in (r.get(f"{p}{column}") for r in rows) if isinstance(v, float) and math.isfinite(v)]
             ax.hist(values, bins=max(5, min(30, len(values) // 2)), color="tab:blue", alpha=0.8)
             ax.set_xlabel(label)
             ax.set_ylabel("members")

@@ -25,9 +25,9 @@ scenario that the ensemble accuracy study ran, the spread is that study's: its m
 run's own setting and at the converged reference, pooled (TYPICAL_SPREAD, written with its
 provenance by `spotsim study spreads`, `spread_from_study`). For another scenario run as an
 ensemble (`spotsim run --ensemble N`, whose member 0 is estimated), it is the ensemble's own.
-For a lone run of any other scenario that completed, it is measured around the run's own start (`start_spread`):
-SPREAD_MEMBERS starts within the ensembles' tolerances of it, at its own setting. A range needs
-MIN_SPREAD_COUNT runs: a smaller ensemble has no bound. `spotsim study estimate` counts how
+For a lone run of any other scenario whose grasps all closed, it is measured around the run's
+own start (`start_spread`): SPREAD_MEMBERS starts within the ensembles' tolerances of it, at its
+own setting. A range needs MIN_SPREAD_COUNT runs: a smaller ensemble has no bound. `spotsim study estimate` counts how
 often the true error lies within the estimate, the uncertainty and the bound.
 """
 
@@ -178,6 +178,14 @@ def study_spread(scenario, run_rows: list[dict], reference_rows: list[dict], abo
             "grasps": {g: {c: st for c, st in by.items() if c in columns} for g, by in stats.items()}}
 
 
+def own_spread(scenario, summary: dict, spread_members: int, **options) -> dict | None:
+    """The spread around the start of a run (`start_spread`, `options` passed on) whose grasps
+    all closed, if `spread_members` asks for one; else None."""
+    if not spread_members or summary["status"] not in CLOSED:
+        return None
+    return start_spread(scenario, spread_members, **options)
+
+
 def read_members(path) -> list[dict]:
     """A members table written by an ensemble (members.csv, or a study's members/<setting>.csv)
     read back: numbers as floats, empty cells None."""
@@ -266,9 +274,9 @@ def estimate(scenario, summary: dict, source: str = "<scenario>", ensemble=None,
 
     s = companion(scenario)
     spread = typical_spread(scenario) or (ensemble_spread(ensemble) if ensemble is not None else None)
-    if spread is None and s is not None and spread_members and summary["status"] in CLOSED:
-        spread = start_spread(scenario, spread_members, workers=workers, model=model, source=source,
-                              progress=progress)
+    if spread is None and s is not None:
+        spread = own_spread(scenario, summary, spread_members, workers=workers, model=model, source=source,
+                            progress=progress)
     why = NO_SPREAD if spread_members else "none: --spread-members 0"
     if summary["status"] not in CLOSED:
         why = f"none: the run ended {summary['status']} (a run whose grasps all close gets one)"
@@ -300,9 +308,8 @@ def validate(scenario, reference, n: int = 8, *, seed: int = VALIDATION_SEED, wo
     for run, comp, ref in zip(*runs, strict=True):
         if not (run.summary and comp.summary and ref.summary):
             continue
-        own = spread
-        if own is None and spread_members and run.summary["status"] in CLOSED:
-            own = start_spread(member_scenario(scenario, run.start), spread_members, workers=workers)
+        own = spread or own_spread(member_scenario(scenario, run.start), run.summary, spread_members,
+                                   workers=workers)
         truth = quantities(ref.summary)
         for g, entry in enumerate(error_estimate(run.summary, comp.summary, own)["grasps"]):
             for name, q in entry.items():

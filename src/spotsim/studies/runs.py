@@ -71,7 +71,6 @@ class Outcome:
     angular_drift_rel: float = math.nan
     finite: bool = True  # every recorded number finite
     prediction: object = None  # stability.StepPrediction of the run's model
-    in_grooves: list = field(default_factory=list)  # per grasp, the summary's (None where not completed)
     outcome: str = ""  # the run's (`status.run_outcome`): '' when it did not end on its physics
 
     @property
@@ -177,7 +176,7 @@ def _run_once(scenario, source: str) -> Outcome:
         s["momentum"]["linear_drift_rel"], s["momentum"]["angular_drift_rel"],
         all(bool(np.all(np.isfinite(a))) for a in result.timeseries.values()
             if np.issubdtype(np.asarray(a).dtype, np.floating)),
-        prediction, [g["in_grooves"] for g in s["grasps"]], run_outcome(s["status"], s))
+        prediction, run_outcome(s["status"], s))
 
 
 # ----------------------------------------------------------------------------- comparing
