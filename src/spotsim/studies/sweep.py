@@ -647,7 +647,7 @@ def run_sweep(config, spec: SweepSpec, out_dir, *, cluster: Cluster = Cluster(),
     if todo:
         try:
             ran = run_points(todo, out, done, cluster, str(config), error_estimate=error_estimate,
-                               on_record=on_record)
+                             on_record=on_record)
         except KeyboardInterrupt:
             interrupted = True
             ran = sum(1 for p in todo if p.key in done)
@@ -708,28 +708,28 @@ def dask_client(cluster: Cluster):
 
     local = None
     quiet = _quiet_dask()  # a lost worker or scheduler is reported by the sweep, not by Dask's logs
-    with dask.config.set({"distributed.scheduler.allowed-failures": 1}):
-        if cluster.scheduler:
-            try:
-                client = Client(cluster.scheduler, timeout="30s")
-            except (OSError, ValueError) as e:  # no answer; an address distributed cannot parse
-                raise SpotsimError(f"--scheduler {cluster.scheduler}: cannot connect: {e}") from e
-        else:
-            # started empty, then scaled: a worker lost while it starts is started again by the
-            # cluster instead of failing its construction
-            local = LocalCluster(n_workers=0, threads_per_worker=1, processes=True, dashboard_address=":0",
-                                 silence_logs=logging.CRITICAL)
-            client = Client(local)
-            local.scale(cluster.workers or os.cpu_count() or 1)
     try:
-        yield client
-    finally:
+        with dask.config.set({"distributed.scheduler.allowed-failures": 1}):
+            if cluster.scheduler:
+                try:
+                    client = Client(cluster.scheduler, timeout="30s")
+                except (OSError, ValueError) as e:  # no answer; an address distributed cannot parse
+                    raise SpotsimError(f"--scheduler {cluster.scheduler}: cannot connect: {e}") from e
+            else:
+                # started empty, then scaled: a worker lost while it starts is started again by the
+                # cluster instead of failing its construction
+                local = LocalCluster(n_workers=0, threads_per_worker=1, processes=True, dashboard_address=":0",
+                                     silence_logs=logging.CRITICAL)
+                client = Client(local)
+                local.scale(cluster.workers or os.cpu_count() or 1)
         try:
+            yield client
+        finally:
             client.close()
             if local is not None:
                 local.close()
-        finally:
-            quiet()
+    finally:
+        quiet()
 
 
 def _quiet_dask():
@@ -813,7 +813,7 @@ def run_on_cluster(first: list[Point], cluster: Cluster, source: str, finished, 
 
 
 def run_points(todo: list[Point], out: Path, done: dict, cluster: Cluster, source: str, *,
-                 error_estimate: bool = True, grow_gap: bool = False, on_record=None) -> int:
+               error_estimate: bool = True, grow_gap: bool = False, on_record=None) -> int:
     """Run the points `todo` on `cluster`, each record appended to out's points file and put
     in `done` as it ends (then `on_record(record)`); returns how many ran."""
     def finished(p, record):
