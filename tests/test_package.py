@@ -53,3 +53,13 @@ def test_unpacked_wheel_validates_its_own_scenario_from_any_directory(wheel, tmp
     proc = subprocess.run([sys.executable, "-m", "spotsim.cli", "validate", "single_arm_case_II"],
                           cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0 and "name: single_arm_case_II" in proc.stdout, proc.stderr
+
+
+def test_output_into_a_closed_pipe_ends_quietly():
+    """`spotsim validate case_I | head -1`: the reader gone, the command ends without a traceback
+    or Python's 'Exception ignored' message, as a Unix filter does."""
+    proc = subprocess.Popen([sys.executable, "-m", "spotsim.cli", "validate", "case_I"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE)
+    proc.stdout.close()  # before the scenario is loaded: its first write finds no reader
+    _, err = proc.communicate(timeout=300)
+    assert proc.returncode == 1 and err == b""

@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 from pathlib import Path
 
@@ -754,6 +755,16 @@ def _load_or_report(path: Path, overrides):
 
 
 def main(argv=None) -> int:
+    """The `spotsim` command: its exit code. Output piped into a reader that stops early (`|
+    head`) ends the command quietly, as a Unix filter does."""
+    try:
+        return _main(argv)
+    except BrokenPipeError:
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit's flush
+        return 1
+
+
+def _main(argv) -> int:
     try:
         args = _parser().parse_args(argv)
     except SystemExit as e:  # --help (0) or a bad option (2, one line printed)
