@@ -177,8 +177,31 @@ def plot_figures(ts: dict, fig_dir: Path, title: str, summary: dict | None = Non
         fig.tight_layout()
         save_figure(fig, fig_dir / f"{name}.png")
         plt.close(fig)
+    if "finger_opening_mm" in ts:
+        _finger_figure(ts, (summary or {}).get("fingers", []), fig_dir, title, plt)
     if "dynamometer_force_N" in ts and "dynamometer" in (summary or {}):
         _dynamometer_figure(ts, summary["dynamometer"], fig_dir, title, plt)
+
+
+def _finger_figure(ts: dict, fingers: list[str], fig_dir: Path, title: str, plt) -> None:
+    """Each finger's opening and contact load, and the active drive's closing speed."""
+    names = fingers if len(fingers) == ts["finger_opening_mm"].shape[1] else \
+        [f"finger {i + 1}" for i in range(ts["finger_opening_mm"].shape[1])]
+    fig, axes = plt.subplots(3, 1, sharex=True, figsize=(7, 6.5))
+    for key, ax, label in (("finger_opening_mm", axes[0], "opening (mm)"), ("finger_load_N", axes[1], "load (N)")):
+        for i, name in enumerate(names):
+            ax.plot(ts["t"], ts[key][:, i], lw=1, label=name)
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=7)
+    axes[2].plot(ts["t"], ts["drive_speed_mm_s"], lw=1, color="k")
+    axes[2].set_ylabel("closing speed (mm/s)")
+    axes[2].grid(alpha=0.3)
+    axes[0].set_title(f"{title}: the fingers' opening and load, the drive's closing speed")
+    axes[-1].set_xlabel(time_label(ts))
+    fig.tight_layout()
+    save_figure(fig, fig_dir / "fingers.png")
+    plt.close(fig)
 
 
 def _dynamometer_figure(ts: dict, setting: dict, fig_dir: Path, title: str, plt) -> None:
@@ -264,7 +287,7 @@ def _displacement_figure(ts, summary, normal, sample_hz, markers, fig_dir, title
     plt.close(fig)
 
 
-FIGURES_SINGLE = ("offset.png", "contact_force.png", "contact_torque.png", "active_pairs.png")
+FIGURES_SINGLE = ("offset.png", "contact_force.png", "contact_torque.png", "active_pairs.png", "fingers.png")
 FIGURES_DUAL = FIGURES_SINGLE + ("robot_centroid_displacement.png", "contact_forces_torques.png", "displacements.png")
 
 
