@@ -1,16 +1,17 @@
-"""Where a default run's time goes: its steps over time, and one step's stages at a clamp.
+"""Where a run's time goes (a shipped case, changed by --set if given): its steps over time and one step at a clamp.
 
-    python benchmarks/profile.py [--case dual] [--chunk 0.25] [--repeat 5]
+    python benchmarks/profile.py [--case dual] [--set KEY=VALUE ...] [--chunk 0.25] [--repeat 5]
 
-1. The default run's wall time, the fastest of REPEAT runs, and the run in chunks of CHUNK
+1. The run's wall time, the fastest of REPEAT runs, and the run in chunks of CHUNK
    simulated seconds: for each, the accepted steps and force evaluations (from runs of the
    same scenario ended at the chunk's end: a run is deterministic, so these are exact), the
    mean number of pairs in contact, and the drive controller's ticks in it (its simulated
-   time over the controller's period). While the fingers touch, an adaptive step ends at
-   every tick (the drive may set a new speed there), so the ticks are the fewest steps a
-   chunk in contact can take.
+   time over the controller's period: the motor's speed loop, or the prescribing drives'
+   controller). While the fingers touch, an adaptive step ends at every tick (the drive may
+   set a new current or speed there), so the ticks are the fewest steps a chunk in contact
+   can take.
 2. One step at a clamp (the first grasp, CLAMP_BEFORE before it completes; reached by steps
-   of one controller period, `Stepper`): the whole default step, with its force
+   of one controller period, `Stepper`): the whole step, with its force
    evaluations, and the stages of one evaluation, each timed in a compiled loop on a copy of
    that state.
 3. The bound these set: at one step per tick, a chunk in which the fingers clamp runs at most
@@ -112,11 +113,18 @@ def chunk_row(label: str, grasp, mean_pairs: str, a: dict, b: dict, period: floa
             f"{evaluations / max(steps, 1):.2f} |")
 
 
+def controller_period(scenario) -> float:
+    """The active drive's reading period, s: the motor's speed loop, else the controller that
+    prescribes the fingers' speed."""
+    ee = scenario.end_effector
+    return ee.motor.speed_loop_period_s if ee.drive == "motor" else ee.control_period_s
+
+
 def clamp_state(scenario, t: float):
     """The model and data of the scenario stepped to t (s) by steps of one controller period."""
     model = spotsim.build_model(scenario)
     stepper = Stepper(model)
-    h = scenario.end_effector.control_period_s
+    h = controller_period(scenario)
     while stepper.data.t < t:
         stepper.step(h)
     return model, stepper.data
@@ -125,19 +133,22 @@ def clamp_state(scenario, t: float):
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--case", default="dual", choices=list(CASES))
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="override a scenario key (repeatable), as `spotsim run --set`")
     ap.add_argument("--chunk", type=float, default=0.25, help="simulated seconds per chunk")
     ap.add_argument("--repeat", type=int, default=5, help="whole runs timed (the fastest is kept)")
     args = ap.parse_args()
-    scenario = spotsim.load_scenario(ROOT / "config" / CASES[args.case])
-    period = scenario.end_effector.control_period_s
+    scenario = spotsim.load_scenario(ROOT / "config" / CASES[args.case], args.set)
+    period = controller_period(scenario)
     model = spotsim.build_model(scenario)
     full = spotsim.simulate(scenario, model=model)  # every kernel loaded from numba's cache
     wall = min(spotsim.simulate(scenario, model=model).summary["wall_time_s"] for _ in range(args.repeat))
     end = full.summary["sim_time_s"]
     series = full.timeseries
     t, pairs = series["t"], series["pairs_slipping"] + series["pairs_sticking"]
-    print(f"Measured by `python benchmarks/profile.py --case {args.case}` at {measured_at()}: the default run in "
-          f"chunks of {args.chunk:g} s simulated, and one default step at a clamp")
+    sets = "".join(f" --set {k}" for k in args.set)
+    print(f"Measured by `python benchmarks/profile.py --case {args.case}{sets}` at {measured_at()}: the run in "
+          f"chunks of {args.chunk:g} s simulated, and one step at a clamp")
     print(f"\nThe run: {end:.3f} s simulated in {wall:.3f} s (the fastest of {args.repeat}), {end / wall:.2f} times "
           f"faster than real time; the controller's period {period * 1e3:g} ms:\n")
     print("| chunk (s) | grasp | mean pairs in contact | accepted steps | force evaluations | controller ticks | "
