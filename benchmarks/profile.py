@@ -113,18 +113,17 @@ def chunk_row(label: str, grasp, mean_pairs: str, a: dict, b: dict, period: floa
             f"{evaluations / max(steps, 1):.2f} |")
 
 
-def controller_period(scenario) -> float:
-    """The active drive's reading period, s: the motor's speed loop, else the controller that
-    prescribes the fingers' speed."""
-    ee = scenario.end_effector
-    return ee.motor.speed_loop_period_s if ee.drive == "motor" else ee.control_period_s
+def controller_period(model) -> float:
+    """The active drive's reading period, s, as the model compiled it (`assemble.model.drives`:
+    the motor's speed loop, else the controller that prescribes the fingers' speed)."""
+    return float(model.sim.drives.period[0])
 
 
 def clamp_state(scenario, t: float):
     """The model and data of the scenario stepped to t (s) by steps of one controller period."""
     model = spotsim.build_model(scenario)
     stepper = Stepper(model)
-    h = controller_period(scenario)
+    h = controller_period(model)
     while stepper.data.t < t:
         stepper.step(h)
     return model, stepper.data
@@ -139,8 +138,8 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=5, help="whole runs timed (the fastest is kept)")
     args = ap.parse_args()
     scenario = spotsim.load_scenario(ROOT / "config" / CASES[args.case], args.set)
-    period = controller_period(scenario)
     model = spotsim.build_model(scenario)
+    period = controller_period(model)
     full = spotsim.simulate(scenario, model=model)  # every kernel loaded from numba's cache
     wall = min(spotsim.simulate(scenario, model=model).summary["wall_time_s"] for _ in range(args.repeat))
     end = full.summary["sim_time_s"]
