@@ -13,7 +13,7 @@ from conftest import CASE_I, CONFIGS, ROOT
 import spotsim
 from spotsim.cli import main
 from spotsim.sim.stability import ENERGY_FLOOR_J
-from spotsim.status import NOT_CAPTURED, SEATED, grasp_outcome
+from spotsim.status import NOT_CAPTURED, SEATED, grasp_outcome, run_outcome
 
 #: A tenfold reduction of the 3 mm start (the paper reports 0.128-0.131 mm): Case I's converged
 #: runs seat (every member of a 32-member ensemble at 12.5 us: 0.12-0.15 mm).
@@ -367,7 +367,7 @@ def test_a_grasp_that_closes_with_a_finger_outside_its_groove_is_not_captured(tm
     spec = sw.SweepSpec(points=[{"module.initial_offset_mm.1": -11.0}], sets=["end_effector.start_gap_mm=15"])
     record = sw.run_point(sw.resolve_points(CASE_I, spec)[0], with_estimate=False)
     assert record["status"] == "not captured"
-    assert sw.verdict(record["status"], record["summary"]) == NOT_CAPTURED
+    assert run_outcome(record["status"], record["summary"]) == NOT_CAPTURED
 
 
 def test_a_run_with_overrides_gets_a_results_directory_of_its_own():

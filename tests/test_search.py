@@ -86,15 +86,14 @@ def test_a_finger_beside_its_groove_lands_on_the_adapter_and_both_searches_agree
     the all-pairs search's."""
     import spotsim
     from spotsim.run import Stepper
-    from spotsim.status import NOT_CAPTURED
-    from spotsim.studies.sweep import verdict
+    from spotsim.status import NOT_CAPTURED, run_outcome
 
     s = spotsim.replace(case_I, module={"initial_offset_mm": (0.0, 12.0, 0.0)},
                         end_effector={"start_gap_mm": 12.0})
     result = spotsim.simulate(s)
     grasp = result.grasp
     assert result.status == NOT_CAPTURED and grasp["in_grooves"] is False and grasp["completed_s"] is not None
-    assert verdict(result.status, result.summary) == NOT_CAPTURED
+    assert run_outcome(result.status, result.summary) == NOT_CAPTURED
     assert abs(grasp["residual_offset_mm"][1]) > 11.0  # the tip's inner edge past the 13 mm half-mouth
     assert result.timeseries["max_penetration_um"].max() < HELD_PENETRATION_UM
 

@@ -26,6 +26,7 @@ from spotsim.status import (
     WALL_LIMIT,
     WEDGED,
     WORKER_DIED,
+    run_outcome,
 )
 from spotsim.studies import sweep as sw
 
@@ -138,7 +139,7 @@ def test_one_sequence_component_is_set_by_its_index():
 
 def test_verdicts():
     """A point's verdict is its run's outcome, the worst of its grasps', by the ensembles'
-    thresholds (offset 0.38 mm, or `precision_mm`; tilt 1.25 deg)."""
+    thresholds (offset 0.38 mm, or `offset_mm`, a sweep's --precision-mm; tilt 1.25 deg)."""
     def grasp(e, tilt=0.01, done=True, in_grooves=True):
         return {"completed_s": 1.0 if done else None, "residual_offset_norm_mm": e, "in_grooves": in_grooves,
                 "residual_rpy_deg": [tilt, 0.0, 0.0]}
@@ -146,15 +147,15 @@ def test_verdicts():
     def summary(*grasps):
         return {"grasps": list(grasps)}
 
-    assert sw.verdict("completed", summary(grasp(0.01), grasp(0.37))) == SEATED
-    assert sw.verdict("completed", summary(grasp(0.01), grasp(0.39))) == WEDGED
-    assert sw.verdict("completed", summary(grasp(0.01, tilt=-1.3))) == WEDGED
-    assert sw.verdict("completed", summary(grasp(0.45)), precision_mm=0.5) == SEATED
-    assert sw.verdict("not captured", summary(grasp(0.01), grasp(12.0, in_grooves=False))) == NOT_CAPTURED
-    assert sw.verdict("incomplete", summary(grasp(0.01), grasp(None, done=False))) == INCOMPLETE
-    assert sw.verdict("diverged", None) == DIVERGED
-    assert sw.verdict(WALL_LIMIT, summary(0.1)) == ""
-    assert sw.verdict(EXCEPTION, None) == ""
+    assert run_outcome("completed", summary(grasp(0.01), grasp(0.37))) == SEATED
+    assert run_outcome("completed", summary(grasp(0.01), grasp(0.39))) == WEDGED
+    assert run_outcome("completed", summary(grasp(0.01, tilt=-1.3))) == WEDGED
+    assert run_outcome("completed", summary(grasp(0.45)), offset_mm=0.5) == SEATED
+    assert run_outcome("not captured", summary(grasp(0.01), grasp(12.0, in_grooves=False))) == NOT_CAPTURED
+    assert run_outcome("incomplete", summary(grasp(0.01), grasp(None, done=False))) == INCOMPLETE
+    assert run_outcome("diverged", None) == DIVERGED
+    assert run_outcome(WALL_LIMIT, summary(0.1)) == ""
+    assert run_outcome(EXCEPTION, None) == ""
 
 
 def test_a_points_file_cut_by_a_kill_loses_only_its_last_line(tmp_path):

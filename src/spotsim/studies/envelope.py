@@ -32,7 +32,7 @@ import numpy as np
 from ..errors import ScenarioError
 from ..files import atomic_write, prepare, save_figure
 from ..scenario import TOLERANCE_DEG, TOLERANCE_OFFSET_MM, from_dict, set_value
-from ..status import SEATED
+from ..status import SEATED, run_outcome
 from .sweep import (
     POINTS_FILE,
     PRECISION_MM,
@@ -45,7 +45,6 @@ from .sweep import (
     run_on_cluster,
     run_points,
     scenario_key,
-    verdict,
 )
 
 #: The misalignment axes: key path of the module's start, unit.
@@ -231,7 +230,7 @@ def envelope(config, out_dir, search: Search = Search(), *, cluster: Cluster = C
     def settle(ray, magnitude, record):
         if record["key"] not in done:
             store(record)
-        ray.record(magnitude, verdict(record["status"], record.get("summary"), search.precision_mm), record["key"])
+        ray.record(magnitude, run_outcome(record["status"], record.get("summary"), search.precision_mm), record["key"])
 
     def probe(ray):
         """The ray's next probe as a point, settling those already done; None when finished."""
@@ -295,7 +294,7 @@ def _chances(todo, raw0, search: Search, done: dict, out: Path, cluster: Cluster
         if rec is None:
             continue
         captured, n = ray.chance.get(m, (0, 0))
-        seated = verdict(rec["status"], rec.get("summary"), search.precision_mm) == SEATED
+        seated = run_outcome(rec["status"], rec.get("summary"), search.precision_mm) == SEATED
         ray.chance[m] = (captured + seated, n + 1)
     return ran
 

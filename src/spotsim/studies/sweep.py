@@ -449,11 +449,6 @@ def run_point(point: Point, wall_limit_s: float | None = WALL_LIMIT_S, with_esti
 # ----------------------------------------------------------------------------- rows
 
 
-def verdict(status: str, summary: dict | None, precision_mm: float = PRECISION_MM) -> str:
-    """A point's verdict: its run's outcome (`status.run_outcome`), '' when it did not run to one."""
-    return run_outcome(status, summary, precision_mm)
-
-
 #: Error estimate columns: summary quantity -> column suffix.
 ESTIMATED = {"residual_offset_norm_mm": "residual_error_mm", "peak_force_norm_N": "peak_force_error_N",
              "peak_torque_norm_Nm": "peak_torque_error_Nm",
@@ -468,7 +463,7 @@ def table_row(record: dict, scenario, keys: list[str], precision_mm: float = PRE
     row = {"key": record["key"], "index": record["index"]}
     row.update({k: record["values"].get(k) for k in keys})
     row["status"] = record["status"]
-    row["verdict"] = verdict(record["status"], summary, precision_mm)
+    row["verdict"] = run_outcome(record["status"], summary, precision_mm)
     n_grasps = len(modules_of(scenario)) if scenario is not None else 1
     dual = scenario is not None and scenario.kind == "dual_arm"
     start = Start({k: tuple(m.initial_offset_mm) for k, m in modules_of(scenario).items()},
