@@ -17,6 +17,12 @@ from spotsim.scenario import Contact, Geometry
 EXAMPLES = sorted((ROOT / "examples").glob("*.py"))
 #: Printed figures carry 3-4 decimals: they agree with the summary to half their last digit.
 PRINTED = {"mm3": 5e-4, "mm4": 5e-5, "N2": 5e-3}
+#: A marker record's values are written to 6 significant digits; the sample's are ~0.1 mm or deg,
+#: under 10, so two writings of the same record agree to 1e-5.
+MARKER_DIGITS = 1e-5
+#: The sample's pooled RMS against its stated noise: about 1,900 samples a kind give the RMS a
+#: sampling error of 1 / sqrt(2 n) = 1.6 %; 10 % is six of those.
+NOISE_RMS_REL = 0.1
 
 
 def run(path, *args):
@@ -134,8 +140,7 @@ def test_sensitivity_example_writes_each_settings_run_and_its_chart(tmp_path):
 def test_sample_markers_example_writes_the_shipped_record_the_runs_plus_its_noise(tmp_path):
     """The sample marker record: the file the example writes is the one shipped in examples/,
     and it differs from the 3 mm testbed run's own camera record (simulated here) by the stated
-    noise alone: each kind's pooled RMS within 10 % of it (about 1,900 samples a kind: the RMS's
-    sampling error is 1.6 %)."""
+    noise alone: each kind's pooled RMS within NOISE_RMS_REL of it."""
     import importlib.util
 
     from spotsim.measures import read_markers
@@ -145,7 +150,7 @@ def test_sample_markers_example_writes_the_shipped_record_the_runs_plus_its_nois
     times, sample = read_markers(out)
     shipped_t, shipped = read_markers(ROOT / "examples" / "markers_sample.csv")
     assert np.array_equal(times, shipped_t) and sample.keys() == shipped.keys()
-    assert all(np.allclose(sample[k], shipped[k], rtol=0, atol=1e-5) for k in sample)  # 6 digits of ~0.1
+    assert all(np.allclose(sample[k], shipped[k], rtol=0, atol=MARKER_DIGITS) for k in sample)
     spec = importlib.util.spec_from_file_location("sample_markers", ROOT / "examples" / "sample_markers.py")
     example = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(example)
@@ -154,4 +159,4 @@ def test_sample_markers_example_writes_the_shipped_record_the_runs_plus_its_nois
     assert np.array_equal(clean_t, times)
     for unit, noise in (("_mm", example.NOISE_MM), ("_deg", example.NOISE_DEG)):
         diff = np.concatenate([sample[k] - clean[k] for k in sample if k.endswith(unit)])
-        assert np.sqrt(np.mean(diff**2)) == pytest.approx(noise, rel=0.1)
+        assert np.sqrt(np.mean(diff**2)) == pytest.approx(noise, rel=NOISE_RMS_REL)
