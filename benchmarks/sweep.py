@@ -27,6 +27,7 @@ from pathlib import Path
 from speed import measured_at
 
 from spotsim.studies import sweep as sw
+from spotsim.studies.runner import Runner
 
 ROOT = Path(__file__).resolve().parents[1]
 CASE_I = ROOT / "config" / "single_arm_case_I.yaml"
@@ -46,7 +47,7 @@ def simulation_s(table) -> float:
 def timed(vary, workers: int, estimate: bool):
     with tempfile.TemporaryDirectory() as out:
         t0 = time.perf_counter()
-        report = sw.run_sweep(CASE_I, sw.spec_of(vary), out, cluster=sw.Cluster(workers=workers),
+        report = sw.run_sweep(CASE_I, sw.spec_of(vary), out, runner=Runner(workers=workers),
                               error_estimate=estimate)
         return report, time.perf_counter() - t0
 

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import spotsim
 from spotsim.studies.envelope import CLAIMED, Search, envelope
-from spotsim.studies.sweep import Cluster
+from spotsim.studies.runner import Runner
 
 CONFIG = Path(__file__).resolve().parents[1] / "config" / "single_arm_case_I.yaml"
 
@@ -43,7 +43,7 @@ def main() -> None:
                 f"geometry.upper_depth_mm={depth}", f"geometry.lower_depth_mm={depth}"]
         out = Path(args.out) / f"bevel_{bevel:g}_depth_{depth:g}"
         report = envelope(CONFIG, out, Search(axes=axes, planes=(), resolution=res),
-                          cluster=Cluster(workers=args.workers), sets=sets)
+                          runner=Runner(workers=args.workers), sets=sets)
         run = spotsim.simulate(spotsim.load_scenario(CONFIG, sets))
         grasp = run.grasp
         bounds = {r.name: (r.lo, r.hi) for r in report.rays}

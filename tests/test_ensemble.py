@@ -14,6 +14,7 @@ from spotsim.cli import ensemble_exit, main
 from spotsim.errors import SpotsimError
 from spotsim.studies import ensemble as ens
 from spotsim.studies.ensemble import EnsembleResult, Member, Start, member_scenario, perturbed_starts, run_member
+from spotsim.studies.runner import keep_model
 
 #: Case I at the default step: a whole member runs in well under a second.
 SHORT_S = 0.6  # s simulated where a member need not complete: past first contact (~0.43 s)
@@ -106,7 +107,8 @@ def test_a_member_on_the_shared_model_is_a_fresh_simulate_of_its_scenario(config
     fresh simulate() of its perturbed scenario, bit for bit (through the dual arm's weld too)."""
     s = spotsim.load_scenario(ROOT / "config" / config)
     start = perturbed_starts(s, 3, seed=11)[2]
-    member = run_member(2, start, spotsim.build_model(s))
+    keep_model(spotsim.build_model(s))  # the nominal model a worker holds
+    member = run_member((2, start), s)
     fresh = spotsim.simulate(member_scenario(s, start))
     assert member.status == fresh.status == "completed"
     assert comparable(member.summary) == comparable(fresh.summary)
@@ -210,10 +212,10 @@ def test_ctrl_c_keeps_the_members_that_finished(tmp_path, monkeypatch):
     others are `interrupted`, and the command exits 130."""
     real = ens.run_member
 
-    def interrupting(index, start, model=None, source="<ensemble>"):
-        if index == 2:
+    def interrupting(task, scenario, source="<ensemble>"):
+        if task[0] == 2:
             raise KeyboardInterrupt
-        return real(index, start, model, source)
+        return real(task, scenario, source)
 
     monkeypatch.setattr(ens, "run_member", interrupting)
     out = tmp_path / "ens"

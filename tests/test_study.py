@@ -10,7 +10,7 @@ from conftest import CASE_I
 
 import spotsim
 from spotsim.cli import main
-from spotsim.status import WEDGED_OFFSET_MM
+from spotsim.status import WALL_LIMIT, WEDGED_OFFSET_MM
 from spotsim.studies import accuracy as acc
 from spotsim.studies import runs
 from spotsim.studies import stability as stab
@@ -153,14 +153,15 @@ def test_a_run_past_its_wall_limit_is_stopped(case_I):
     # 1 us steps
     slow = spotsim.replace(case_I, simulation={"substeps": 1000, "integrator": {"method": "symplectic_euler"}})
     o = runs.run_once(slow, wall_limit_s=1.0)
-    assert o.status == runs.WALL_LIMIT and "wall limit of 1 s" in o.message
+    assert o.status == WALL_LIMIT and "wall-time budget of 1 s spent" in o.message
     assert stab.verdict(o) == "no verdict: wall limit" and o.prediction.step_s == pytest.approx(1e-6)
 
 
 def test_a_run_within_its_wall_limit_is_the_same_run(case_I):
-    """In its child process, a run gives what it gives in the study's own process."""
+    """In its worker process, within its budget, a run gives what it gives in the study's own
+    process without one."""
     short = spotsim.replace(case_I, simulation={"duration_s": 0.5})
-    here, there = runs.run_once(short), runs.run_once(short, wall_limit_s=60)
+    here, there = runs._run_once(short, "<test>"), runs.run_once(short, wall_limit_s=60)
     assert there.status == here.status == "incomplete" and there.steps == here.steps
     assert (there.offsets[0] == here.offsets[0]).all() and there.peaks == here.peaks
 

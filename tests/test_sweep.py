@@ -29,7 +29,9 @@ from spotsim.status import (
     run_outcome,
 )
 from spotsim.studies import sweep as sw
+from spotsim.studies.runner import Runner, SchedulerLost
 
+HERE = Runner("serial")  # fake runs, in the test's own process
 #: Three short Case I points, x_a offset -1, 0 and 1 mm (each ~0.2 s and its companion).
 VARY = ["module.initial_offset_mm.0=-1:1:3"]
 #: Columns that depend on the machine or the worker, not on the physics.
@@ -120,7 +122,8 @@ def test_more_points_than_the_budget_are_refused_before_they_are_made(tmp_path, 
     assert not out.exists()
     # the envelope's count is an upper bound of its bisection: here 2 rays x (1 + 6 halvings of 16 mm to 0.25 mm)
     assert env.Search(axes=("y",), planes=()).most_runs() == 14
-    report = env.envelope(CASE_I, tmp_path / "y", env.Search(axes=("y",), planes=()), run=fake_run({"y": 0.1}))
+    report = env.envelope(CASE_I, tmp_path / "y", env.Search(axes=("y",), planes=()), runner=HERE,
+                          run=fake_run({"y": 0.1}))
     assert sum(len(r.probes) for r in report.rays) <= 14
 
 
@@ -196,7 +199,7 @@ def test_a_point_that_raises_is_recorded_with_its_status(monkeypatch):
 def local(tmp_path_factory):
     """The three points on the default local cluster (two workers)."""
     out = tmp_path_factory.mktemp("sweep_local")
-    return sw.run_sweep(CASE_I, sw.spec_of(VARY), out, cluster=sw.Cluster(workers=2))
+    return sw.run_sweep(CASE_I, sw.spec_of(VARY), out, runner=Runner(workers=2))
 
 
 def test_a_sweep_writes_a_row_per_point_with_its_verdict_and_error_estimate(local):
@@ -213,7 +216,7 @@ def test_a_sweep_writes_a_row_per_point_with_its_verdict_and_error_estimate(loca
 
 
 def test_a_finished_sweep_started_again_runs_nothing(local):
-    again = sw.run_sweep(CASE_I, sw.spec_of(VARY), local.out, cluster=sw.Cluster(workers=2))
+    again = sw.run_sweep(CASE_I, sw.spec_of(VARY), local.out, runner=Runner(workers=2))
     assert again.ran == 0 and again.reused == 3
     assert physics(again.table).equals(physics(local.table))
 
@@ -250,7 +253,7 @@ def test_an_existing_scheduler_with_two_workers_gives_the_local_clusters_table(l
 
         with Client(address, timeout="60s") as c:
             c.wait_for_workers(2, timeout=120)
-        remote = sw.run_sweep(CASE_I, sw.spec_of(VARY), tmp_path / "out", cluster=sw.Cluster(scheduler=address))
+        remote = sw.run_sweep(CASE_I, sw.spec_of(VARY), tmp_path / "out", runner=Runner(scheduler=address))
 
         def kill_the_scheduler(record, written=[]):  # noqa: B006 - the count across calls
             written.append(record)
@@ -258,9 +261,9 @@ def test_an_existing_scheduler_with_two_workers_gives_the_local_clusters_table(l
                 os.killpg(procs[0].pid, signal.SIGKILL)
 
         lost = tmp_path / "lost"
-        with pytest.raises(sw.SchedulerLost, match="2 of 5 points finished, kept in .* run the sweep again"):
+        with pytest.raises(SchedulerLost, match="2 of 5 points finished, kept in .* run the sweep again"):
             sw.run_sweep(CASE_I, sw.spec_of(["module.initial_offset_mm.0=-1:1:5"]), lost,
-                         cluster=sw.Cluster(scheduler=address), error_estimate=False, on_record=kill_the_scheduler)
+                         runner=Runner(scheduler=address), error_estimate=False, on_record=kill_the_scheduler)
         assert len(sw.read_records(lost / sw.POINTS_FILE)) == 2
     finally:
         for p in procs:
@@ -304,7 +307,7 @@ def test_killed_workers_leave_every_point_in_the_table_exactly_once(local, tmp_p
 
     threading.Thread(target=kill_a_starting_worker, daemon=True).start()
     spec = sw.spec_of(["module.initial_offset_mm.0=-1:1:5"])
-    report = sw.run_sweep(CASE_I, spec, tmp_path, cluster=sw.Cluster(workers=2), on_record=kill_a_worker)
+    report = sw.run_sweep(CASE_I, spec, tmp_path, runner=Runner(workers=2), on_record=kill_a_worker)
     assert len(killed) == 2
     keys = [json.loads(line)["key"] for line in (tmp_path / sw.POINTS_FILE).read_text().splitlines()]
     assert len(keys) == len(set(keys)) == 5
@@ -319,9 +322,9 @@ def test_an_interrupted_sweep_resumes_with_only_its_missing_points(local, tmp_pa
         if len(seen) == 2:
             raise KeyboardInterrupt
 
-    first = sw.run_sweep(CASE_I, sw.spec_of(VARY), tmp_path, cluster=sw.Cluster(workers=2), on_record=stop_after_two)
+    first = sw.run_sweep(CASE_I, sw.spec_of(VARY), tmp_path, runner=Runner(workers=2), on_record=stop_after_two)
     assert first.interrupted and len(first.table) == 2
-    resumed = sw.run_sweep(CASE_I, sw.spec_of(VARY), tmp_path, cluster=sw.Cluster(workers=2))
+    resumed = sw.run_sweep(CASE_I, sw.spec_of(VARY), tmp_path, runner=Runner(workers=2))
     assert resumed.ran == 1 and resumed.reused == 2 and not resumed.interrupted
     assert physics(resumed.table).equals(physics(local.table))
 
@@ -348,13 +351,14 @@ def test_a_sweep_killed_with_sigkill_resumes_and_keeps_each_point_once(tmp_path)
     kill_after_two = (
         "import os, signal\n"
         "from spotsim.studies import sweep as sw\n"
+        "from spotsim.studies.runner import Runner\n"
         "written = []\n"
         "def on_record(record):\n"
         "    written.append(record)\n"
         "    if len(written) == 2:\n"
         "        os.killpg(0, signal.SIGKILL)\n"
         f"sw.run_sweep({str(CASE_I)!r}, sw.spec_of(['module.initial_offset_mm.0=-1:1:5']), {str(out)!r},\n"
-        "             cluster=sw.Cluster(workers=1), error_estimate=False, on_record=on_record)\n")
+        "             runner=Runner(workers=1), error_estimate=False, on_record=on_record)\n")
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
     proc = subprocess.run([sys.executable, "-c", kill_after_two], env=env, stdout=subprocess.DEVNULL,
                           stderr=subprocess.DEVNULL, start_new_session=True, timeout=600)
@@ -401,14 +405,14 @@ def test_bisection_finds_a_known_boundary_in_log_runs(tmp_path):
 
     run = fake_run({"x": 3.7, "roll": 12.3})
     asym = lambda point: run(point) if point.values[sw_axis("x")] >= 0 else fake_run({"x": 2.2})(point)  # noqa: E731
-    report = env.envelope(CASE_I, tmp_path, env.Search(axes=("x", "roll"), planes=()), run=asym)
+    report = env.envelope(CASE_I, tmp_path, env.Search(axes=("x", "roll"), planes=()), runner=HERE, run=asym)
     by = {r.name: r for r in report.rays}
     for name, true in (("x+", 3.7), ("x-", 2.2), ("roll+", 12.3), ("roll-", 12.3)):
         r = by[name]
         assert r.lo < true <= r.hi and r.hi - r.lo <= r.resolution
         assert len(r.probes) == 1 + math.ceil(math.log2(r.limit / r.resolution))
         assert r.beyond == INCOMPLETE  # its fake run never closed
-    again = env.envelope(CASE_I, tmp_path, env.Search(axes=("x", "roll"), planes=()), run=asym)
+    again = env.envelope(CASE_I, tmp_path, env.Search(axes=("x", "roll"), planes=()), runner=HERE, run=asym)
     assert again.runs == 0 and [r.boundary for r in again.rays] == [r.boundary for r in report.rays]
     text = (tmp_path / "envelope.md").read_text()
     assert "| x (mm) | ±10 |" in text
@@ -417,7 +421,7 @@ def test_bisection_finds_a_known_boundary_in_log_runs(tmp_path):
 def test_a_ray_captured_at_its_limit_has_its_boundary_beyond(tmp_path):
     from spotsim.studies import envelope as env
 
-    report = env.envelope(CASE_I, tmp_path, env.Search(axes=("y",), planes=()), run=fake_run({"y": 100.0}))
+    report = env.envelope(CASE_I, tmp_path, env.Search(axes=("y",), planes=()), runner=HERE, run=fake_run({"y": 100.0}))
     assert all(r.boundary == math.inf and len(r.probes) == 1 for r in report.rays)
 
 
@@ -431,27 +435,11 @@ def test_near_the_boundary_the_capture_fraction_is_counted_over_perturbed_starts
     """Ensembles at each ray's bracket: the stand-in captures every member inside, none outside."""
     from spotsim.studies import envelope as env
 
-    report = env.envelope(CASE_I, tmp_path, env.Search(axes=("x",), planes=(), members=4), run=fake_run({"x": 3.7}))
+    report = env.envelope(CASE_I, tmp_path, env.Search(axes=("x",), planes=(), members=4), runner=HERE,
+                          run=fake_run({"x": 3.7}))
     for r in report.rays:
         assert r.chance[r.lo] == (4, 4) and r.chance[r.hi] == (0, 4)
     assert "capture_fraction_at_captured" in (tmp_path / "envelope.csv").read_text()
-
-
-def test_a_worker_reuses_a_model_across_starts_and_a_compiled_scene_across_contact_parameters():
-    """Models from the worker's caches are those built from scratch."""
-    from spotsim.assemble.model import build_model
-
-    sw._MODELS.clear()
-    sw._SCENES.clear()
-    a = load_scenario(CASE_I)
-    b = load_scenario(CASE_I, ["module.initial_offset_mm.1=-2.0"])
-    c = load_scenario(CASE_I, ["friction.mu_k=0.3", "contact.restitution=0.6"])
-    ma, mb, mc = sw.model_for(a), sw.model_for(b), sw.model_for(c)
-    assert mb.pin_model is ma.pin_model  # with_start: the Pinocchio model shared
-    assert mc.urdf is ma.urdf and len(sw._SCENES) == 1 and len(sw._MODELS) == 2
-    for cached, scenario in ((mb, b), (mc, c)):
-        fresh = build_model(scenario)
-        assert np.array_equal(cached.q0, fresh.q0) and cached.law == fresh.law
 
 
 def test_a_point_that_cannot_be_written_is_cut_back_off_and_one_clear_error(tmp_path, monkeypatch):

@@ -111,6 +111,8 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--seed", type=SEED, default=0, metavar="S", help="with --ensemble: the perturbations' seed "
                                                                       "(default 0)")
     run.add_argument("--workers", type=COUNT, metavar="W", help="with --ensemble: processes (default: CPU count)")
+    run.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="with --ensemble: run the members on this "
+                                                                     "Dask scheduler's workers")
     run.add_argument("--perturb", choices=FAMILIES, default=ALL_AXES,
                      help="with --ensemble: which start coordinates a member moves: all (default) or one_axis "
                           "(member i only the (i-1) mod 6-th of x, y, z, roll, pitch, yaw)")
@@ -148,7 +150,8 @@ def _parser() -> argparse.ArgumentParser:
 
 def _envelope_parser(sub) -> None:
     from .studies.envelope import AXES, LIMIT, PLANE_RAYS, RESOLUTION
-    from .studies.sweep import MAX_POINTS, PRECISION_MM, WALL_LIMIT_S
+    from .studies.runner import MAX_POINTS, WALL_LIMIT_S
+    from .studies.sweep import PRECISION_MM
 
     en = sub.add_parser("envelope", help="the capture envelope of a single-arm scenario, by bisection along rays")
     en.add_argument("config", help="scenario YAML, or a shipped scenario's name (single arm)")
@@ -166,8 +169,7 @@ def _envelope_parser(sub) -> None:
                          f"is seated, captured (default {PRECISION_MM:g}, the ensembles')")
     en.add_argument("--out", help="output directory (default results/<scenario name>/envelope); started again "
                                   "over it, probes already run are not run again")
-    en.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="an existing Dask scheduler")
-    en.add_argument("--workers", type=COUNT, metavar="W", help="local cluster: worker processes")
+    _runner_arguments(en)
     en.add_argument("--wall-limit", type=float, default=WALL_LIMIT_S, metavar="S", help="budget of each probe")
     en.add_argument("--max-points", type=COUNT, default=MAX_POINTS, metavar="N",
                     help=f"refuse a search that may run more probes (default {MAX_POINTS})")
@@ -197,11 +199,11 @@ def _envelope(args) -> int:
         for name in ("resolution_mm", "resolution_deg", "limit_mm", "limit_deg"):
             if not getattr(args, name) > 0:
                 raise ScenarioError([f"--{name.replace('_', '-')} = {getattr(args, name)}: must be positive"])
-        cluster = _cluster(args)
+        runner = _runner(args)
         out = Path(args.out) if args.out else results_dir(load_scenario(path, args.set).name, args.set, "envelope")
         search = Search(axes, planes, args.rays, {"mm": args.resolution_mm, "deg": args.resolution_deg},
                         {"mm": args.limit_mm, "deg": args.limit_deg}, args.precision_mm, args.members, args.seed)
-        report = envelope(path, out, search, cluster=cluster, sets=args.set)
+        report = envelope(path, out, search, runner=runner, sets=args.set)
     except SpotsimError as e:
         return _bad_input(e)
     print((out / "envelope.md").read_text(), end="")
@@ -213,7 +215,8 @@ def _envelope(args) -> int:
 
 
 def _sweep_parser(sub) -> None:
-    from .studies.sweep import MAX_POINTS, PRECISION_MM, WALL_LIMIT_S
+    from .studies.runner import MAX_POINTS, WALL_LIMIT_S
+    from .studies.sweep import PRECISION_MM
 
     sw = sub.add_parser("sweep", help="run a scenario over variations of its keys on Dask, resumable")
     sw.add_argument("config", help="scenario YAML, or a shipped scenario's name")
@@ -226,10 +229,7 @@ def _sweep_parser(sub) -> None:
                     help="override a scenario key at every point (repeatable)")
     sw.add_argument("--out", help="output directory (default results/<scenario name>/sweep); a sweep started "
                                   "again over it runs only the points it lacks")
-    sw.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="an existing Dask scheduler (default: a "
-                                                                     "local cluster)")
-    sw.add_argument("--workers", type=COUNT, metavar="W", help="local cluster: worker processes (default: one "
-                                                             "per core)")
+    _runner_arguments(sw)
     sw.add_argument("--wall-limit", type=float, default=WALL_LIMIT_S, metavar="S",
                     help=f"wall-time budget of each point (default {WALL_LIMIT_S:g} s)")
     sw.add_argument("--max-points", type=COUNT, default=MAX_POINTS, metavar="N",
@@ -241,13 +241,28 @@ def _sweep_parser(sub) -> None:
     sw.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
-def _cluster(args):
-    """The Cluster of `sweep`'s and `envelope`'s options (ScenarioError for a bad budget)."""
-    from .studies.sweep import Cluster
+def _runner_arguments(parser, backend: bool = True) -> None:
+    """The runner's options: where the runs go (`studies.runner.Runner`)."""
+    from .studies.runner import BACKENDS, DASK
+
+    if backend:
+        parser.add_argument("--backend", choices=BACKENDS, default=DASK,
+                            help="where the runs go: a Dask cluster (default), a pool of processes here, or here "
+                                 "one after the other")
+    parser.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="an existing Dask scheduler (default: a "
+                                                                         "local cluster)")
+    parser.add_argument("--workers", type=COUNT, metavar="W", help="local cluster or pool: worker processes "
+                                                                 "(default: one per core)")
+
+
+def _runner(args):
+    """The Runner of `sweep`'s and `envelope`'s options (SpotsimError for a bad budget or a
+    scheduler beside another backend)."""
+    from .studies.runner import Runner
 
     if not args.wall_limit > 0:
         raise ScenarioError([f"--wall-limit = {args.wall_limit}: must be positive"])
-    return Cluster(args.scheduler, args.workers, args.wall_limit, not args.quiet, args.max_points)
+    return Runner(args.backend, args.scheduler, args.workers, args.wall_limit, not args.quiet, args.max_points)
 
 
 def _list() -> int:
@@ -276,10 +291,10 @@ def _sweep(args) -> int:
 
     try:
         path = _config_path(args.config)
-        cluster = _cluster(args)
-        spec = spec_of(args.vary, args.spec, args.set, cluster.max_points)
+        runner = _runner(args)
+        spec = spec_of(args.vary, args.spec, args.set, runner.max_points)
         out = Path(args.out) if args.out else results_dir(load_scenario(path, spec.sets).name, spec.sets, "sweep")
-        report = run_sweep(path, spec, out, cluster=cluster, precision_mm=args.precision_mm,
+        report = run_sweep(path, spec, out, runner=runner, precision_mm=args.precision_mm,
                            error_estimate=not args.no_error_estimate)
     except SpotsimError as e:
         return _bad_input(e)
@@ -606,8 +621,13 @@ def _ensemble(args, scenario, model, path: Path, out: Path) -> int:
         prepare(out, ENSEMBLE_JSON)
     except SpotsimError as err:
         return _bad_input(err)
+    runner = None
+    if args.scheduler:  # the members on Dask
+        from .studies.runner import DASK, Runner
+
+        runner = Runner(DASK, args.scheduler, args.workers, None, not args.quiet)
     e = ensemble(scenario, args.ensemble, seed=args.seed, family=args.perturb, workers=args.workers,
-                 progress=not args.quiet, model=model, source=str(path))
+                 progress=not args.quiet, model=model, source=str(path), runner=runner)
     first = e.members[0] if e.members else None
     if not args.no_error_estimate and not e.interrupted and first is not None and first.summary:
         from .studies.estimate import estimate
@@ -798,7 +818,7 @@ def _main(argv) -> int:
         return 0
     if args.command == "run" and args.ensemble is None:
         given = [o for o, v in (("--seed", args.seed != 0), ("--workers", args.workers is not None),
-                                ("--perturb", args.perturb != ALL_AXES)) if v]
+                                ("--perturb", args.perturb != ALL_AXES), ("--scheduler", args.scheduler)) if v]
         if given:
             print(f"{', '.join(given)}: only with --ensemble N", file=sys.stderr)
             return 2

@@ -18,10 +18,7 @@ import csv
 import io
 import json
 import math
-import multiprocessing
 import os
-import signal
-import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -29,7 +26,7 @@ import numpy as np
 
 from ..errors import SpotsimError
 from ..scenario import modules_of, replace
-from ..status import EXCEPTION, REJECTED, WEDGED_OFFSET_MM, WEDGED_TILT_DEG, grasp_outcome
+from ..status import EXCEPTION, REJECTED, WEDGED_OFFSET_MM, WEDGED_TILT_DEG, WORKER_DIED, grasp_outcome
 
 #: Default perturbation of each module's start: +-10 um on each axis of the offset and
 #: +-0.01 deg on each of roll, pitch, yaw, well below any tolerance a drawing would state and
@@ -114,44 +111,32 @@ class Member:
         return self.summary["grasps"] if self.summary else []
 
 
-# What a worker process keeps between members: the nominal scenario and its Model, built once.
-_WORKER: dict = {}
-
-
-def _init_worker(scenario, source: str, model, ignore_sigint: bool) -> None:
-    """A pool worker's start: keep the nominal Model (inherited under fork, built here under
-    spawn); Ctrl-C is the parent's to handle."""
-    if ignore_sigint:
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
-    if model is None:
-        from ..assemble.model import build_model
-
-        model = build_model(scenario, source)
-    _WORKER.update(scenario=scenario, source=source, model=model)
-
-
-def run_member(index: int, start: Start, model=None, source: str = "<ensemble>") -> Member:
-    """Run one member from `start` on the nominal `model` (the worker's when None), with its
-    start swapped in (`assemble.model.with_start`). Never raises but on the user's Ctrl-C: a
-    rejected start or an exception is the member's status."""
-    from ..assemble.model import with_start
+def run_member(task: tuple[int, Start], scenario, source: str = "<ensemble>") -> Member:
+    """Run one member, task = (index, start), of the ensemble of `scenario`: on the process's
+    model of its scene (`runner.model_for`: the nominal one, built or inherited once per
+    worker) with the member's start swapped in (`assemble.model.with_start`). Never raises but
+    on the user's Ctrl-C: a rejected start or an exception is the member's status."""
+    from .runner import model_for
     from .runs import attempt, raised
 
-    if model is None:  # in a pool worker
-        model, source = _WORKER["model"], _WORKER["source"]
+    index, start = task
     try:
-        scenario = member_scenario(model.scenario, start)
-        mine = with_start(model, scenario)
+        mine = member_scenario(scenario, start)
+        model = model_for(mine, source)
     except SpotsimError as e:  # the perturbed start's own problem, found before anything ran
         return Member(index, start, REJECTED, str(e).replace("\n", "; "))
     except Exception as e:  # nothing here should raise: the member reports it, the others go on
         return Member(index, start, EXCEPTION, raised(e, "the start"))
-    status, message, result = attempt(scenario, mine, source)
+    status, message, result = attempt(mine, model, source)
     return Member(index, start, status, message, None if result is None else result.summary)
 
 
-def _run_task(task) -> Member:
-    return run_member(*task)
+def failed_member(task: tuple[int, Start], error: BaseException) -> Member:
+    """The member whose task failed outside its run: its worker died, or it could not be sent."""
+    from .runner import worker_died
+
+    return Member(task[0], task[1], WORKER_DIED if worker_died(error) else EXCEPTION,
+                  f"{type(error).__name__}: {error}")
 
 
 # ----------------------------------------------------------------------------- the ensemble
@@ -192,92 +177,60 @@ class EnsembleResult:
 
 def ensemble(scenario, n: int, *, seed: int = 0, offset_tol_mm: float = OFFSET_TOL_MM,
              rpy_tol_deg: float = RPY_TOL_DEG, family: str = ALL_AXES, workers: int | None = None,
-             progress: bool = False, model=None, source: str = "<scenario>") -> EnsembleResult:
+             progress: bool = False, model=None, source: str = "<scenario>", runner=None) -> EnsembleResult:
     """Run `scenario` from n starts, member 0 unperturbed and the others perturbed within the
-    tolerances on the axes of `family` (`perturbed_starts`), in `workers` processes (default:
-    os.cpu_count(); 1 runs them here, one after the other).
+    tolerances on the axes of `family` (`perturbed_starts`), on `runner` (`runner.Runner`; by
+    default a pool of `workers` processes, os.cpu_count() when None; 1 runs them here, one
+    after the other).
 
     model: the scenario's Model if already built (each worker process otherwise builds it once).
     Never raises on a member's physics or failure: each is counted with its status. Ctrl-C
     stops the ensemble; the members that finished are kept, the others are `interrupted`.
     """
+    import functools
     import time
 
-    from ..run import progress_bar
+    from .runner import PROCESSES, SERIAL, Runner, execute, keep_model, warm_worker
 
     if not (isinstance(n, int | np.integer) and n >= 1):
         raise SpotsimError(f"ensemble size n = {n}: must be an integer >= 1")
     for name, tol in (("offset_tol_mm", offset_tol_mm), ("rpy_tol_deg", rpy_tol_deg)):
         if not (math.isfinite(tol) and tol >= 0):
             raise SpotsimError(f"{name} = {tol}: must be finite and >= 0")
-    workers = min(int(workers or os.cpu_count() or 1), n)
-    if multiprocessing.current_process().daemon:  # a pool's or Dask's worker may not start children
-        workers = 1
-    if workers < 1:
-        raise SpotsimError(f"workers = {workers}: must be >= 1")
-    fork = sys.platform.startswith("linux")  # elsewhere the pool spawns: each worker builds its Model
-    if model is None:  # here too under spawn: a scenario that cannot be built fails before the pool
+    if runner is None:
+        workers = min(int(workers or os.cpu_count() or 1), n)
+        if workers < 1:
+            raise SpotsimError(f"workers = {workers}: must be >= 1")
+        runner = Runner(SERIAL if workers == 1 else PROCESSES, workers=workers, wall_limit_s=None, progress=progress)
+    if model is None:  # here first: a scenario that cannot be built fails before any worker starts
         from ..assemble.model import build_model
 
         model = build_model(scenario, source)
     elif model.scenario != scenario:
         raise SpotsimError("ensemble: `model` was built from another scenario than `scenario`")
+    keep_model(model)  # the workers' (forked) or this process's nominal model
     starts = perturbed_starts(scenario, n, seed, offset_tol_mm, rpy_tol_deg, family)
     members: list[Member | None] = [None] * n
+
+    def finished(task, m: Member):
+        members[m.index] = m
+        if m.status == "interrupted":  # Ctrl-C ended this member's run
+            raise KeyboardInterrupt
+
     interrupted = False
-    bar = progress_bar(n, progress, what="ensemble", unit="run")
     wall0 = time.perf_counter()
     try:
-        if workers == 1:
-            for i, start in enumerate(starts):
-                members[i] = m = run_member(i, start, model, source)
-                bar.update(1)
-                if m.status == "interrupted":  # Ctrl-C ended this member's run
-                    interrupted = True
-                    break
-        else:
-            interrupted = _in_pool(scenario, source, model, starts, members, workers, bar, fork)
+        execute(functools.partial(run_member, scenario=scenario, source=source), list(enumerate(starts)), runner,
+                finished, failed_member, what="ensemble", total=n,
+                warm=functools.partial(warm_worker, scenario, source))
     except KeyboardInterrupt:
         interrupted = True
-    finally:
-        bar.close()
     wall = time.perf_counter() - wall0
     for i, m in enumerate(members):
         if m is None:
             members[i] = Member(i, starts[i], "interrupted", "not run: the ensemble was interrupted")
-    return EnsembleResult(scenario, seed, offset_tol_mm, rpy_tol_deg, members, interrupted, wall, workers, family)
-
-
-def _in_pool(scenario, source, model, starts, members, workers, bar, fork: bool) -> bool:
-    """Run the members in a pool of `workers` processes into `members`; True if interrupted.
-
-    fork (Linux): the workers inherit the loaded compiled kernels and the Model. Otherwise they
-    are spawned, import spotsim, load the kernels from numba's cache and build the Model once
-    each.
-    """
-    if fork:  # load the compiled loop and start check here once, for every worker to inherit
-        from ..run import compile_loop, initial_contacts
-        from ..sim.data import make_data
-
-        compile_loop(model, make_data(model))
-        initial_contacts(model)
-    ctx = multiprocessing.get_context("fork" if fork else "spawn")
-    pool = ctx.Pool(workers, initializer=_init_worker,
-                    initargs=(scenario, source, model if fork else None, True))
-    closed = False
-    try:
-        for m in pool.imap_unordered(_run_task, [(i, s) for i, s in enumerate(starts)]):
-            members[m.index] = m
-            bar.update(1)
-        pool.close()  # the workers end on their own (terminating spawned ones leaks their semaphores)
-        closed = True
-        return False
-    except KeyboardInterrupt:
-        return True
-    finally:
-        if not closed:  # interrupted, or an error in the pool: stop the workers now
-            pool.terminate()
-        pool.join()
+    return EnsembleResult(scenario, seed, offset_tol_mm, rpy_tol_deg, members, interrupted, wall,
+                          runner.worker_count(n) if runner.backend != SERIAL else 1, family)
 
 
 # ----------------------------------------------------------------------------- statistics

@@ -18,7 +18,7 @@ perturbed as `spotsim run --ensemble` perturbs them, and the capture fraction at
 reported (`Ray.chance`).
 
 Probes are sweep points (the same keys, files and resumption: `points.jsonl` in the output
-directory), run on the same Dask cluster.
+directory), run on the same runner (`runner.execute`, Dask by default).
 """
 
 from __future__ import annotations
@@ -33,19 +33,8 @@ from ..errors import ScenarioError
 from ..files import atomic_write, prepare, save_figure
 from ..scenario import TOLERANCE_DEG, TOLERANCE_OFFSET_MM, from_dict, set_value
 from ..status import SEATED, run_outcome
-from .sweep import (
-    POINTS_FILE,
-    PRECISION_MM,
-    Cluster,
-    Point,
-    SchedulerLost,
-    _append,
-    check_budget,
-    read_records,
-    run_on_cluster,
-    run_points,
-    scenario_key,
-)
+from .runner import Runner, SchedulerLost, check_budget
+from .sweep import POINTS_FILE, PRECISION_MM, Point, _append, read_records, run_on, scenario_key
 
 #: The misalignment axes: key path of the module's start, unit.
 AXES = {"x": ("module.initial_offset_mm.0", "mm"), "y": ("module.initial_offset_mm.1", "mm"),
@@ -193,12 +182,12 @@ class Search:
         return total
 
 
-def envelope(config, out_dir, search: Search = Search(), *, cluster: Cluster = Cluster(), sets=(),
+def envelope(config, out_dir, search: Search = Search(), *, runner: Runner = Runner(), sets=(),
              run=None) -> EnvelopeReport:
     """Find the capture boundary along every ray of `search` for a single-arm scenario (with
-    the overrides `sets`, as `--set`), its probes run on `cluster` (or by `run(point) ->
-    record` in this process, for tests). Probes found in `out_dir`'s points file are not run
-    again."""
+    the overrides `sets`, as `--set`), its probes run on `runner` (by `sweep.run_point`, or by
+    `run(point) -> record` if given: tests). Probes found in `out_dir`'s points file are not
+    run again."""
     import yaml
 
     from .sweep import base_raw
@@ -210,7 +199,7 @@ def envelope(config, out_dir, search: Search = Search(), *, cluster: Cluster = C
         raise ScenarioError([f"{config}: kind = {scenario.kind}: the envelope is of a single-arm scenario's module"])
     for axis in AXES:  # the centred start: the rays' origin
         set_value(raw0, AXES[axis][0], 0.0)
-    check_budget(search.most_runs(), cluster.max_points, f"{config}: the envelope (at most)")
+    check_budget(search.most_runs(), runner.max_points, f"{config}: the envelope (at most)")
     todo = search.rays()
     done = read_records(out / POINTS_FILE)  # before anything is written: a foreign file stays as it is
     prepare(out, "envelope.md")
@@ -245,14 +234,9 @@ def envelope(config, out_dir, search: Search = Search(), *, cluster: Cluster = C
 
     interrupted = False
     try:
-        if run is not None:
-            for ray in todo:
-                while (p := probe(ray)) is not None:
-                    settle(ray, p[0], run(p[1]))
-        else:
-            _on_dask(todo, probe, settle, cluster, str(config))
+        _bisect(todo, probe, settle, runner, str(config), run)
         if search.members > 1:
-            state["runs"] += _chances(todo, raw0, search, done, out, cluster, str(config), store, run)
+            _chances(todo, raw0, search, done, runner, str(config), store, run)
     except KeyboardInterrupt:
         interrupted = True
     except SchedulerLost as e:
@@ -264,11 +248,10 @@ def envelope(config, out_dir, search: Search = Search(), *, cluster: Cluster = C
     return report
 
 
-def _chances(todo, raw0, search: Search, done: dict, out: Path, cluster: Cluster, source: str, store, run) -> int:
+def _chances(todo, raw0, search: Search, done: dict, runner: Runner, source: str, store, run) -> None:
     """Each ray's bracket run as ensembles: `search.members` perturbed starts (seeded; member
     0 the probe itself) at its last captured and first uncaptured magnitudes, their capture
-    fractions into `Ray.chance`. New records go through `store` (by `run`) or straight into
-    the points file and `done` (on the cluster). Returns the runs made on the cluster."""
+    fractions into `Ray.chance`. New records go through `store`."""
     from .ensemble import member_scenario, perturbed_starts
 
     plan = []  # (ray, magnitude, point)
@@ -283,12 +266,9 @@ def _chances(todo, raw0, search: Search, done: dict, out: Path, cluster: Cluster
                 s = member_scenario(base.scenario, start)
                 plan.append((ray, m, Point(i, base.values, scenario_key(s), s)))
     missing = list({p.key: p for _, _, p in plan if p.key not in done}.values())
-    ran = 0
-    if run is not None:
-        for p in missing:
-            store(run(p))
-    elif missing:
-        ran = run_points(missing, out, done, cluster, source, error_estimate=False, grow_gap=True)
+    if missing:
+        run_on(runner, missing, source, lambda p, record: store(record), error_estimate=False, grow_gap=True,
+               what="envelope", total=len(missing), run=run)
     for ray, m, p in plan:
         rec = done.get(p.key)
         if rec is None:
@@ -296,12 +276,10 @@ def _chances(todo, raw0, search: Search, done: dict, out: Path, cluster: Cluster
         captured, n = ray.chance.get(m, (0, 0))
         seated = run_outcome(rec["status"], rec.get("summary"), search.precision_mm) == SEATED
         ray.chance[m] = (captured + seated, n + 1)
-    return ran
 
 
-def _on_dask(todo, probe, settle, cluster: Cluster, source: str) -> None:
-    """Bisect every ray at once on `cluster` (`sweep.run_on_cluster`): each ray's next probe
-    submitted as its last ends."""
+def _bisect(todo, probe, settle, runner: Runner, source: str, run) -> None:
+    """Bisect every ray at once on `runner`: each ray's next probe submitted as its last ends."""
     where = {}
 
     def next_of(ray) -> list:
@@ -316,8 +294,8 @@ def _on_dask(todo, probe, settle, cluster: Cluster, source: str) -> None:
         settle(ray, m, record)
         return next_of(ray)
 
-    run_on_cluster([p for ray in todo for p in next_of(ray)], cluster, source, finished, error_estimate=False,
-                   grow_gap=True, what="envelope")
+    run_on(runner, [p for ray in todo for p in next_of(ray)], source, finished, error_estimate=False,
+           grow_gap=True, what="envelope", run=run)
 
 
 # ----------------------------------------------------------------------------- output

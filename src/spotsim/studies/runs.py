@@ -1,15 +1,13 @@
 """One run of a study and what a study keeps of it, compared and written out.
 
-A run may be given a wall-time budget: it then runs in a child process, killed when the
-budget is spent. Studies write their CSV a row at a time as runs finish, so that Ctrl-C keeps
-what was computed.
+A run may be given a wall-time budget (`run.simulate`'s, status `wall limit`). Studies write
+their CSV a row at a time as runs finish, so that Ctrl-C keeps what was computed.
 """
 
 from __future__ import annotations
 
 import csv
 import math
-import multiprocessing
 import traceback
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -18,7 +16,7 @@ import numpy as np
 
 from ..errors import SpotsimError
 from ..scenario import modules_of, replace, to_dict
-from ..status import COMPARABLE, COMPLETED, EXCEPTION, NOT_CAPTURED, REJECTED, WALL_LIMIT, run_outcome
+from ..status import COMPARABLE, COMPLETED, EXCEPTION, NOT_CAPTURED, REJECTED, WORKER_DIED, run_outcome
 
 # ----------------------------------------------------------------------------- one run
 
@@ -79,50 +77,25 @@ class Outcome:
 
 
 def run_once(scenario, source: str = "<study>", wall_limit_s: float | None = None) -> Outcome:
-    """Build, check and simulate `scenario`; never raises but on the user's Ctrl-C.
+    """Build, check and simulate `scenario` in a worker process of its own (`runner.execute`,
+    one process forked from this one: a crash in compiled code costs this run only), within
+    the wall-time budget `wall_limit_s` (status `wall limit`); never raises but on the user's
+    Ctrl-C. A scenario the model or the start check rejects is status `rejected`; any
+    exception out of `simulate` is status `exception` (it must never raise: a bug the study
+    reports)."""
+    import functools
 
-    A scenario the model or the start check rejects is status `rejected`; any exception out
-    of `simulate` is status `exception` (it must never raise: a bug the study reports).
+    from .runner import PROCESSES, Runner, execute, worker_died
 
-    With `wall_limit_s`, the run goes on in a forked child process, which is killed once the
-    budget is spent (status `wall limit`; what it recorded is lost with it). A signal raised
-    into the run instead would land inside numba's callbacks, which turn it into a SystemError;
-    and a child also survives what the simulator must never do, a crash in compiled code.
-    """
-    if not wall_limit_s:
-        return _run_once(scenario, source)
-    ctx = multiprocessing.get_context("fork")  # the child inherits the loaded kernels
-    receive, send = ctx.Pipe(duplex=False)
-    child = ctx.Process(target=_child, args=(send, scenario, source), daemon=True)
-    child.start()
-    send.close()
-    try:
-        if receive.poll(wall_limit_s):
-            o = receive.recv()
-        else:
-            o = Outcome(WALL_LIMIT, f"wall limit of {wall_limit_s:g} s reached: the run was stopped")
-    except EOFError:  # the child died without a word
-        child.join()
-        o = Outcome(EXCEPTION, f"the run's process died (exit code {child.exitcode})")
-    finally:
-        if child.is_alive():
-            child.kill()
-        child.join()
-        receive.close()
-    if o.status == "interrupted":
-        raise KeyboardInterrupt  # the user's Ctrl-C reached the child too: the study stops
-    if o.prediction is None and o.status in (WALL_LIMIT, EXCEPTION):
-        o.prediction = _prediction(scenario, source)
-    return o
+    out = []
 
+    def failed(task, e):
+        return Outcome(WORKER_DIED if worker_died(e) else EXCEPTION, f"{type(e).__name__}: {e}",
+                       prediction=_prediction(scenario, source))
 
-def _child(send, scenario, source) -> None:
-    try:
-        o = _run_once(scenario, source)
-    except KeyboardInterrupt:
-        o = Outcome("interrupted", "interrupted by the user")
-    send.send(o)
-    send.close()
+    execute(functools.partial(_run_once, source=source, wall_limit_s=wall_limit_s), [scenario],
+            Runner(PROCESSES, workers=1, wall_limit_s=wall_limit_s), lambda task, o: out.append(o), failed)
+    return out[0]
 
 
 def _prediction(scenario, source):
@@ -148,21 +121,19 @@ def _caused_by_ctrl_c(e: BaseException) -> bool:
     return False
 
 
-def _run_once(scenario, source: str) -> Outcome:
-    from ..assemble.model import build_model
+def _run_once(scenario, source: str, wall_limit_s: float | None = None) -> Outcome:
     from ..sim.stability import predict_step
+    from .runner import model_for
 
     try:
-        model = build_model(scenario, source)
+        model = model_for(scenario, source)
     except SpotsimError as e:  # the scenario's own problem, found before anything ran
         return Outcome(REJECTED, str(e).replace("\n", "; "))
     prediction = predict_step(model)
-    status, message, result = attempt(scenario, model, source)
+    status, message, result = attempt(scenario, model, source, wall_limit_s)
     if result is None:
         return Outcome(status, message, prediction=prediction)
     s = result.summary
-    if s["status"] == "interrupted":
-        raise KeyboardInterrupt  # the user's Ctrl-C: the study stops
     integrator = s["integrator"]
     done = [g["completed_s"] for g in s["grasps"]]
     return Outcome(

@@ -21,14 +21,16 @@ The output directory holds:
 - `sweep.parquet` and `sweep.csv`: the table, a row per point in the spec's order, written to
   a temporary file and renamed over the last one when the sweep ends or stops.
 
-The points run on `dask.distributed`: a local cluster of one single-threaded worker process per
-core by default, or an existing scheduler (`scheduler=`, `--scheduler tcp://HOST:PORT`). A
-worker keeps the models it built by their scene (the scenario without the modules' starts), so
-points that change only the starts share one model, and points that change no more than the
-contact, friction, drive or integrator parameters share one compiled scene; it loads numba's
-kernels once. A point that raises, diverges or spends its wall-time budget is a row with its
-status; one whose worker died is tried once more (the local cluster's `allowed-failures`; an
-existing scheduler's own setting rules there) and is then recorded as `worker died`.
+The points run on the study runner (`runner.execute`): by default on `dask.distributed`, a
+local cluster of one single-threaded worker process per core, or an existing scheduler
+(`scheduler=`, `--scheduler tcp://HOST:PORT`); `Runner(backend="processes")` or `"serial"`
+runs them on this machine without Dask. A worker keeps the models it built by their scene
+(the scenario without the modules' starts), so points that change only the starts share one
+model, and points that change no more than the contact, friction, drive or integrator
+parameters share one compiled scene; it loads numba's kernels once. A point that raises,
+diverges or spends its wall-time budget is a row with its status; one whose worker died is
+tried once more (on Dask, the local cluster's `allowed-failures`; an existing scheduler's own
+setting rules there) and is then recorded as `worker died`.
 """
 
 from __future__ import annotations
@@ -38,12 +40,10 @@ import functools
 import hashlib
 import itertools
 import json
-import logging
 import math
 import os
 import time
-from collections import Counter, OrderedDict
-from contextlib import contextmanager
+from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -63,22 +63,25 @@ from ..status import (
     run_outcome,
 )
 from .ensemble import Member, Start, grasp_prefix, member_row
+from .runner import (
+    MAX_POINTS,
+    WALL_LIMIT_S,
+    Runner,
+    SchedulerLost,
+    check_budget,
+    execute,
+    model_for,
+    warm_worker,
+    worker_died,
+)
 
 #: A point's verdict is its run's outcome (`status.run_outcome`: seated, wedged, not captured,
 #: incomplete, diverged), with the residual offset beyond which a closed grasp is wedged: by
 #: default the ensembles' (`status.WEDGED_OFFSET_MM`). Points that did not run have none.
 PRECISION_MM = WEDGED_OFFSET_MM
-#: A point's default wall-time budget (its run and its error estimate's companion), s.
-WALL_LIMIT_S = 600.0
-#: The most runs a sweep or an envelope makes unless told otherwise (`--max-points`,
-#: `Cluster.max_points`): each is a whole run of a second or more, so a larger count is far
-#: more often a mistyped range than a plan; it is refused before any point is built.
-MAX_POINTS = 10_000
 #: Why a point's error estimate has no spread over starts, and so no bound.
 SWEEP_NO_SPREAD = ("none: a sweep point (its spread would take 16 more runs a point); `spotsim run` of the point's "
                    "scenario measures it and gives the bound")
-#: Models a worker keeps, the least recently used dropped first.
-MODELS_KEPT = 8
 SAMPLERS = ("sobol", "lhs")
 #: A grid axis that sets several keys to the same values, together: `--vary a+b=LO:HI:N` (both
 #: bevels of a groove, say), not a product of two axes.
@@ -111,13 +114,6 @@ def parse_range(text: str, where: str, most: int = MAX_POINTS) -> list:
     if any(v is None for v in values):
         raise ScenarioError([f"{where} = {text}: an empty value"])
     return values
-
-
-def check_budget(count: int, most: int, what: str) -> None:
-    """Refuse `count` runs above the budget `most` (ScenarioError naming the option)."""
-    if count > most:
-        raise ScenarioError([f"{what}: {count} runs, more than the budget of {most}: give --max-points (Python: "
-                             "Cluster(max_points=...)) to allow more, or fewer points"])
 
 
 def parse_vary(assignment: str, most: int = MAX_POINTS) -> tuple[str, list]:
@@ -315,82 +311,6 @@ def _has_path(tree, path: str) -> bool:
 
 
 # ----------------------------------------------------------------------------- one point (worker)
-
-#: A worker process's models by scene key, and compiled scenes (URDF and contact faces) by
-#: the XACRO's inputs, the least recently used first.
-_MODELS: OrderedDict = OrderedDict()
-_SCENES: OrderedDict = OrderedDict()
-
-
-def scene_key(scenario) -> str:
-    """A hash of the scenario without the modules' starts: scenarios with equal scene keys
-    share a model (`assemble.model.with_start`)."""
-    raw = to_dict(scenario)
-    for k in modules_of(scenario):
-        raw[k].pop("initial_offset_mm", None)
-        raw[k].pop("initial_rpy_deg", None)
-    return hashlib.sha256(json.dumps(raw, sort_keys=True, default=str).encode()).hexdigest()
-
-
-def _kept(cache: OrderedDict, key, value):
-    cache[key] = value
-    cache.move_to_end(key)
-    while len(cache) > MODELS_KEPT:
-        cache.popitem(last=False)
-    return value
-
-
-def model_for(scenario, source: str = "<sweep>"):
-    """The Model of `scenario`, from the worker's kept models when one shares its scene (only
-    the starts differ), else built on the compiled scene of one that shares its XACRO's
-    inputs (the geometry and the modules' mass properties: the contact law, friction, drive,
-    integrator may differ), else built whole."""
-    from ..assemble.model import build_model, with_start
-    from ..assemble.scene import scene_spec
-
-    k = scene_key(scenario)
-    nominal = _MODELS.get(k)
-    if nominal is None:
-        spec = scene_spec(scenario)
-        xacro = hashlib.sha256(json.dumps([str(spec.xacro), sorted(spec.args.items())], default=str).encode()).digest()
-        compiled = _SCENES.get(xacro)
-        if compiled is None:
-            nominal = build_model(scenario, source)
-        else:
-            nominal = build_model(scenario, source, urdf=compiled[0], faces=compiled[1])
-        _kept(_SCENES, xacro, (nominal.urdf, nominal.faces))
-        _kept(_MODELS, k, nominal)
-    else:
-        _MODELS.move_to_end(k)
-    return nominal if nominal.scenario == scenario else with_start(nominal, scenario)
-
-
-def warm_worker(scenario, source: str = "<sweep>") -> int:
-    """Build the scenario's model and load the compiled loop into this worker (once per
-    worker, before its first point): the points' wall times are then their runs'."""
-    from ..run import compile_loop
-    from ..sim.data import make_data
-
-    model = model_for(scenario, source)
-    compile_loop(model, make_data(model))
-    return os.getpid()
-
-
-def warm(client, scenario, source: str = "<sweep>") -> None:
-    """`warm_worker` on every worker of `client`, now and as each joins later (a worker plugin,
-    set up before the worker takes a point). A worker lost meanwhile, or whose warm-up raised,
-    is passed over: a point that lands on a worker builds its model there, and reports its own
-    problem."""
-    from distributed.diagnostics.plugin import WorkerPlugin
-
-    class Warm(WorkerPlugin):
-        def setup(self, worker):
-            warm_worker(scenario, source)
-
-    try:
-        client.register_plugin(Warm(), name=f"spotsim-warm-{scenario_key(scenario)}")
-    except Exception:  # noqa: BLE001 - a worker lost while it warmed, or a warm-up that raised
-        pass
 
 
 def run_point(point: Point, wall_limit_s: float | None = WALL_LIMIT_S, with_estimate: bool = True,
@@ -599,29 +519,15 @@ class SweepReport:
         return out
 
 
-@dataclass(frozen=True)
-class Cluster:
-    """Where and how a sweep's or an envelope's points run: on the Dask scheduler at
-    `scheduler`, or on a local cluster of `workers` processes (default one per core); each
-    point within `wall_limit_s` (None: no budget), at most `max_points` runs in all; with a
-    progress bar or not."""
-
-    scheduler: str | None = None
-    workers: int | None = None
-    wall_limit_s: float | None = WALL_LIMIT_S
-    progress: bool = False
-    max_points: int = MAX_POINTS
-
-
-def run_sweep(config, spec: SweepSpec, out_dir, *, cluster: Cluster = Cluster(), precision_mm: float = PRECISION_MM,
+def run_sweep(config, spec: SweepSpec, out_dir, *, runner: Runner = Runner(), precision_mm: float = PRECISION_MM,
               error_estimate: bool = True, on_record=None) -> SweepReport:
     """Run `config` (a scenario file) at every point of `spec` not already in `out_dir`, on
-    `cluster`, and write the table. Ctrl-C stops it and keeps every finished point
+    `runner` (Dask by default), and write the table. Ctrl-C stops it and keeps every finished point
     (report.interrupted); a point's own failure never stops it. `on_record(record)` is called
     after each point is written (tests use it to interrupt or kill)."""
     config, out = Path(config), Path(out_dir)
     spec.check()
-    check_budget(spec.count(), cluster.max_points, f"{config}: the sweep")
+    check_budget(spec.count(), runner.max_points, f"{config}: the sweep")
     points = resolve_points(config, spec)
     keys = spec.keys()
     done = read_records(out / POINTS_FILE)  # before anything is written: a foreign file stays as it is
@@ -641,7 +547,7 @@ def run_sweep(config, spec: SweepSpec, out_dir, *, cluster: Cluster = Cluster(),
     lost = None
     if todo:
         try:
-            ran = run_points(todo, out, done, cluster, str(config), error_estimate=error_estimate,
+            ran = run_points(todo, out, done, runner, str(config), error_estimate=error_estimate,
                              on_record=on_record)
         except KeyboardInterrupt:
             interrupted = True
@@ -677,14 +583,14 @@ def spec_of(vary=(), spec: SweepSpec | str | Path | None = None, sets=(), most: 
 
 
 def sweep(config, *, vary=(), spec: SweepSpec | str | Path | None = None, sets=(), out_dir=None, **options):
-    """Run a sweep from Python as `spotsim sweep` does (`run_sweep`'s options: `cluster=
-    Cluster(workers=2)`, `precision_mm`, ...) and return its table as a pandas DataFrame, a
+    """Run a sweep from Python as `spotsim sweep` does (`run_sweep`'s options: `runner=
+    Runner(workers=2)`, `precision_mm`, ...) and return its table as a pandas DataFrame, a
     row per point; `table.attrs['report']` is the SweepReport. out_dir: by default
     results/<scenario name>/sweep."""
     from ..paths import results_dir
     from ..scenario import load_scenario
 
-    spec = spec_of(vary, spec, sets, options.get("cluster", Cluster()).max_points)
+    spec = spec_of(vary, spec, sets, options.get("runner", Runner()).max_points)
     if out_dir is None:
         out_dir = results_dir(load_scenario(config, spec.sets).name, spec.sets, "sweep")
     report = run_sweep(config, spec, out_dir, **options)
@@ -693,123 +599,30 @@ def sweep(config, *, vary=(), spec: SweepSpec | str | Path | None = None, sets=(
     return table
 
 
-@contextmanager
-def dask_client(cluster: Cluster):
-    """A dask.distributed Client: of `cluster.scheduler`, or of a local cluster of
-    `cluster.workers` single-threaded worker processes (default one per core) whose scheduler
-    lets a task's worker die once (`allowed-failures`) before it gives up on the task."""
-    import dask
-    from distributed import Client, LocalCluster
-
-    local = None
-    quiet = _quiet_dask()  # a lost worker or scheduler is reported by the sweep, not by Dask's logs
-    try:
-        with dask.config.set({"distributed.scheduler.allowed-failures": 1}):
-            if cluster.scheduler:
-                try:
-                    client = Client(cluster.scheduler, timeout="30s")
-                except (OSError, ValueError) as e:  # no answer; an address distributed cannot parse
-                    raise SpotsimError(f"--scheduler {cluster.scheduler}: cannot connect: {e}") from e
-            else:
-                # started empty, then scaled: a worker lost while it starts is started again by the
-                # cluster instead of failing its construction
-                local = LocalCluster(n_workers=0, threads_per_worker=1, processes=True, dashboard_address=":0",
-                                     silence_logs=logging.CRITICAL)
-                client = Client(local)
-                local.scale(cluster.workers or os.cpu_count() or 1)
-        try:
-            yield client
-        finally:
-            client.close()
-            if local is not None:
-                local.close()
-    finally:
-        quiet()
-
-
-def _quiet_dask():
-    """Raise Dask's loggers to CRITICAL; returns the function that restores them."""
-    names = [n for n in logging.root.manager.loggerDict if n.split(".")[0] in ("distributed", "tornado")]
-    loggers = [logging.getLogger(n) for n in ("distributed", "tornado", "asyncio", *names)]
-    levels = [lg.level for lg in loggers]
-    for lg in loggers:
-        lg.setLevel(logging.CRITICAL)
-
-    def restore():
-        for lg, level in zip(loggers, levels, strict=True):
-            lg.setLevel(level)
-    return restore
-
-
-class SchedulerLost(SpotsimError):
-    """The Dask scheduler went away during a sweep or an envelope: the points finished before
-    are kept in the points file, the others were not run."""
-
-
-def task_record(point: Point, future) -> dict:
-    """The record of a point's finished task: its run's record, or the task's failure
-    (`failed_record`). A result that cannot be had because the client lost its scheduler (the
-    futures cancelled, the connection closed) is no point's failure: SchedulerLost."""
-    from distributed.client import FutureCancelledError
-    from distributed.comm.core import CommClosedError
-
-    try:
-        return future.result()
-    except (FutureCancelledError, CommClosedError, OSError) as e:
-        raise SchedulerLost(f"the Dask scheduler was lost ({type(e).__name__})") from e
-    except Exception as e:  # noqa: BLE001 - the point's failure, not the sweep's
-        return failed_record(point, e)
-
-
 def failed_record(point: Point, error: BaseException) -> dict:
-    """The record of a point whose task failed on Dask: its worker died (twice) or it could
-    not run there."""
+    """The record of a point whose task failed: its worker died (twice) or it could not run
+    there."""
     return {"key": point.key, "index": point.index, "values": point.values, "summary": None, "worker": None,
-            "start_gap_mm": None, "status": WORKER_DIED if type(error).__name__ == "KilledWorker" else EXCEPTION,
+            "start_gap_mm": None, "status": WORKER_DIED if worker_died(error) else EXCEPTION,
             "message": f"{type(error).__name__}: {error}", "wall_time_s": math.nan}
 
 
-def run_on_cluster(first: list[Point], cluster: Cluster, source: str, finished, *, error_estimate: bool = True,
-                   grow_gap: bool = False, what: str = "sweep", total: int | None = None) -> int:
-    """Run points on `cluster` (`run_point`, every worker warmed first): the points `first`, then
-    whatever `finished(point, record)` returns for each that ends (a list of more points: none
-    for a sweep, a ray's next probe for the envelope). A point's failure is its record
-    (`task_record`); a lost scheduler is SchedulerLost. Returns how many points ran."""
-    from distributed import as_completed
-
-    from ..run import progress_bar
-
-    ran = 0
-    with dask_client(cluster) as client:
-        bar = progress_bar(total, cluster.progress, what=what, unit="point")
-        try:
-            scenario = next((p.scenario for p in first if p.scenario is not None), None)
-            if scenario is not None:
-                warm(client, scenario, source)
-            pending, points = as_completed(), {}
-
-            def submit(batch):
-                for p in batch:
-                    fut = client.submit(run_point, p, cluster.wall_limit_s, error_estimate, source, grow_gap,
-                                        key=f"point-{p.key}", pure=False)
-                    points[fut.key] = p
-                    pending.add(fut)
-
-            submit(first)
-            for fut in pending:
-                p = points.pop(fut.key)
-                record = task_record(p, fut)
-                ran += 1
-                bar.update(1)
-                submit(finished(p, record) or [])
-        finally:
-            bar.close()
-    return ran
+def run_on(runner: Runner, first: list[Point], source: str, finished, *, error_estimate: bool = True,
+           grow_gap: bool = False, what: str = "sweep", total: int | None = None, run=None) -> int:
+    """Run points on `runner` (`run_point`, every worker warmed first on the first point's
+    scenario; or `run(point) -> record` if given: tests): the points `first`, then whatever
+    `finished(point, record)` returns for each that ends (none for a sweep, a ray's next probe
+    for the envelope). Returns how many ran."""
+    scenario = next((p.scenario for p in first if p.scenario is not None), None)
+    warm = None if scenario is None or run is not None else functools.partial(warm_worker, scenario, source)
+    run = run or functools.partial(run_point, wall_limit_s=runner.wall_limit_s, with_estimate=error_estimate,
+                                   source=source, grow_gap=grow_gap)
+    return execute(run, first, runner, finished, failed_record, what=what, total=total, warm=warm)
 
 
-def run_points(todo: list[Point], out: Path, done: dict, cluster: Cluster, source: str, *,
+def run_points(todo: list[Point], out: Path, done: dict, runner: Runner, source: str, *,
                error_estimate: bool = True, grow_gap: bool = False, on_record=None) -> int:
-    """Run the points `todo` on `cluster`, each record appended to out's points file and put
+    """Run the points `todo` on `runner`, each record appended to out's points file and put
     in `done` as it ends (then `on_record(record)`); returns how many ran."""
     def finished(p, record):
         _append(out / POINTS_FILE, record)
@@ -817,5 +630,5 @@ def run_points(todo: list[Point], out: Path, done: dict, cluster: Cluster, sourc
         if on_record is not None:
             on_record(record)
 
-    return run_on_cluster(todo, cluster, source, finished, error_estimate=error_estimate, grow_gap=grow_gap,
-                          total=len(todo))
+    return run_on(runner, todo, source, finished, error_estimate=error_estimate, grow_gap=grow_gap,
+                  total=len(todo))
