@@ -23,7 +23,7 @@ from ..tables import ADAPTIVE, METHODS
 from .runs import (
     COMPARABLE,
     Outcome,
-    RowWriter,
+    StudyRows,
     errors,
     free_floating,
     grasp_names,
@@ -405,22 +405,20 @@ def accuracy_study(scenario, settings: list[Setting], reference: Setting, out_di
     dt = scenario.simulation.dt_s
     confirmation = reference.refined()
     sphere_sweep = any(s.sphere_scale != 1.0 for s in settings)
-    writer = RowWriter(out / "accuracy.csv", accuracy_columns(scenario, sphere_sweep))
     default = setting_of(scenario)
     # the paper's dynamics step is its 1 ms record interval; a scenario recording at another
     # interval has no run with the paper's setting
     paper = Setting("symplectic_euler", 1) if math.isclose(dt, 1e-3) else None
     todo = [s for s in dict.fromkeys(settings) if s not in (reference, confirmation)]
-    report = AccuracyReport(scenario.name, dt, reference, Outcome("interrupted", "not run"), confirmation,
-                            None, math.nan, "", writer.rows)
-    from ..run import progress_bar
-
-    bar = progress_bar(len(todo) + 3, progress, f"{scenario.name}: accuracy", "run")
 
     def role(s: Setting) -> str:
         return "paper" if s == paper else "default" if s == default else "sweep"
 
-    try:
+    with StudyRows(out / "accuracy.csv", accuracy_columns(scenario, sphere_sweep), len(todo) + 3, progress,
+                   f"{scenario.name}: accuracy") as study:
+        report = AccuracyReport(scenario.name, dt, reference, Outcome("interrupted", "not run"), confirmation,
+                                None, math.nan, "", study.rows)
+        bar, writer = study.bar, study
         warm_up(scenario, sorted({s.method for s in (*settings, reference)}))
         for setting, name in ((reference, "reference"), (confirmation, "confirmation")):
             bar.set_postfix_str(setting.label(dt))
@@ -456,12 +454,8 @@ def accuracy_study(scenario, settings: list[Setting], reference: Setting, out_di
             o = run_once(setting.apply(scenario), source, wall_limit_s)
             writer.write(accuracy_row(scenario, setting, role(setting), o, report.reference_outcome))
             bar.update(1)
-    except KeyboardInterrupt:
-        report.interrupted = True
-    finally:
-        bar.close()
-        writer.close()
-    report.files = [writer.path, out / "accuracy.md"]
+    report.interrupted = study.interrupted
+    report.files = [study.path, out / "accuracy.md"]
     atomic_write(out / "accuracy.md", accuracy_markdown(scenario, report))
     if plot and report.rows:
         work_precision_plot(scenario, report, out / "work_precision.png")

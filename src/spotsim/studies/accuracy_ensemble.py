@@ -53,7 +53,7 @@ from .ensemble import (
     members_csv,
     statistics,
 )
-from .runs import RowWriter, markdown_table, percent, sig, warm_up
+from .runs import StudyRows, markdown_table, percent, sig, warm_up
 
 #: Targets of a setting against the reference (issue 14): the near-deterministic quantities
 #: within 2 %, member by member (`paired_rel`); the residual offset's distribution not told
@@ -320,13 +320,12 @@ def accuracy_ensemble_study(scenario, settings: list, reference, out_dir, n: int
     confirmation = reference.refined()
     k = min(confirmation_members or n, n)
     n_grasps, dual = len(modules_of(scenario)), scenario.kind == "dual_arm"
-    writer = RowWriter(out / "accuracy_ensemble.csv", columns(n_grasps, dual))
-    report = EnsembleAccuracyReport(scenario.name, dt, n, seed, reference, confirmation, k, writer.rows)
     todo = [(reference, "reference", n), (confirmation, "confirmation", k)]
     todo += [(s, "default" if s == default else "sweep", n) for s in dict.fromkeys(settings)
              if s not in (reference, confirmation)]
     ref = None
-    try:
+    with StudyRows(out / "accuracy_ensemble.csv", columns(n_grasps, dual)) as writer:
+        report = EnsembleAccuracyReport(scenario.name, dt, n, seed, reference, confirmation, k, writer.rows)
         warm_up(scenario, sorted({s.method for s, _, _ in todo}))
         for setting, role, size in todo:
             label = setting.label(dt)
@@ -341,10 +340,7 @@ def accuracy_ensemble_study(scenario, settings: list, reference, out_dir, n: int
                 break
             ref = ref or e
             writer.write(setting_row(setting, role, e, ref, dt))
-    except KeyboardInterrupt:
-        report.interrupted = True
-    finally:
-        writer.close()
+    report.interrupted = report.interrupted or writer.interrupted
     md = out / "accuracy_ensemble.md"
     atomic_write(md, ensemble_markdown(scenario, report))
     report.files = [writer.path, md]

@@ -229,6 +229,30 @@ class RowWriter:
         self._file.close()
 
 
+class StudyRows:
+    """A study's loop, as a context: its CSV written a row at a time (`write`), its progress
+    bar (`bar`, of `total` runs), and Ctrl-C, which ends the loop, keeps the rows written and
+    sets `interrupted`."""
+
+    def __init__(self, path: Path, columns: list[str], total: int | None = None, progress: bool = False,
+                 what: str = "study"):
+        from ..run import progress_bar
+
+        self.writer = RowWriter(path, columns)
+        self.rows, self.path, self.write = self.writer.rows, path, self.writer.write
+        self.bar = progress_bar(total, progress, what, "run")
+        self.interrupted = False
+
+    def __enter__(self) -> StudyRows:
+        return self
+
+    def __exit__(self, kind, value, traceback) -> bool:
+        self.bar.close()
+        self.writer.close()
+        self.interrupted = kind is not None and issubclass(kind, KeyboardInterrupt)
+        return self.interrupted
+
+
 def markdown_table(header: list[str], rows: list[list]) -> str:
     lines = ["| " + " | ".join(header) + " |", "| " + " | ".join("---" for _ in header) + " |"]
     lines += ["| " + " | ".join(str(c).replace("|", "\\|") for c in r) + " |" for r in rows]

@@ -27,7 +27,7 @@ from ..status import (
 from ..tables import ADAPTIVE
 from .runs import (
     Outcome,
-    RowWriter,
+    StudyRows,
     markdown_table,
     run_once,
     sig,
@@ -336,37 +336,30 @@ def stability_study(scenario, cases: list[Case], out_dir, *, source: str = "<stu
     Ctrl-C stops the study and keeps the rows written."""
     out = Path(out_dir)
     prepare(out, "stability.md")
-    writer = RowWriter(out / "stability.csv", STABILITY_COLUMNS)
-    report = StabilityReport(scenario.name, writer.rows)
-    from ..run import progress_bar
-
-    bar = progress_bar(len(cases), progress, f"{scenario.name}: stability", "run")
-    try:
+    with StudyRows(out / "stability.csv", STABILITY_COLUMNS, len(cases), progress,
+                   f"{scenario.name}: stability") as study:
+        report = StabilityReport(scenario.name, study.rows)
         warm_up(scenario, [scenario.simulation.integrator.method])
         for case in cases:
-            bar.set_postfix_str(case.name)
+            study.bar.set_postfix_str(case.name)
             try:
                 s = case.apply(scenario)
             except SpotsimError as e:
                 s, o = None, Outcome(REJECTED, str(e).replace("\n", "; "))
             else:
                 o = run_once(s, source, wall_limit_s)
-            writer.write(checked_row(case, o, s, source, wall_limit_s))
+            study.write(checked_row(case, o, s, source, wall_limit_s))
             gap = clearing_gap(s) if case.misalignment and o.status == REJECTED and s is not None else None
             if gap is not None:  # the same start, with fingers opened wide enough to clear it
                 wide = dc_replace(case, name=f"{case.name}, gap {gap:g} mm",
                                   what=f"{case.what}; start gap {s.end_effector.start_gap_mm:g} -> {gap:g} mm")
                 s = widened(s, gap)
                 o = run_once(s, source, wall_limit_s)
-                writer.write(checked_row(wide, o, s, source, wall_limit_s))
-            bar.update(1)
-    except KeyboardInterrupt:
-        report.interrupted = True
-    finally:
-        bar.close()
-        writer.close()
+                study.write(checked_row(wide, o, s, source, wall_limit_s))
+            study.bar.update(1)
+    report.interrupted = study.interrupted
     atomic_write(out / "stability.md", stability_markdown(scenario, report))
-    report.files = [writer.path, out / "stability.md"]
+    report.files = [study.path, out / "stability.md"]
     return report
 
 
