@@ -364,7 +364,7 @@ CORPUS = {
         "{tmp}/out: timeseries.npz: a single array, not an .npz archive of them",
     )),
     "sweep: a foreign points file": Bad(_foreign_points, (
-        "{tmp}/out/points.jsonl: line 1 is not a sweep's point record: not resumable; move the file or give "
+        "{tmp}/out/points.jsonl: line 1 is not a study's run record: not resumable; move the file or give "
         "another --out",
     )),
 }

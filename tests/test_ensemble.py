@@ -1,6 +1,7 @@
 """Ensembles: a scenario run from starts perturbed within a stated tolerance, and the
 statistics and outcome classes across its members."""
 
+import csv
 import json
 from dataclasses import astuple
 
@@ -225,3 +226,39 @@ def test_ctrl_c_keeps_the_members_that_finished(tmp_path, monkeypatch):
     assert code == 130 and doc["status"] == "interrupted"
     assert [s["status"] for s in doc["starts"]] == ["incomplete", "incomplete", "interrupted", "interrupted"]
     assert doc["classes"]["grasp"] == {"incomplete": {"count": 2, "fraction": 1.0}}
+
+
+def test_an_interrupted_ensemble_started_again_runs_only_the_members_it_lacks(tmp_path, monkeypatch):
+    """Ctrl-C during member 2 of 4: members 0 and 1 are in members.jsonl; the same command again
+    runs members 2 and 3 only and gives the members an uninterrupted ensemble gives; under
+    other code (another fingerprint) it runs them all again."""
+    from spotsim.studies import runner as rn
+
+    real = ens.run_member
+    ran = []
+
+    def interrupting(task, scenario, source="<ensemble>"):
+        ran.append(task[0])
+        if ran == [0, 1, 2]:  # the first command's third member
+            raise KeyboardInterrupt
+        return real(task, scenario, source)
+
+    monkeypatch.setattr(ens, "run_member", interrupting)
+    out = tmp_path / "ens"
+    cmd = ["run", str(CASE_I), "--ensemble", "4", "--workers", "1", "--out", str(out), "--quiet",
+           "--no-error-estimate", "--set", f"simulation.duration_s={SHORT_S}"]
+    assert main(cmd) == 130 and ran == [0, 1, 2]
+    assert len((out / ens.MEMBERS_FILE).read_text().splitlines()) == 2
+    assert main(cmd) == 3 and ran == [0, 1, 2, 2, 3]  # incomplete (shortened), each member run once to its end
+    resumed = json.loads((out / "ensemble.json").read_text())
+    assert resumed["reused_members"] == 2 and resumed["statuses"] == {"incomplete": 4}
+    fresh = tmp_path / "fresh"
+    assert main([*cmd[:7], str(fresh), *cmd[8:]]) == 3
+    def table(d):  # the members table, without the machine's wall times
+        return [{k: v for k, v in r.items() if k != "wall_time_s"} for r in csv.DictReader(open(d / "members.csv"))]
+
+    assert table(out) == table(fresh)
+    monkeypatch.setattr(rn, "code_fingerprint", lambda: "other code")
+    del ran[:]
+    ran.append("other code")
+    assert main(cmd) == 3 and ran == ["other code", 0, 1, 2, 3]

@@ -22,6 +22,7 @@ from conftest import CASE_I
 import spotsim
 from spotsim.results import FIGURES_SINGLE
 from spotsim.studies import sweep as sw
+from spotsim.studies.runner import read_records
 
 KILLS = 25
 ENV = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
@@ -79,7 +80,7 @@ def check_study(d: Path) -> str:
 
 
 def check_sweep(d: Path) -> str:
-    records = sw.read_records(d / sw.POINTS_FILE)  # a line cut by the kill is dropped, any other refused
+    records = read_records(d / sw.POINTS_FILE)  # a line cut by the kill is dropped, any other refused
     assert len(records) <= 2
     if not (d / "sweep.parquet").exists():
         return "none"

@@ -6,9 +6,9 @@ import os
 
 import numpy as np
 import pytest
+from conftest import CASE_I
 
 import spotsim
-from conftest import CASE_I
 from spotsim import SpotsimError, load_scenario
 from spotsim.status import EXCEPTION, WORKER_DIED
 from spotsim.studies import runner as rn

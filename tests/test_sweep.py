@@ -28,8 +28,9 @@ from spotsim.status import (
     WORKER_DIED,
     run_outcome,
 )
+from spotsim.studies import runner as rn
 from spotsim.studies import sweep as sw
-from spotsim.studies.runner import Runner, SchedulerLost
+from spotsim.studies.runner import Runner, SchedulerLost, append_record, read_records
 
 HERE = Runner("serial")  # fake runs, in the test's own process
 #: Three short Case I points, x_a offset -1, 0 and 1 mm (each ~0.2 s and its companion).
@@ -164,7 +165,7 @@ def test_verdicts():
 def test_a_points_file_cut_by_a_kill_loses_only_its_last_line(tmp_path):
     path = tmp_path / sw.POINTS_FILE
     path.write_text(json.dumps({"key": "a", "status": "completed"}) + "\n" + '{"key": "b", "sta')
-    assert list(sw.read_records(path)) == ["a"]
+    assert list(read_records(path)) == ["a"]
     assert path.read_text().endswith("}\n")  # truncated to its last whole line
 
 
@@ -172,11 +173,11 @@ def test_a_foreign_points_file_is_refused_and_left_as_it_is(tmp_path, capsys):
     path = tmp_path / sw.POINTS_FILE
     text = json.dumps({"key": "a", "status": "completed"}) + "\nnot a record\n" + '{"key": "b", "sta'
     path.write_text(text)
-    with pytest.raises(SpotsimError, match="line 2 is not a sweep's point record"):
-        sw.read_records(path)
+    with pytest.raises(SpotsimError, match="line 2 is not a study's run record"):
+        read_records(path)
     assert path.read_text() == text
     assert main(["sweep", str(CASE_I), "--vary", VARY[0], "--out", str(tmp_path), "--quiet"]) == 2
-    assert "line 2 is not a sweep's point record" in capsys.readouterr().err and path.read_text() == text
+    assert "line 2 is not a study's run record" in capsys.readouterr().err and path.read_text() == text
     assert not (tmp_path / sw.SPEC_FILE).exists()
 
 
@@ -224,9 +225,9 @@ def test_a_finished_sweep_started_again_runs_nothing(local):
 def test_a_point_computed_by_other_code_is_not_reused(local, monkeypatch):
     """A point's key covers spotsim's code: under other code (another fingerprint) none of the
     finished points matches the spec's, so a resumed sweep runs them all again."""
-    done = sw.read_records(local.out / sw.POINTS_FILE)
+    done = read_records(local.out / sw.POINTS_FILE)
     assert {p.key for p in sw.resolve_points(CASE_I, sw.spec_of(VARY))} == set(done)
-    monkeypatch.setattr(sw, "code_fingerprint", lambda: "other code")
+    monkeypatch.setattr(rn, "code_fingerprint", lambda: "other code")
     assert not {p.key for p in sw.resolve_points(CASE_I, sw.spec_of(VARY))} & set(done)
 
 
@@ -264,7 +265,7 @@ def test_an_existing_scheduler_with_two_workers_gives_the_local_clusters_table(l
         with pytest.raises(SchedulerLost, match="2 of 5 points finished, kept in .* run the sweep again"):
             sw.run_sweep(CASE_I, sw.spec_of(["module.initial_offset_mm.0=-1:1:5"]), lost,
                          runner=Runner(scheduler=address), error_estimate=False, on_record=kill_the_scheduler)
-        assert len(sw.read_records(lost / sw.POINTS_FILE)) == 2
+        assert len(read_records(lost / sw.POINTS_FILE)) == 2
     finally:
         for p in procs:
             os.killpg(p.pid, signal.SIGKILL)
@@ -364,7 +365,7 @@ def test_a_sweep_killed_with_sigkill_resumes_and_keeps_each_point_once(tmp_path)
                           stderr=subprocess.DEVNULL, start_new_session=True, timeout=600)
     assert proc.returncode == -signal.SIGKILL
     points = out / sw.POINTS_FILE
-    assert len(sw.read_records(points)) == 2
+    assert len(read_records(points)) == 2
     cmd = [sys.executable, "-m", "spotsim.cli", "sweep", str(CASE_I), "--vary", "module.initial_offset_mm.0=-1:1:5",
            "--out", str(out), "--workers", "1", "--quiet", "--no-error-estimate"]
     assert subprocess.run(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL).returncode == 0
@@ -449,7 +450,7 @@ def test_a_point_that_cannot_be_written_is_cut_back_off_and_one_clear_error(tmp_
 
     points = tmp_path / sw.POINTS_FILE
     first = {"key": "a", "status": "completed", "values": {}}
-    sw._append(points, first)
+    append_record(points, first)
     real_write, calls = os.write, []
 
     def full(fd, data):  # writes 10 bytes, then the disk is full
@@ -458,9 +459,9 @@ def test_a_point_that_cannot_be_written_is_cut_back_off_and_one_clear_error(tmp_
             return real_write(fd, bytes(data[:10]))
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
 
-    monkeypatch.setattr(sw.os, "write", full)
-    with pytest.raises(SpotsimError, match=f"{points}: cannot write a finished point: No space left on device; "
-                                           "the points before it are kept"):
-        sw._append(points, {"key": "b", "status": "completed", "values": {}})
+    monkeypatch.setattr(rn.os, "write", full)
+    with pytest.raises(SpotsimError, match=f"{points}: cannot write a finished run: No space left on device; "
+                                           "the runs before it are kept"):
+        append_record(points, {"key": "b", "status": "completed", "values": {}})
     monkeypatch.undo()
-    assert list(sw.read_records(points)) == ["a"] and points.read_text().count("\n") == 1
+    assert list(read_records(points)) == ["a"] and points.read_text().count("\n") == 1

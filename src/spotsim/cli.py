@@ -626,8 +626,11 @@ def _ensemble(args, scenario, model, path: Path, out: Path) -> int:
         from .studies.runner import DASK, Runner
 
         runner = Runner(DASK, args.scheduler, args.workers, None, not args.quiet)
-    e = ensemble(scenario, args.ensemble, seed=args.seed, family=args.perturb, workers=args.workers,
-                 progress=not args.quiet, model=model, source=str(path), runner=runner)
+    try:
+        e = ensemble(scenario, args.ensemble, seed=args.seed, family=args.perturb, workers=args.workers,
+                     progress=not args.quiet, model=model, source=str(path), runner=runner, out_dir=out)
+    except SpotsimError as err:  # a scheduler that cannot be reached, or was lost
+        return _bad_input(err)
     first = e.members[0] if e.members else None
     if not args.no_error_estimate and not e.interrupted and first is not None and first.summary:
         from .studies.estimate import estimate
@@ -651,7 +654,8 @@ def _ensemble(args, scenario, model, path: Path, out: Path) -> int:
     if e.error_estimate is not None:
         print(estimate_lines(e.error_estimate).replace("  error estimate, per quantity", "  member 0's error estimate, "
                                                                                      "per quantity", 1))
-    print(f"  wall time {e.wall_time_s:.2f} s on {e.workers} worker{'s' if e.workers > 1 else ''}")
+    print(f"  wall time {e.wall_time_s:.2f} s on {e.workers} worker{'s' if e.workers > 1 else ''}"
+          + (f"; {e.reused} members from an earlier run over {out} (members.jsonl)" if e.reused else ""))
     for f in files:
         print(f"  {f}")
     if e.interrupted:

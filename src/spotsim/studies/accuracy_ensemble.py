@@ -312,7 +312,9 @@ def accuracy_ensemble_study(scenario, settings: list, reference, out_dir, n: int
     starts; write accuracy_ensemble.csv (a row per setting as it ends), members/<setting>.csv
     (each ensemble's members table), accuracy_ensemble.md and work_precision_ensemble.png into
     `out_dir`; `default`: the scenario's own setting (`accuracy.setting_of`). Ctrl-C stops the
-    study and keeps the rows written (report.interrupted)."""
+    study and keeps the rows written (report.interrupted); every member's run is kept in
+    members/members.jsonl as it ends, and a study started again over `out_dir` runs only the
+    members it lacks (`ensemble.ensemble`'s out_dir)."""
     out = Path(out_dir)
     prepare(out, "accuracy_ensemble.md")
     (out / "members").mkdir(exist_ok=True)
@@ -332,7 +334,7 @@ def accuracy_ensemble_study(scenario, settings: list, reference, out_dir, n: int
             if progress:
                 print(f"{scenario.name}: {label} ({role}), {size} members", flush=True)
             e = ensemble(setting.apply(scenario), size, seed=seed, workers=workers, progress=progress,
-                         source=source)
+                         source=source, out_dir=out / "members")
             report.ensembles[label] = e
             atomic_write(out / "members" / f"{slug(label)}.csv", members_csv(e))
             if e.interrupted:

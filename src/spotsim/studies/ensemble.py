@@ -139,6 +139,37 @@ def failed_member(task: tuple[int, Start], error: BaseException) -> Member:
                   f"{type(error).__name__}: {error}")
 
 
+#: The records file of an ensemble's members (`runner.append_record`), in its output directory.
+MEMBERS_FILE = "members.jsonl"
+#: Statuses of members run again when the ensemble is: not their run's own end.
+RUN_AGAIN = ("interrupted", WORKER_DIED)
+
+
+def member_record(m: Member, key: str) -> dict:
+    """A member as its line of the records file."""
+    return {"key": key, "index": m.index, "start": m.start.as_dict(), "status": m.status, "message": m.message,
+            "summary": m.summary}
+
+
+def member_of(record: dict, index: int) -> Member:
+    """The member `index` from its line of the records file."""
+    start = record["start"]
+    return Member(index, Start({k: tuple(v["initial_offset_mm"]) for k, v in start.items()},
+                               {k: tuple(v["initial_rpy_deg"]) for k, v in start.items()}),
+                  record["status"], record["message"], record["summary"])
+
+
+def _member_key(scenario, start: Start) -> str | None:
+    """The key of a member's record (`runner.scenario_key`: its scenario and spotsim's code),
+    None for a start that is no valid scenario (such a member is always run)."""
+    from .runner import scenario_key
+
+    try:
+        return scenario_key(member_scenario(scenario, start))
+    except SpotsimError:
+        return None
+
+
 # ----------------------------------------------------------------------------- the ensemble
 
 
@@ -156,6 +187,7 @@ class EnsembleResult:
     wall_time_s: float = math.nan
     workers: int = 1
     family: str = ALL_AXES
+    reused: int = 0  # members found in the records file of an earlier run (`ensemble`'s out_dir)
     summary: dict = field(init=False)
     error_estimate: dict | None = None  # member 0's (`studies.estimate`), when one was made
 
@@ -177,11 +209,16 @@ class EnsembleResult:
 
 def ensemble(scenario, n: int, *, seed: int = 0, offset_tol_mm: float = OFFSET_TOL_MM,
              rpy_tol_deg: float = RPY_TOL_DEG, family: str = ALL_AXES, workers: int | None = None,
-             progress: bool = False, model=None, source: str = "<scenario>", runner=None) -> EnsembleResult:
+             progress: bool = False, model=None, source: str = "<scenario>", runner=None,
+             out_dir=None) -> EnsembleResult:
     """Run `scenario` from n starts, member 0 unperturbed and the others perturbed within the
     tolerances on the axes of `family` (`perturbed_starts`), on `runner` (`runner.Runner`; by
     default a pool of `workers` processes, os.cpu_count() when None; 1 runs them here, one
     after the other).
+
+    out_dir: each member's record is appended to its MEMBERS_FILE as the member ends, and a
+    member whose record is there (its scenario and spotsim's code the same) is not run again:
+    an interrupted ensemble started again over the directory runs only what it lacks.
 
     model: the scenario's Model if already built (each worker process otherwise builds it once).
     Never raises on a member's physics or failure: each is counted with its status. Ctrl-C
@@ -190,7 +227,17 @@ def ensemble(scenario, n: int, *, seed: int = 0, offset_tol_mm: float = OFFSET_T
     import functools
     import time
 
-    from .runner import PROCESSES, SERIAL, Runner, execute, keep_model, warm_worker
+    from .runner import (
+        PROCESSES,
+        SERIAL,
+        Runner,
+        SchedulerLost,
+        append_record,
+        execute,
+        keep_model,
+        read_records,
+        warm_worker,
+    )
 
     if not (isinstance(n, int | np.integer) and n >= 1):
         raise SpotsimError(f"ensemble size n = {n}: must be an integer >= 1")
@@ -211,26 +258,41 @@ def ensemble(scenario, n: int, *, seed: int = 0, offset_tol_mm: float = OFFSET_T
     keep_model(model)  # the workers' (forked) or this process's nominal model
     starts = perturbed_starts(scenario, n, seed, offset_tol_mm, rpy_tol_deg, family)
     members: list[Member | None] = [None] * n
+    records = None if out_dir is None else Path(out_dir) / MEMBERS_FILE
+    keys = [None] * n if records is None else [_member_key(scenario, start) for start in starts]
+    done = {} if records is None else read_records(records)
+    if records is not None:
+        records.parent.mkdir(parents=True, exist_ok=True)
+    for i, key in enumerate(keys):
+        if key in done and done[key]["status"] not in RUN_AGAIN:
+            members[i] = member_of(done[key], i)
+    reused = sum(m is not None for m in members)
 
     def finished(task, m: Member):
         members[m.index] = m
         if m.status == "interrupted":  # Ctrl-C ended this member's run
             raise KeyboardInterrupt
+        if keys[m.index] is not None and m.status not in RUN_AGAIN:
+            append_record(records, member_record(m, keys[m.index]))
 
     interrupted = False
     wall0 = time.perf_counter()
     try:
-        execute(functools.partial(run_member, scenario=scenario, source=source), list(enumerate(starts)), runner,
-                finished, failed_member, what="ensemble", total=n,
+        execute(functools.partial(run_member, scenario=scenario, source=source),
+                [(i, start) for i, start in enumerate(starts) if members[i] is None], runner,
+                finished, failed_member, what="ensemble", total=n - reused,
                 warm=functools.partial(warm_worker, scenario, source))
     except KeyboardInterrupt:
         interrupted = True
+    except SchedulerLost as e:
+        kept = f", kept in {records}: run it again to resume" if records is not None else ""
+        raise SchedulerLost(f"{e}: {sum(m is not None for m in members)} of {n} members finished{kept}") from e
     wall = time.perf_counter() - wall0
     for i, m in enumerate(members):
         if m is None:
             members[i] = Member(i, starts[i], "interrupted", "not run: the ensemble was interrupted")
     return EnsembleResult(scenario, seed, offset_tol_mm, rpy_tol_deg, members, interrupted, wall,
-                          runner.worker_count(n) if runner.backend != SERIAL else 1, family)
+                          runner.worker_count(n) if runner.backend != SERIAL else 1, family, reused)
 
 
 # ----------------------------------------------------------------------------- statistics
@@ -375,6 +437,7 @@ def ensemble_json(e: EnsembleResult) -> dict:
                            "that ran (all but the interrupted)",
         "workers": e.workers,
         "wall_time_s": e.wall_time_s,
+        "reused_members": e.reused,
         "statuses": s["statuses"],
         "classes": s["classes"],
         "statistics": s["statistics"],

@@ -33,8 +33,8 @@ from ..errors import ScenarioError
 from ..files import atomic_write, prepare, save_figure
 from ..scenario import TOLERANCE_DEG, TOLERANCE_OFFSET_MM, from_dict, set_value
 from ..status import SEATED, run_outcome
-from .runner import Runner, SchedulerLost, check_budget
-from .sweep import POINTS_FILE, PRECISION_MM, Point, _append, read_records, run_on, scenario_key
+from .runner import Runner, SchedulerLost, append_record, check_budget, read_records, scenario_key
+from .sweep import POINTS_FILE, PRECISION_MM, Point, run_on
 
 #: The misalignment axes: key path of the module's start, unit.
 AXES = {"x": ("module.initial_offset_mm.0", "mm"), "y": ("module.initial_offset_mm.1", "mm"),
@@ -212,7 +212,7 @@ def envelope(config, out_dir, search: Search = Search(), *, runner: Runner = Run
 
     def store(record):
         """Keep a new record: appended to the points file and in `done`."""
-        _append(out / POINTS_FILE, record)
+        append_record(out / POINTS_FILE, record)
         done[record["key"]] = record
         state["runs"] += 1
 

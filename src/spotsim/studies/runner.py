@@ -19,6 +19,8 @@ on every backend. Each worker process keeps the models it built (`model_for`).
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 import hashlib
 import json
 import logging
@@ -29,10 +31,14 @@ import sys
 from collections import OrderedDict, deque
 from contextlib import contextmanager
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Callable
 
+import numpy as np
+
 from ..errors import ScenarioError, SpotsimError
-from ..scenario import modules_of, to_dict
+from ..jit import add_sources
+from ..scenario import modules_of, to_dict, to_yaml
 
 SERIAL, PROCESSES, DASK = "serial", "processes", "dask"
 BACKENDS = (SERIAL, PROCESSES, DASK)
@@ -299,6 +305,90 @@ def _quiet_dask():
         for lg, level in zip(loggers, levels, strict=True):
             lg.setLevel(level)
     return restore
+
+
+# ----------------------------------------------------------------------------- keys
+
+
+@functools.cache
+def code_fingerprint() -> str:
+    """A hash of the code a study's run runs: spotsim's modules and the URDF/XACRO files it builds
+    its scenes from, by their paths and contents."""
+    from ..assemble.assets import URDF_DIR
+
+    package = Path(__file__).resolve().parents[1]
+    digest = hashlib.sha256()
+    add_sources(digest, package, sorted(package.rglob("*.py")))
+    add_sources(digest, URDF_DIR, sorted([*URDF_DIR.rglob("*.xacro"), *URDF_DIR.rglob("*.urdf")]))
+    return digest.hexdigest()
+
+
+def scenario_key(scenario) -> str:
+    """A short hash of a resolved scenario and of the code that runs it (`code_fingerprint`):
+    equal scenarios under equal code, equal keys; a record computed by other code is not
+    reused (a version of spotsim is its code)."""
+    return hashlib.sha256((code_fingerprint() + to_yaml(scenario)).encode()).hexdigest()[:16]
+
+
+# ----------------------------------------------------------------------------- records
+
+
+def read_records(path: Path) -> dict[str, dict]:
+    """The finished runs of a records file (`append_record`) by key. A last line without its newline (a kill
+    while writing) is dropped and cut from the file; any other line that is not a record is an
+    error (SpotsimError), and the file is left as it is."""
+    out: dict = {}
+    if not path.exists():
+        return out
+    data = path.read_bytes()
+    lines = data.splitlines(keepends=True)
+    for n, line in enumerate(lines, 1):
+        if not line.endswith(b"\n"):
+            with path.open("r+b") as f:
+                f.truncate(len(data) - len(line))
+            break
+        try:
+            rec = json.loads(line)
+        except ValueError:
+            rec = None
+        if not isinstance(rec, dict) or "key" not in rec or "status" not in rec:
+            raise SpotsimError(f"{path}: line {n} is not a study's run record: not resumable; move the file "
+                               "or give another --out")
+        out.setdefault(rec["key"], rec)
+    return out
+
+
+def append_record(path: Path, record: dict) -> None:
+    """Append a finished run's record (a JSON object with its `key` and `status`) as one line,
+    synced to disk: the one writer of every resumable study. A write that fails (a full
+    disk) is cut back off, so that the file keeps whole lines only, and is a SpotsimError."""
+    data = memoryview((json.dumps(record, default=plain) + "\n").encode())
+    fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
+    size = os.fstat(fd).st_size
+    try:
+        while data:
+            data = data[os.write(fd, data):]
+        os.fsync(fd)
+    except OSError as e:
+        try:
+            os.ftruncate(fd, size)
+        except OSError:
+            pass  # a line cut short is dropped when the file is read (`read_records`)
+        raise SpotsimError(f"{path}: cannot write a finished run: {e.strerror}; the runs before it are "
+                           "kept: free some space and run the study again to resume") from e
+    finally:
+        os.close(fd)
+
+
+def plain(x):
+    """A JSON value of what json cannot write itself: numpy's, a dataclass, else its text."""
+    if isinstance(x, np.generic):
+        return x.item()
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    if dataclasses.is_dataclass(x):
+        return dataclasses.asdict(x)
+    return str(x)
 
 
 # ----------------------------------------------------------------------------- a worker's models

@@ -290,11 +290,11 @@ def step_scaled(s, factor: float):
 
 
 def warm_up(scenario, methods, duration_s: float = 0.5) -> None:
-    """Run each method briefly (dopri5 at a loose tolerance), so that no timed run pays for
-    loading its compiled kernels."""
+    """Run each method briefly here (dopri5 at a loose tolerance), so that no timed run pays for
+    loading its compiled kernels: the processes `run_once` forks inherit them loaded."""
     for method in methods:
         integrator = {**to_dict(scenario.simulation.integrator), "method": method}
         if method == "dopri5":
             integrator.update(rtol=1e-3, atol=1e-6)
-        run_once(replace(scenario, simulation={"duration_s": min(duration_s, scenario.simulation.duration_s),
-                                               "integrator": integrator}))
+        _run_once(replace(scenario, simulation={"duration_s": min(duration_s, scenario.simulation.duration_s),
+                                                "integrator": integrator}), "<warm-up>")

@@ -52,8 +52,7 @@ import yaml
 
 from ..errors import ScenarioError, SpotsimError
 from ..files import atomic_write
-from ..jit import add_sources
-from ..scenario import from_dict, modules_of, parse_yaml, read_yaml, set_value, to_dict, to_yaml
+from ..scenario import from_dict, modules_of, parse_yaml, read_yaml, set_value, to_dict
 from ..status import (
     EXCEPTION,
     REJECTED,
@@ -68,9 +67,13 @@ from .runner import (
     WALL_LIMIT_S,
     Runner,
     SchedulerLost,
+    append_record,
     check_budget,
     execute,
     model_for,
+    plain,
+    read_records,
+    scenario_key,
     warm_worker,
     worker_died,
 )
@@ -243,26 +246,6 @@ class Point:
     problems: list = field(default_factory=list)
 
 
-@functools.cache
-def code_fingerprint() -> str:
-    """A hash of the code a point runs: spotsim's modules and the URDF/XACRO files it builds
-    its scenes from, by their paths and contents."""
-    from ..assemble.assets import URDF_DIR
-
-    package = Path(__file__).resolve().parents[1]
-    digest = hashlib.sha256()
-    add_sources(digest, package, sorted(package.rglob("*.py")))
-    add_sources(digest, URDF_DIR, sorted([*URDF_DIR.rglob("*.xacro"), *URDF_DIR.rglob("*.urdf")]))
-    return digest.hexdigest()
-
-
-def scenario_key(scenario) -> str:
-    """A short hash of a resolved scenario and of the code that runs it (`code_fingerprint`):
-    equal scenarios under equal code, equal keys; a point computed by other code is not
-    reused."""
-    return hashlib.sha256((code_fingerprint() + to_yaml(scenario)).encode()).hexdigest()[:16]
-
-
 def base_raw(config: Path, sets: list[str]) -> dict:
     """The raw mapping of a scenario file with the fixed overrides applied, validated once."""
     from ..scenario import load_scenario, set_override
@@ -410,62 +393,6 @@ def table_row(record: dict, scenario, keys: list[str], precision_mm: float = PRE
     return row
 
 
-def read_records(path: Path) -> dict[str, dict]:
-    """The finished points of a points file by key. A last line without its newline (a kill
-    while writing) is dropped and cut from the file; any other line that is not a record is an
-    error (SpotsimError), and the file is left as it is."""
-    out: dict = {}
-    if not path.exists():
-        return out
-    data = path.read_bytes()
-    lines = data.splitlines(keepends=True)
-    for n, line in enumerate(lines, 1):
-        if not line.endswith(b"\n"):
-            with path.open("r+b") as f:
-                f.truncate(len(data) - len(line))
-            break
-        try:
-            rec = json.loads(line)
-        except ValueError:
-            rec = None
-        if not isinstance(rec, dict) or "key" not in rec or "status" not in rec:
-            raise SpotsimError(f"{path}: line {n} is not a sweep's point record: not resumable; move the file "
-                               "or give another --out")
-        out.setdefault(rec["key"], rec)
-    return out
-
-
-def _append(path: Path, record: dict) -> None:
-    """Append a finished point's record as one line, synced to disk. A write that fails (a full
-    disk) is cut back off, so that the file keeps whole lines only, and is a SpotsimError."""
-    data = memoryview((json.dumps(record, default=_plain) + "\n").encode())
-    fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
-    size = os.fstat(fd).st_size
-    try:
-        while data:
-            data = data[os.write(fd, data):]
-        os.fsync(fd)
-    except OSError as e:
-        try:
-            os.ftruncate(fd, size)
-        except OSError:
-            pass  # a line cut short is dropped when the file is read (`read_records`)
-        raise SpotsimError(f"{path}: cannot write a finished point: {e.strerror}; the points before it are "
-                           "kept: free some space and run the sweep again to resume") from e
-    finally:
-        os.close(fd)
-
-
-def _plain(x):
-    if isinstance(x, np.generic):
-        return x.item()
-    if isinstance(x, np.ndarray):
-        return x.tolist()
-    if dataclasses.is_dataclass(x):
-        return dataclasses.asdict(x)
-    return str(x)
-
-
 def write_table(rows: list[dict], out: Path):
     """rows as sweep.parquet and sweep.csv, each written whole to a temporary file and then
     renamed over the last one; returns the DataFrame."""
@@ -535,7 +462,7 @@ def run_sweep(config, spec: SweepSpec, out_dir, *, runner: Runner = Runner(), pr
         out.mkdir(parents=True, exist_ok=True)
         atomic_write(out / SPEC_FILE, yaml.safe_dump(
             {"scenario": str(config), "set": spec.sets, "keys": keys,
-             "points": [{"key": p.key, **{k: _plain(v) if isinstance(v, np.generic) else v
+             "points": [{"key": p.key, **{k: plain(v) if isinstance(v, np.generic) else v
                                           for k, v in p.values.items()}} for p in points]}, sort_keys=False))
     except OSError as e:
         raise SpotsimError(f"{out}: cannot write the sweep's files: {e.strerror}") from e
@@ -625,7 +552,7 @@ def run_points(todo: list[Point], out: Path, done: dict, runner: Runner, source:
     """Run the points `todo` on `runner`, each record appended to out's points file and put
     in `done` as it ends (then `on_record(record)`); returns how many ran."""
     def finished(p, record):
-        _append(out / POINTS_FILE, record)
+        append_record(out / POINTS_FILE, record)
         done[p.key] = record
         if on_record is not None:
             on_record(record)
