@@ -14,7 +14,7 @@ from spotsim.assemble.model import with_start
 from spotsim.cli import ensemble_exit, main
 from spotsim.errors import SpotsimError
 from spotsim.studies import ensemble as ens
-from spotsim.studies.ensemble import EnsembleResult, Member, Start, member_scenario, perturbed_starts, run_member
+from spotsim.studies.ensemble import EnsembleResult, Start, member, member_scenario, perturbed_starts, run_member
 from spotsim.studies.runner import keep_model
 
 #: Case I at the default step: a whole member runs in well under a second.
@@ -109,10 +109,10 @@ def test_a_member_on_the_shared_model_is_a_fresh_simulate_of_its_scenario(config
     s = spotsim.load_scenario(ROOT / "config" / config)
     start = perturbed_starts(s, 3, seed=11)[2]
     keep_model(spotsim.build_model(s))  # the nominal model a worker holds
-    member = run_member((2, start), s)
+    one = run_member((2, start, None), s)
     fresh = spotsim.simulate(member_scenario(s, start))
-    assert member.status == fresh.status == "completed"
-    assert comparable(member.summary) == comparable(fresh.summary)
+    assert one.status == fresh.status == "completed"
+    assert comparable(one.summary) == comparable(fresh.summary)
 
 
 def test_the_same_seed_gives_the_same_results_serial_or_in_a_pool(case_I, model_I):
@@ -152,7 +152,7 @@ def _member(i, status, norm=None, roll=0.0, peak=50.0, completed=1.0):
              "peak_force_norm_N": peak, "peak_torque_norm_Nm": 1.0}
     start = Start({"module": (0.0, -3.0, 0.0)}, {"module": (0.0, 0.0, 0.0)})
     summary = None if status == "interrupted" else {"grasps": [grasp], "sim_time_s": 1.0, "wall_time_s": 0.1}
-    return Member(i, start, status, status, summary)
+    return member(i, start, status, status, summary)
 
 
 def test_statistics_and_classes_of_hand_made_members(case_I):

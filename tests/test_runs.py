@@ -366,8 +366,8 @@ def test_a_grasp_that_closes_with_a_finger_outside_its_groove_is_not_captured(tm
     assert (ens / "figures" / "ensemble.png").read_bytes().startswith(b"\x89PNG")
     spec = sw.SweepSpec(points=[{"module.initial_offset_mm.1": -11.0}], sets=["end_effector.start_gap_mm=15"])
     record = sw.run_point(sw.resolve_points(CASE_I, spec)[0], with_estimate=False)
-    assert record["status"] == "not captured"
-    assert run_outcome(record["status"], record["summary"]) == NOT_CAPTURED
+    assert record.status == "not captured"
+    assert run_outcome(record.status, record.summary) == NOT_CAPTURED
 
 
 def test_a_run_with_overrides_gets_a_results_directory_of_its_own():

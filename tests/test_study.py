@@ -161,7 +161,7 @@ def test_a_run_within_its_wall_limit_is_the_same_run(case_I):
     """In its worker process, within its budget, a run gives what it gives in the study's own
     process without one."""
     short = spotsim.replace(case_I, simulation={"duration_s": 0.5})
-    here, there = runs._run_once(short, "<test>"), runs.run_once(short, wall_limit_s=60)
+    here, there = runs.Outcome.of(runs.run_record(short)), runs.run_once(short, wall_limit_s=60)
     assert there.status == here.status == "incomplete" and there.steps == here.steps
     assert (there.offsets[0] == here.offsets[0]).all() and there.peaks == here.peaks
 
@@ -362,13 +362,13 @@ def accuracy_ensembles(tmp_path_factory):
 def test_every_setting_runs_from_the_same_seeded_starts(accuracy_ensembles):
     """The reference, its confirmation and the swept setting run from the same starts: those of
     the seed, member 0 unperturbed."""
-    from spotsim.studies.ensemble import perturbed_starts
+    from spotsim.studies.ensemble import perturbed_starts, start_of
 
     report, _, _ = accuracy_ensembles
     expected = perturbed_starts(spotsim.load_scenario(CASE_I), 3, seed=7)
     assert len(report.ensembles) == 3
     for e in report.ensembles.values():
-        assert [m.start for m in e.members] == expected and e.seed == 7
+        assert [start_of(m) for m in e.members] == expected and e.seed == 7
 
 
 def test_ensemble_accuracy_study_writes_a_row_per_setting(accuracy_ensembles):

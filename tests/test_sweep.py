@@ -190,7 +190,7 @@ def test_a_point_that_raises_is_recorded_with_its_status(monkeypatch):
     monkeypatch.setattr(run, "simulate", broken)
     point = sw.resolve_points(CASE_I, sw.spec_of(VARY))[0]
     record = sw.run_point(point)
-    assert record["status"] == EXCEPTION and "RuntimeError raised by simulate: a bug" in record["message"]
+    assert record.status == EXCEPTION and "RuntimeError raised by simulate: a bug" in record.message
 
 
 # ----------------------------------------------------------------------------- on Dask
@@ -302,9 +302,9 @@ def test_killed_workers_leave_every_point_in_the_table_exactly_once(local, tmp_p
             time.sleep(0.01)
 
     def kill_a_worker(record):
-        if len(killed) < 2 and record["worker"] not in killed:
-            os.kill(record["worker"], signal.SIGKILL)
-            killed.append(record["worker"])
+        if len(killed) < 2 and record.worker not in killed:
+            os.kill(record.worker, signal.SIGKILL)
+            killed.append(record.worker)
 
     threading.Thread(target=kill_a_starting_worker, daemon=True).start()
     spec = sw.spec_of(["module.initial_offset_mm.0=-1:1:5"])
@@ -319,7 +319,7 @@ def test_killed_workers_leave_every_point_in_the_table_exactly_once(local, tmp_p
 
 def test_an_interrupted_sweep_resumes_with_only_its_missing_points(local, tmp_path):
     def stop_after_two(record, seen=[]):  # noqa: B006 - the count across calls
-        seen.append(record["key"])
+        seen.append(record.key)
         if len(seen) == 2:
             raise KeyboardInterrupt
 
@@ -387,9 +387,8 @@ def fake_run(boundary: dict):
         summary = {"grasps": [{"residual_offset_norm_mm": 0.01, "completed_s": 1.0, "in_grooves": True,
                                "residual_rpy_deg": [0.01, 0.0, 0.0]} if inside else
                               {"residual_offset_norm_mm": None, "completed_s": None}]}
-        return {"key": point.key, "index": point.index, "values": point.values, "summary": summary,
-                "status": "completed" if inside else "incomplete", "message": "", "wall_time_s": 0.0,
-                "worker": None, "start_gap_mm": None}
+        return rn.Record(point.key, point.index, "completed" if inside else "incomplete", "", summary, 0.0,
+                         about={"values": point.values, "start_gap_mm": None})
     return run
 
 
@@ -449,7 +448,7 @@ def test_a_point_that_cannot_be_written_is_cut_back_off_and_one_clear_error(tmp_
     import errno
 
     points = tmp_path / sw.POINTS_FILE
-    first = {"key": "a", "status": "completed", "values": {}}
+    first = rn.Record("a", 0, "completed", "")
     append_record(points, first)
     real_write, calls = os.write, []
 
@@ -462,6 +461,6 @@ def test_a_point_that_cannot_be_written_is_cut_back_off_and_one_clear_error(tmp_
     monkeypatch.setattr(rn.os, "write", full)
     with pytest.raises(SpotsimError, match=f"{points}: cannot write a finished run: No space left on device; "
                                            "the runs before it are kept"):
-        append_record(points, {"key": "b", "status": "completed", "values": {}})
+        append_record(points, rn.Record("b", 1, "completed", ""))
     monkeypatch.undo()
     assert list(read_records(points)) == ["a"] and points.read_text().count("\n") == 1

@@ -15,6 +15,7 @@ are the same whatever its size.
 from __future__ import annotations
 
 import csv
+import dataclasses
 import io
 import json
 import math
@@ -27,6 +28,7 @@ import numpy as np
 from ..errors import SpotsimError
 from ..scenario import modules_of, replace
 from ..status import EXCEPTION, REJECTED, WEDGED_OFFSET_MM, WEDGED_TILT_DEG, WORKER_DIED, grasp_outcome
+from .runner import Record, failed
 
 #: Default perturbation of each module's start: +-10 um on each axis of the offset and
 #: +-0.01 deg on each of roll, pitch, yaw, well below any tolerance a drawing would state and
@@ -96,67 +98,48 @@ def member_scenario(scenario, start: Start):
 # ----------------------------------------------------------------------------- one member
 
 
-@dataclass
-class Member:
-    """One member of an ensemble: its start, its status and message, and the summary.json
-    dictionary of its run (None when it did not run: rejected, exception, interrupted)."""
-
-    index: int
-    start: Start
-    status: str
-    message: str
-    summary: dict | None = None
-
-    def grasps(self) -> list[dict]:
-        return self.summary["grasps"] if self.summary else []
+def member(index: int, start: Start, status: str, message: str, summary: dict | None = None,
+           key: str | None = None) -> Record:
+    """An ensemble member's record (`runner.Record`): its start in `about`."""
+    return Record(key, index, status, message, summary, about={"start": start.as_dict()})
 
 
-def run_member(task: tuple[int, Start], scenario, source: str = "<ensemble>") -> Member:
-    """Run one member, task = (index, start), of the ensemble of `scenario`: on the process's
-    model of its scene (`runner.model_for`: the nominal one, built or inherited once per
-    worker) with the member's start swapped in (`assemble.model.with_start`). Never raises but
-    on the user's Ctrl-C: a rejected start or an exception is the member's status."""
+def start_of(m: Record) -> Start:
+    """A member's start, from its record."""
+    start = m.about["start"]
+    return Start({k: tuple(v["initial_offset_mm"]) for k, v in start.items()},
+                 {k: tuple(v["initial_rpy_deg"]) for k, v in start.items()})
+
+
+def run_member(task: tuple[int, Start, str | None], scenario, source: str = "<ensemble>") -> Record:
+    """Run one member, task = (index, start, key), of the ensemble of `scenario`: on the
+    process's model of its scene (`runner.model_for`: the nominal one, built or inherited once
+    per worker) with the member's start swapped in (`assemble.model.with_start`). Never raises
+    but on the user's Ctrl-C: a rejected start or an exception is the member's status."""
     from .runner import model_for
     from .runs import attempt, raised
 
-    index, start = task
+    index, start, key = task
     try:
         mine = member_scenario(scenario, start)
         model = model_for(mine, source)
     except SpotsimError as e:  # the perturbed start's own problem, found before anything ran
-        return Member(index, start, REJECTED, str(e).replace("\n", "; "))
+        return member(index, start, REJECTED, str(e).replace("\n", "; "), key=key)
     except Exception as e:  # nothing here should raise: the member reports it, the others go on
-        return Member(index, start, EXCEPTION, raised(e, "the start"))
+        return member(index, start, EXCEPTION, raised(e, "the start"), key=key)
     status, message, result = attempt(mine, model, source)
-    return Member(index, start, status, message, None if result is None else result.summary)
+    return member(index, start, status, message, None if result is None else result.summary, key)
 
 
-def failed_member(task: tuple[int, Start], error: BaseException) -> Member:
+def failed_member(task: tuple[int, Start, str | None], error: BaseException) -> Record:
     """The member whose task failed outside its run: its worker died, or it could not be sent."""
-    from .runner import worker_died
-
-    return Member(task[0], task[1], WORKER_DIED if worker_died(error) else EXCEPTION,
-                  f"{type(error).__name__}: {error}")
+    return failed(task[2], task[0], error, start=task[1].as_dict())
 
 
 #: The records file of an ensemble's members (`runner.append_record`), in its output directory.
 MEMBERS_FILE = "members.jsonl"
 #: Statuses of members run again when the ensemble is: not their run's own end.
 RUN_AGAIN = ("interrupted", WORKER_DIED)
-
-
-def member_record(m: Member, key: str) -> dict:
-    """A member as its line of the records file."""
-    return {"key": key, "index": m.index, "start": m.start.as_dict(), "status": m.status, "message": m.message,
-            "summary": m.summary}
-
-
-def member_of(record: dict, index: int) -> Member:
-    """The member `index` from its line of the records file."""
-    start = record["start"]
-    return Member(index, Start({k: tuple(v["initial_offset_mm"]) for k, v in start.items()},
-                               {k: tuple(v["initial_rpy_deg"]) for k, v in start.items()}),
-                  record["status"], record["message"], record["summary"])
 
 
 def _member_key(scenario, start: Start) -> str | None:
@@ -182,7 +165,7 @@ class EnsembleResult:
     seed: int
     offset_tol_mm: float
     rpy_tol_deg: float
-    members: list[Member]
+    members: list[Record]
     interrupted: bool = False
     wall_time_s: float = math.nan
     workers: int = 1
@@ -257,29 +240,29 @@ def ensemble(scenario, n: int, *, seed: int = 0, offset_tol_mm: float = OFFSET_T
         raise SpotsimError("ensemble: `model` was built from another scenario than `scenario`")
     keep_model(model)  # the workers' (forked) or this process's nominal model
     starts = perturbed_starts(scenario, n, seed, offset_tol_mm, rpy_tol_deg, family)
-    members: list[Member | None] = [None] * n
+    members: list[Record | None] = [None] * n
     records = None if out_dir is None else Path(out_dir) / MEMBERS_FILE
     keys = [None] * n if records is None else [_member_key(scenario, start) for start in starts]
     done = {} if records is None else read_records(records)
     if records is not None:
         records.parent.mkdir(parents=True, exist_ok=True)
     for i, key in enumerate(keys):
-        if key in done and done[key]["status"] not in RUN_AGAIN:
-            members[i] = member_of(done[key], i)
+        if key in done and done[key].status not in RUN_AGAIN:
+            members[i] = dataclasses.replace(done[key], index=i)
     reused = sum(m is not None for m in members)
 
-    def finished(task, m: Member):
+    def finished(task, m: Record):
         members[m.index] = m
         if m.status == "interrupted":  # Ctrl-C ended this member's run
             raise KeyboardInterrupt
-        if keys[m.index] is not None and m.status not in RUN_AGAIN:
-            append_record(records, member_record(m, keys[m.index]))
+        if records is not None and m.key is not None and m.status not in RUN_AGAIN:
+            append_record(records, m)
 
     interrupted = False
     wall0 = time.perf_counter()
     try:
         execute(functools.partial(run_member, scenario=scenario, source=source),
-                [(i, start) for i, start in enumerate(starts) if members[i] is None], runner,
+                [(i, start, keys[i]) for i, start in enumerate(starts) if members[i] is None], runner,
                 finished, failed_member, what="ensemble", total=n - reused,
                 warm=functools.partial(warm_worker, scenario, source))
     except KeyboardInterrupt:
@@ -290,7 +273,7 @@ def ensemble(scenario, n: int, *, seed: int = 0, offset_tol_mm: float = OFFSET_T
     wall = time.perf_counter() - wall0
     for i, m in enumerate(members):
         if m is None:
-            members[i] = Member(i, starts[i], "interrupted", "not run: the ensemble was interrupted")
+            members[i] = member(i, starts[i], "interrupted", "not run: the ensemble was interrupted")
     return EnsembleResult(scenario, seed, offset_tol_mm, rpy_tol_deg, members, interrupted, wall,
                           runner.worker_count(n) if runner.backend != SERIAL else 1, family, reused)
 
@@ -314,15 +297,16 @@ def statistics(values) -> dict:
             "max": float(x.max()), "count": int(len(x))}
 
 
-def member_row(m: Member, n_grasps: int, centroid: bool) -> dict:
+def member_row(m: Record, n_grasps: int, centroid: bool) -> dict:
     """The members table's row of one member: its start, status and each grasp's headline
     quantities (None where the grasp did not complete) and class; with `centroid` (a
     free-floating robot) the robot centroid's displacement over each grasp."""
     row = {"member": m.index, "status": m.status}
-    for k in m.start.offsets_mm:
-        for axis, x in zip("xyz", m.start.offsets_mm[k], strict=True):
+    start = start_of(m)
+    for k in start.offsets_mm:
+        for axis, x in zip("xyz", start.offsets_mm[k], strict=True):
             row[f"{k}_offset_{axis}_mm"] = x
-        for name, x in zip(("roll", "pitch", "yaw"), m.start.rpy_deg[k], strict=True):
+        for name, x in zip(("roll", "pitch", "yaw"), start.rpy_deg[k], strict=True):
             row[f"{k}_{name}_deg"] = x
     grasps = m.grasps()
     for g in range(n_grasps):
@@ -441,7 +425,7 @@ def ensemble_json(e: EnsembleResult) -> dict:
         "statuses": s["statuses"],
         "classes": s["classes"],
         "statistics": s["statistics"],
-        "starts": [{"member": m.index, "status": m.status, **m.start.as_dict()} for m in e.members],
+        "starts": [{"member": m.index, "status": m.status, **m.about["start"]} for m in e.members],
         **({"error_estimate": e.error_estimate} if e.error_estimate is not None else {}),
     }
 

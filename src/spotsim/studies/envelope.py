@@ -213,13 +213,13 @@ def envelope(config, out_dir, search: Search = Search(), *, runner: Runner = Run
     def store(record):
         """Keep a new record: appended to the points file and in `done`."""
         append_record(out / POINTS_FILE, record)
-        done[record["key"]] = record
+        done[record.key] = record
         state["runs"] += 1
 
     def settle(ray, magnitude, record):
-        if record["key"] not in done:
+        if record.key not in done:
             store(record)
-        ray.record(magnitude, run_outcome(record["status"], record.get("summary"), search.precision_mm), record["key"])
+        ray.record(magnitude, run_outcome(record.status, record.summary, search.precision_mm), record.key)
 
     def probe(ray):
         """The ray's next probe as a point, settling those already done; None when finished."""
@@ -274,7 +274,7 @@ def _chances(todo, raw0, search: Search, done: dict, runner: Runner, source: str
         if rec is None:
             continue
         captured, n = ray.chance.get(m, (0, 0))
-        seated = run_outcome(rec["status"], rec.get("summary"), search.precision_mm) == SEATED
+        seated = run_outcome(rec.status, rec.summary, search.precision_mm) == SEATED
         ray.chance[m] = (captured + seated, n + 1)
 
 
@@ -356,8 +356,8 @@ def plot_envelope(report: EnvelopeReport, path: Path) -> None:
                 continue
             da, db = r.direction.get(a, 0.0), r.direction.get(b, 0.0)
             for m, v, key in r.probes:
-                rec = report.records.get(key, {})
-                s = rec.get("summary") or {}
+                rec = report.records.get(key)
+                s = (rec.summary if rec is not None else None) or {}
                 g = (s.get("grasps") or [{}])[0]
                 xs.append(m * da)
                 ys.append(m * db)

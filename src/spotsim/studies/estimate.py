@@ -296,7 +296,7 @@ def validate(scenario, reference, n: int = 8, *, seed: int = VALIDATION_SEED, wo
     at a converged setting. The spread is the study's for a studied scenario; for another,
     each member's own, measured around its start as `spotsim run` measures it (`start_spread`,
     `spread_members` starts; 0: none)."""
-    from .ensemble import ensemble, member_scenario
+    from .ensemble import ensemble, member_scenario, start_of
 
     other = companion(scenario)
     if other is None:
@@ -308,7 +308,7 @@ def validate(scenario, reference, n: int = 8, *, seed: int = VALIDATION_SEED, wo
     for run, comp, ref in zip(*runs, strict=True):
         if not (run.summary and comp.summary and ref.summary):
             continue
-        own = spread or own_spread(member_scenario(scenario, run.start), run.summary, spread_members,
+        own = spread or own_spread(member_scenario(scenario, start_of(run)), run.summary, spread_members,
                                    workers=workers)
         truth = quantities(ref.summary)
         for g, entry in enumerate(error_estimate(run.summary, comp.summary, own)["grasps"]):

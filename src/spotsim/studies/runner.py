@@ -24,6 +24,7 @@ import functools
 import hashlib
 import json
 import logging
+import math
 import multiprocessing
 import os
 import signal
@@ -39,6 +40,7 @@ import numpy as np
 from ..errors import ScenarioError, SpotsimError
 from ..jit import add_sources
 from ..scenario import modules_of, to_dict, to_yaml
+from ..status import EXCEPTION, WORKER_DIED
 
 SERIAL, PROCESSES, DASK = "serial", "processes", "dask"
 BACKENDS = (SERIAL, PROCESSES, DASK)
@@ -101,6 +103,48 @@ class WorkerDied(RuntimeError):
 def worker_died(error: BaseException) -> bool:
     """Whether a task failed because its worker died (here or on Dask), not by its own error."""
     return isinstance(error, WorkerDied) or type(error).__name__ == "KilledWorker"
+
+
+# ----------------------------------------------------------------------------- a run's record
+
+
+@dataclass
+class Record:
+    """What a study keeps of one run, the same on every backend and in every records file:
+    its `key` (its scenario and spotsim's code, `scenario_key`; None for a run no scenario
+    names), its `index` in the study, status and message, the summary.json dictionary of its
+    run (None when it did not run), the run's wall time with what came before it in the task
+    (model, start check, companion run) and the worker process's id; `about`: the study's own
+    (a sweep point's values and start gap, an ensemble member's start)."""
+
+    key: str | None
+    index: int
+    status: str
+    message: str
+    summary: dict | None = None
+    wall_time_s: float = math.nan
+    worker: int | None = None
+    about: dict = dataclasses.field(default_factory=dict)
+
+    def grasps(self) -> list[dict]:
+        """The summary's grasps; none when the run did not run."""
+        return self.summary["grasps"] if self.summary else []
+
+    @classmethod
+    def of_json(cls, d: dict) -> Record:
+        """A record from its line of a records file (fields it does not know go to `about`; a
+        line without index or message, as an earlier spotsim may have written, gets -1 and '')."""
+        known = {f.name for f in dataclasses.fields(cls)}
+        about = {**d.get("about", {}), **{k: v for k, v in d.items() if k not in known}}
+        fields = {"index": -1, "message": "", **{k: v for k, v in d.items() if k in known and k != "about"}}
+        return cls(**fields, about=about)
+
+
+def failed(key: str | None, index: int, error: BaseException, **about) -> Record:
+    """The record of a task that failed outside its run: its worker died (twice), or it could
+    not be sent."""
+    return Record(key, index, WORKER_DIED if worker_died(error) else EXCEPTION, f"{type(error).__name__}: {error}",
+                  about=about)
 
 
 # ----------------------------------------------------------------------------- execute
@@ -333,7 +377,7 @@ def scenario_key(scenario) -> str:
 # ----------------------------------------------------------------------------- records
 
 
-def read_records(path: Path) -> dict[str, dict]:
+def read_records(path: Path) -> dict[str, Record]:
     """The finished runs of a records file (`append_record`) by key. A last line without its newline (a kill
     while writing) is dropped and cut from the file; any other line that is not a record is an
     error (SpotsimError), and the file is left as it is."""
@@ -354,15 +398,15 @@ def read_records(path: Path) -> dict[str, dict]:
         if not isinstance(rec, dict) or "key" not in rec or "status" not in rec:
             raise SpotsimError(f"{path}: line {n} is not a study's run record: not resumable; move the file "
                                "or give another --out")
-        out.setdefault(rec["key"], rec)
+        out.setdefault(rec["key"], Record.of_json(rec))
     return out
 
 
-def append_record(path: Path, record: dict) -> None:
-    """Append a finished run's record (a JSON object with its `key` and `status`) as one line,
+def append_record(path: Path, record: Record) -> None:
+    """Append a finished run's record as one JSON line,
     synced to disk: the one writer of every resumable study. A write that fails (a full
     disk) is cut back off, so that the file keeps whole lines only, and is a SpotsimError."""
-    data = memoryview((json.dumps(record, default=plain) + "\n").encode())
+    data = memoryview((json.dumps(dataclasses.asdict(record), default=plain) + "\n").encode())
     fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
     size = os.fstat(fd).st_size
     try:

@@ -16,7 +16,7 @@ import numpy as np
 
 from ..errors import SpotsimError
 from ..scenario import modules_of, replace, to_dict
-from ..status import COMPARABLE, COMPLETED, EXCEPTION, NOT_CAPTURED, REJECTED, WORKER_DIED, run_outcome
+from ..status import COMPARABLE, COMPLETED, EXCEPTION, NOT_CAPTURED, REJECTED, run_outcome
 
 # ----------------------------------------------------------------------------- one run
 
@@ -50,9 +50,10 @@ def raised(e: BaseException, stage: str) -> str:
 
 @dataclass
 class Outcome:
-    """What a study keeps of one run. Per grasp: the offset of O_b from O_a at the end (the
-    residual offset of a completed grasp, mm), the peak contact force norm (N) and, on a
-    free-floating robot, the centroid displacement (mm); None where the grasp never ran."""
+    """What the accuracy and stability studies compare of one run (`of` its record). Per grasp:
+    the offset of O_b from O_a at the end (the residual offset of a completed grasp, mm), the
+    peak contact force norm (N) and, on a free-floating robot, the centroid displacement (mm);
+    None where the grasp never ran."""
 
     status: str
     message: str
@@ -75,27 +76,42 @@ class Outcome:
     def comparable(self) -> bool:
         return self.status in COMPARABLE
 
+    @classmethod
+    def of(cls, r) -> Outcome:
+        """What a study keeps of a run's record (`runner.Record`, as `run_record` makes it)."""
+        s, prediction = r.summary, r.about.get("prediction")
+        if s is None:
+            return cls(r.status, r.message, prediction=prediction)
+        integrator = s["integrator"]
+        done = [g["completed_s"] for g in s["grasps"]]
+        return cls(
+            s["status"], s["message"], s["wall_time_s"], s["sim_time_s"],
+            done[-1] if s["status"] in (COMPLETED, NOT_CAPTURED) else math.nan,  # every grasp closed
+            s["steps"], integrator.get("force_evaluations", s["steps"]), integrator.get("rejected_steps", 0),
+            [None if g["final_offset_mm"] is None else np.array(g["final_offset_mm"]) for g in s["grasps"]],
+            [g["peak_force_norm_N"] for g in s["grasps"]],
+            [np.array(g["robot_centroid_displacement_mm"]) if "robot_centroid_displacement_mm" in g else None
+             for g in s["grasps"]],
+            s["momentum"]["linear_drift_rel"], s["momentum"]["angular_drift_rel"], r.about.get("finite", True),
+            prediction, run_outcome(s["status"], s))
+
 
 def run_once(scenario, source: str = "<study>", wall_limit_s: float | None = None) -> Outcome:
     """Build, check and simulate `scenario` in a worker process of its own (`runner.execute`,
     one process forked from this one: a crash in compiled code costs this run only), within
-    the wall-time budget `wall_limit_s` (status `wall limit`); never raises but on the user's
-    Ctrl-C. A scenario the model or the start check rejects is status `rejected`; any
-    exception out of `simulate` is status `exception` (it must never raise: a bug the study
-    reports)."""
+    the wall-time budget `wall_limit_s` (status `wall limit`), and read its record as an
+    Outcome; never raises but on the user's Ctrl-C. A scenario the model or the start check
+    rejects is status `rejected`; any exception out of `simulate` is status `exception` (it
+    must never raise: a bug the study reports)."""
     import functools
 
-    from .runner import PROCESSES, Runner, execute, worker_died
+    from .runner import PROCESSES, Runner, execute, failed
 
     out = []
-
-    def failed(task, e):
-        return Outcome(WORKER_DIED if worker_died(e) else EXCEPTION, f"{type(e).__name__}: {e}",
-                       prediction=_prediction(scenario, source))
-
-    execute(functools.partial(_run_once, source=source, wall_limit_s=wall_limit_s), [scenario],
-            Runner(PROCESSES, workers=1, wall_limit_s=wall_limit_s), lambda task, o: out.append(o), failed)
-    return out[0]
+    execute(functools.partial(run_record, source=source, wall_limit_s=wall_limit_s), [scenario],
+            Runner(PROCESSES, workers=1, wall_limit_s=wall_limit_s), lambda task, r: out.append(r),
+            lambda task, e: failed(None, 0, e, prediction=_prediction(scenario, source)))
+    return Outcome.of(out[0])
 
 
 def _prediction(scenario, source):
@@ -121,33 +137,23 @@ def _caused_by_ctrl_c(e: BaseException) -> bool:
     return False
 
 
-def _run_once(scenario, source: str, wall_limit_s: float | None = None) -> Outcome:
+def run_record(scenario, source: str = "<study>", wall_limit_s: float | None = None):
+    """Build, check and simulate `scenario` here: its `runner.Record`, with the model's
+    predicted stable step (`about["prediction"]`) and whether every recorded number is finite
+    (`about["finite"]`)."""
     from ..sim.stability import predict_step
-    from .runner import model_for
+    from .runner import Record, model_for
 
     try:
         model = model_for(scenario, source)
     except SpotsimError as e:  # the scenario's own problem, found before anything ran
-        return Outcome(REJECTED, str(e).replace("\n", "; "))
-    prediction = predict_step(model)
+        return Record(None, 0, REJECTED, str(e).replace("\n", "; "))
+    about = {"prediction": predict_step(model)}
     status, message, result = attempt(scenario, model, source, wall_limit_s)
-    if result is None:
-        return Outcome(status, message, prediction=prediction)
-    s = result.summary
-    integrator = s["integrator"]
-    done = [g["completed_s"] for g in s["grasps"]]
-    return Outcome(
-        s["status"], s["message"], s["wall_time_s"], s["sim_time_s"],
-        done[-1] if s["status"] in (COMPLETED, NOT_CAPTURED) else math.nan,  # every grasp closed
-        s["steps"], integrator.get("force_evaluations", s["steps"]), integrator.get("rejected_steps", 0),
-        [None if g["final_offset_mm"] is None else np.array(g["final_offset_mm"]) for g in s["grasps"]],
-        [g["peak_force_norm_N"] for g in s["grasps"]],
-        [np.array(g["robot_centroid_displacement_mm"]) if "robot_centroid_displacement_mm" in g else None
-         for g in s["grasps"]],
-        s["momentum"]["linear_drift_rel"], s["momentum"]["angular_drift_rel"],
-        all(bool(np.all(np.isfinite(a))) for a in result.timeseries.values()
-            if np.issubdtype(np.asarray(a).dtype, np.floating)),
-        prediction, run_outcome(s["status"], s))
+    if result is not None:
+        about["finite"] = all(bool(np.all(np.isfinite(a))) for a in result.timeseries.values()
+                              if np.issubdtype(np.asarray(a).dtype, np.floating))
+    return Record(None, 0, status, message, None if result is None else result.summary, about=about)
 
 
 # ----------------------------------------------------------------------------- comparing
@@ -296,5 +302,5 @@ def warm_up(scenario, methods, duration_s: float = 0.5) -> None:
         integrator = {**to_dict(scenario.simulation.integrator), "method": method}
         if method == "dopri5":
             integrator.update(rtol=1e-3, atol=1e-6)
-        _run_once(replace(scenario, simulation={"duration_s": min(duration_s, scenario.simulation.duration_s),
-                                                "integrator": integrator}), "<warm-up>")
+        run_record(replace(scenario, simulation={"duration_s": min(duration_s, scenario.simulation.duration_s),
+                                                 "integrator": integrator}), "<warm-up>")

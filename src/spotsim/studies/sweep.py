@@ -58,24 +58,24 @@ from ..status import (
     REJECTED,
     WALL_LIMIT,
     WEDGED_OFFSET_MM,
-    WORKER_DIED,
     run_outcome,
 )
-from .ensemble import Member, Start, grasp_prefix, member_row
+from .ensemble import Start, grasp_prefix, member_row
 from .runner import (
     MAX_POINTS,
     WALL_LIMIT_S,
+    Record,
     Runner,
     SchedulerLost,
     append_record,
     check_budget,
     execute,
+    failed,
     model_for,
     plain,
     read_records,
     scenario_key,
     warm_worker,
-    worker_died,
 )
 
 #: A point's verdict is its run's outcome (`status.run_outcome`: seated, wedged, not captured,
@@ -297,26 +297,25 @@ def _has_path(tree, path: str) -> bool:
 
 
 def run_point(point: Point, wall_limit_s: float | None = WALL_LIMIT_S, with_estimate: bool = True,
-              source: str = "<sweep>", grow_gap: bool = False) -> dict:
+              source: str = "<sweep>", grow_gap: bool = False) -> Record:
     """Run one point (in a worker) and return its record: status, message, wall time, the
-    run's summary and its error estimate. Never raises: a problem is the point's status.
-    grow_gap: a start whose fingers and groove interpenetrate runs with the start gap that
-    clears it (`stability.clearing_gap`, the time the longer travel takes added), recorded as
-    `start_gap_mm`."""
+    run's summary and its error estimate, the point's values (`about`). Never raises: a
+    problem is the point's status. grow_gap: a start whose fingers and groove interpenetrate
+    runs with the start gap that clears it (`stability.clearing_gap`, the time the longer
+    travel takes added), recorded as `about["start_gap_mm"]`."""
     from ..run import initial_contacts
     from .estimate import companion, error_estimate
     from .runs import attempt, raised
     from .stability import clearing_gap, widened
 
     t0 = time.perf_counter()
-    record = {"key": point.key, "index": point.index, "values": point.values, "summary": None,
-              "worker": os.getpid(), "start_gap_mm": None}
-    if point.scenario is None:
-        return {**record, "status": REJECTED, "message": "; ".join(point.problems), "wall_time_s": 0.0}
+    about = {"values": point.values, "start_gap_mm": None}
 
     def ended(status, message, summary=None):
-        return {**record, "status": status, "message": message, "summary": summary,
-                "wall_time_s": time.perf_counter() - t0}
+        return Record(point.key, point.index, status, message, summary, time.perf_counter() - t0, os.getpid(), about)
+
+    if point.scenario is None:
+        return ended(REJECTED, "; ".join(point.problems))
 
     scenario = point.scenario
     try:
@@ -326,7 +325,7 @@ def run_point(point: Point, wall_limit_s: float | None = WALL_LIMIT_S, with_esti
             if gap is not None:
                 scenario = widened(scenario, gap)
                 model = model_for(scenario, source)
-                record["start_gap_mm"] = gap
+                about["start_gap_mm"] = gap
     except SpotsimError as e:  # the point's own scenario cannot be built
         return ended(REJECTED, str(e).replace("\n", "; "))
     except Exception as e:  # the point reports it; the sweep goes on
@@ -358,21 +357,20 @@ ESTIMATED = {"residual_offset_norm_mm": "residual_error_mm", "peak_force_norm_N"
              "robot_centroid_displacement_norm_mm": "centroid_displacement_error_mm"}
 
 
-def table_row(record: dict, scenario, keys: list[str], precision_mm: float = PRECISION_MM) -> dict:
+def table_row(record: Record, scenario, keys: list[str], precision_mm: float = PRECISION_MM) -> dict:
     """The table's row of a point's record: its key, its values, status, verdict and message,
     each grasp's results (`ensemble.member_row`: class, residual, peaks, completion, the robot
     centroid's displacement) and error estimates, and its wall time."""
-    summary = record.get("summary")
-    row = {"key": record["key"], "index": record["index"]}
-    row.update({k: record["values"].get(k) for k in keys})
-    row["status"] = record["status"]
-    row["verdict"] = run_outcome(record["status"], summary, precision_mm)
+    summary = record.summary
+    row = {"key": record.key, "index": record.index}
+    row.update({k: record.about["values"].get(k) for k in keys})
+    row["status"] = record.status
+    row["verdict"] = run_outcome(record.status, summary, precision_mm)
     n_grasps = len(modules_of(scenario)) if scenario is not None else 1
     dual = scenario is not None and scenario.kind == "dual_arm"
     start = Start({k: tuple(m.initial_offset_mm) for k, m in modules_of(scenario).items()},
                   {k: tuple(m.initial_rpy_deg) for k, m in modules_of(scenario).items()}) if scenario else Start({}, {})
-    member = Member(record["index"], start, record["status"], record["message"], summary)
-    results = member_row(member, n_grasps, centroid=dual)
+    results = member_row(dataclasses.replace(record, about={"start": start.as_dict()}), n_grasps, centroid=dual)
     for k in ("member", "status", "message", "wall_time_s", "sim_time_s"):
         results.pop(k, None)
     row.update(results)
@@ -383,13 +381,13 @@ def table_row(record: dict, scenario, keys: list[str], precision_mm: float = PRE
         for q, name in ESTIMATED.items():
             if q != "robot_centroid_displacement_norm_mm" or dual:
                 row[f"{p}{name}"] = (entry.get(q) or {}).get("estimate")
-    row["start_gap_mm"] = record.get("start_gap_mm")
+    row["start_gap_mm"] = record.about.get("start_gap_mm")
     row["sim_time_s"] = (summary or {}).get("sim_time_s")
     row["run_wall_time_s"] = (summary or {}).get("wall_time_s")
     row["companion_wall_time_s"] = (estimate.get("companion") or {}).get("wall_time_s")
-    row["wall_time_s"] = record["wall_time_s"]
-    row["worker"] = record.get("worker")
-    row["message"] = record["message"]
+    row["wall_time_s"] = record.wall_time_s
+    row["worker"] = record.worker
+    row["message"] = record.message
     return row
 
 
@@ -482,8 +480,8 @@ def run_sweep(config, spec: SweepSpec, out_dir, *, runner: Runner = Runner(), pr
         except SchedulerLost as e:
             lost = e
     # a record may come from an earlier sweep over the directory: this spec's index and values
-    rows = [table_row({**done[p.key], "index": p.index, "values": p.values}, p.scenario, keys, precision_mm)
-            for p in points if p.key in done]
+    rows = [table_row(dataclasses.replace(done[p.key], index=p.index, about={**done[p.key].about, "values": p.values}),
+                      p.scenario, keys, precision_mm) for p in points if p.key in done]
     try:
         table = write_table(rows, out)
     except OSError as e:
@@ -526,12 +524,10 @@ def sweep(config, *, vary=(), spec: SweepSpec | str | Path | None = None, sets=(
     return table
 
 
-def failed_record(point: Point, error: BaseException) -> dict:
+def failed_record(point: Point, error: BaseException) -> Record:
     """The record of a point whose task failed: its worker died (twice) or it could not run
     there."""
-    return {"key": point.key, "index": point.index, "values": point.values, "summary": None, "worker": None,
-            "start_gap_mm": None, "status": WORKER_DIED if worker_died(error) else EXCEPTION,
-            "message": f"{type(error).__name__}: {error}", "wall_time_s": math.nan}
+    return failed(point.key, point.index, error, values=point.values, start_gap_mm=None)
 
 
 def run_on(runner: Runner, first: list[Point], source: str, finished, *, error_estimate: bool = True,
