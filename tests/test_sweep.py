@@ -222,6 +222,14 @@ def test_a_finished_sweep_started_again_runs_nothing(local):
     assert physics(again.table).equals(physics(local.table))
 
 
+@pytest.mark.parametrize("backend", ["processes", "serial"])
+def test_a_sweep_on_a_pool_or_in_process_gives_the_local_clusters_table(local, tmp_path, backend):
+    """The same three points on the runner's other backends: the same table, physics column by
+    column."""
+    other = sw.run_sweep(CASE_I, sw.spec_of(VARY), tmp_path, runner=Runner(backend, workers=2))
+    assert other.ran == 3 and physics(other.table).equals(physics(local.table))
+
+
 def test_a_point_computed_by_other_code_is_not_reused(local, monkeypatch):
     """A point's key covers spotsim's code: under other code (another fingerprint) none of the
     finished points matches the spec's, so a resumed sweep runs them all again."""
