@@ -36,6 +36,14 @@ def test_every_backend_gives_every_record_and_follows_each_tasks_followers(backe
     assert ran == 8 and records == {t: 2**t for t in (0, 1, 2, 3, 10, 11, 12, 13)}
 
 
+def test_no_tasks_start_no_workers(monkeypatch):
+    """A study with nothing left to run (every record found) starts no pool and no cluster."""
+    monkeypatch.setattr(rn, "dask_client", None)  # would raise if called
+    monkeypatch.setattr(rn, "_on_processes", None)
+    for backend in rn.BACKENDS:
+        assert rn.execute(TWICE, [], rn.Runner(backend), lambda t, r: None, lambda t, e: None) == 0
+
+
 def _dies_on_three(task):
     if task == 3:
         os._exit(9)  # the worker process dies, as a crash in compiled code would end it

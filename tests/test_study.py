@@ -166,23 +166,40 @@ def test_a_run_within_its_wall_limit_is_the_same_run(case_I):
     assert (there.offsets[0] == here.offsets[0]).all() and there.peaks == here.peaks
 
 
-def test_ctrl_c_keeps_the_rows_written(case_I, tmp_path, monkeypatch):
-    """Ctrl-C during a study stops it; the rows of the runs that finished stay in the CSV."""
-    calls = []
-    real = runs.run_once
+def test_ctrl_c_keeps_the_rows_written_and_the_study_started_again_runs_only_what_it_lacks(
+        case_I, tmp_path, monkeypatch):
+    """Ctrl-C during a study stops it; the rows of the runs that finished stay in the CSV. The
+    same study started again over its directory takes those runs from runs.jsonl and runs the
+    third alone, and gives the rows an uninterrupted study gives."""
+    from spotsim.studies import runner
 
-    def interrupt_third(*args, **kwargs):
+    calls, real = [], runs.Runs.__call__
+
+    def interrupt_third(self, scenario):
         calls.append(1)
         if len(calls) == 3:
             raise KeyboardInterrupt
-        return real(*args, **kwargs)
+        return real(self, scenario)
 
-    monkeypatch.setattr(stab, "run_once", interrupt_third)
+    monkeypatch.setattr(runs.Runs, "__call__", interrupt_third)
     monkeypatch.setattr(stab, "warm_up", lambda *a, **k: None)
     short = spotsim.replace(case_I, simulation={"duration_s": 0.05})
-    report = stab.stability_study(short, stab.select_cases(["baseline", "Ex10", "Ex100"]), tmp_path)
+    cases = stab.select_cases(["baseline", "Ex10", "Ex100"])
+    report = stab.stability_study(short, cases, tmp_path)
     assert report.interrupted and len(read_csv(tmp_path / "stability.csv")) == 2
     assert "interrupted" in (tmp_path / "stability.md").read_text()
+    assert len((tmp_path / runs.RUNS_FILE).read_text().splitlines()) == 2
+
+    real_execute, executed = runner.execute, []
+    monkeypatch.setattr(runner, "execute", lambda *a, **k: executed.append(1) or real_execute(*a, **k))
+    again = stab.stability_study(short, cases, tmp_path)
+    fresh = stab.stability_study(short, cases, tmp_path / "fresh")
+    assert not again.interrupted and len(executed) == 1 + 3  # the third case here, all three fresh
+
+    def physics(rows):
+        return [{k: v for k, v in r.items() if "wall" not in k} for r in rows]
+
+    assert physics(again.rows) == physics(fresh.rows) and len(again.rows) == 3
 
 
 def test_ctrl_c_inside_a_compiled_callback_still_stops_the_study():

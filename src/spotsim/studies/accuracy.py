@@ -22,14 +22,15 @@ from ..scenario import Integrator, modules_of, replace, to_dict
 from ..tables import ADAPTIVE, METHODS
 from .runs import (
     COMPARABLE,
+    RUNS_FILE,
     Outcome,
+    Runs,
     StudyRows,
     errors,
     free_floating,
     grasp_names,
     markdown_table,
     percent,
-    run_once,
     sig,
     warm_up,
     worst,
@@ -391,7 +392,9 @@ def accuracy_study(scenario, settings: list[Setting], reference: Setting, out_di
     the reference's uncertainty instead. A further run, the reference started PERTURBATION_MM
     off, measures how sensitive the reported quantities are to the start. The paper's setting
     (symplectic Euler at dt = 1 ms) and the scenario's own setting are marked in the `role`
-    column. Ctrl-C stops the study and keeps the rows written (report.interrupted).
+    column. Ctrl-C stops the study and keeps the rows written (report.interrupted); every run is
+    kept in runs.jsonl as it ends, and a study started again over `out_dir` runs only what it
+    lacks (`runs.Runs`).
     """
     if ensemble is not None:
         from .accuracy_ensemble import accuracy_ensemble_study
@@ -402,6 +405,7 @@ def accuracy_study(scenario, settings: list[Setting], reference: Setting, out_di
                                        progress=progress, plot=plot)
     out = Path(out_dir)
     prepare(out, "accuracy.md")
+    runs = Runs(source, wall_limit_s, out / RUNS_FILE)
     dt = scenario.simulation.dt_s
     confirmation = reference.refined()
     sphere_sweep = any(s.sphere_scale != 1.0 for s in settings)
@@ -422,7 +426,7 @@ def accuracy_study(scenario, settings: list[Setting], reference: Setting, out_di
         warm_up(scenario, sorted({s.method for s in (*settings, reference)}))
         for setting, name in ((reference, "reference"), (confirmation, "confirmation")):
             bar.set_postfix_str(setting.label(dt))
-            o = run_once(setting.apply(scenario), source, wall_limit_s)
+            o = runs(setting.apply(scenario))
             if name == "reference":
                 report.reference_outcome = o
             else:
@@ -437,21 +441,21 @@ def accuracy_study(scenario, settings: list[Setting], reference: Setting, out_di
         if math.isnan(report.change_rel) and report.reference_outcome.comparable and coarser is not None:
             # the refinement gave nothing to compare (it diverged): bound the reference from below
             bar.set_postfix_str(coarser.label(dt))
-            o = run_once(coarser.apply(scenario), source, wall_limit_s)
+            o = runs(coarser.apply(scenario))
             writer.write(accuracy_row(scenario, coarser, "coarser check", o, report.reference_outcome))
             change = errors(o, report.reference_outcome, names, centroid)
             report.coarser, report.coarser_change_rel, report.coarser_change_what = coarser, change["max_err_rel"], \
                 worst(change)
             todo = [s for s in todo if s != coarser]
         bar.set_postfix_str(f"{reference.label(dt)}, started {PERTURBATION_MM * 1e6:g} nm off")
-        o = run_once(reference.apply(perturbed(scenario)), source, wall_limit_s)
+        o = runs(reference.apply(perturbed(scenario)))
         writer.write(accuracy_row(scenario, reference, "perturbed", o, report.reference_outcome))
         change = errors(o, report.reference_outcome, names, centroid)
         report.sensitivity_rel, report.sensitivity_what = change["max_err_rel"], worst(change)
         bar.update(1)
         for setting in todo:
             bar.set_postfix_str(setting.label(dt))
-            o = run_once(setting.apply(scenario), source, wall_limit_s)
+            o = runs(setting.apply(scenario))
             writer.write(accuracy_row(scenario, setting, role(setting), o, report.reference_outcome))
             bar.update(1)
     report.interrupted = study.interrupted

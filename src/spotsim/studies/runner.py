@@ -162,6 +162,9 @@ def execute(run: Callable, tasks, runner: Runner, finished: Callable, failed: Ca
     many tasks ran."""
     from ..run import progress_bar
 
+    tasks = list(tasks)
+    if not tasks:  # nothing to run: no pool or cluster started
+        return 0
     bar = progress_bar(total, runner.progress, what=what, unit="run")
     count = [0]
 
@@ -172,7 +175,7 @@ def execute(run: Callable, tasks, runner: Runner, finished: Callable, failed: Ca
 
     try:
         if runner.backend == DASK:
-            _on_dask(run, list(tasks), runner, done, failed, warm)
+            _on_dask(run, tasks, runner, done, failed, warm)
         elif runner.backend == PROCESSES and not _in_daemon():
             _on_processes(run, deque(tasks), runner, done, failed, warm)
         else:

@@ -16,7 +16,17 @@ import numpy as np
 
 from ..errors import SpotsimError
 from ..scenario import modules_of, replace, to_dict
-from ..status import COMPARABLE, COMPLETED, EXCEPTION, NOT_CAPTURED, REJECTED, run_outcome
+from ..status import (
+    COMPARABLE,
+    COMPLETED,
+    EXCEPTION,
+    INTERRUPTED,
+    NOT_CAPTURED,
+    REJECTED,
+    WALL_LIMIT,
+    WORKER_DIED,
+    run_outcome,
+)
 
 # ----------------------------------------------------------------------------- one run
 
@@ -79,7 +89,11 @@ class Outcome:
     @classmethod
     def of(cls, r) -> Outcome:
         """What a study keeps of a run's record (`runner.Record`, as `run_record` makes it)."""
+        from ..sim.stability import StepPrediction
+
         s, prediction = r.summary, r.about.get("prediction")
+        if isinstance(prediction, dict):  # read back from a records file
+            prediction = StepPrediction(**prediction)
         if s is None:
             return cls(r.status, r.message, prediction=prediction)
         integrator = s["integrator"]
@@ -96,22 +110,51 @@ class Outcome:
             prediction, run_outcome(s["status"], s))
 
 
+@dataclass(frozen=True)
+class Runs:
+    """How a study runs its scenarios one at a time (`runs(scenario) -> Outcome`): each in a
+    worker process of its own (`runner.execute`, one process forked from this one: a crash in
+    compiled code costs that run only), within the wall-time budget `wall_limit_s` (status
+    `wall limit`), named `source`. With `records`, a records file (`runner.append_record`)
+    keeps each run as it ends and gives it back when the study asks for the same scenario
+    under the same code again: a study started again over its directory runs only what it
+    lacks. Never raises but on the user's Ctrl-C: a scenario the model or the start check
+    rejects is `rejected`, an exception out of `simulate` is `exception` (a bug the study
+    reports)."""
+
+    source: str = "<study>"
+    wall_limit_s: float | None = None
+    records: Path | None = None
+
+    def __call__(self, scenario) -> Outcome:
+        import dataclasses
+        import functools
+
+        from .runner import PROCESSES, Runner, append_record, execute, failed, read_records, scenario_key
+
+        key = None if self.records is None else scenario_key(scenario)
+        if key is not None:
+            done = read_records(self.records).get(key)
+            if done is not None and done.status not in RUN_AGAIN:
+                return Outcome.of(done)
+        out = []
+        execute(functools.partial(run_record, source=self.source, wall_limit_s=self.wall_limit_s), [scenario],
+                Runner(PROCESSES, workers=1, wall_limit_s=self.wall_limit_s), lambda task, r: out.append(r),
+                lambda task, e: failed(None, 0, e, prediction=_prediction(scenario, self.source)))
+        if key is not None and out[0].status not in RUN_AGAIN:
+            append_record(self.records, dataclasses.replace(out[0], key=key))
+        return Outcome.of(out[0])
+
+
+#: The records file of a study's runs (`Runs`), in its output directory.
+RUNS_FILE = "runs.jsonl"
+#: Statuses of a study's runs that are run again when the study is: not their run's own end.
+RUN_AGAIN = (INTERRUPTED, WALL_LIMIT, WORKER_DIED)
+
+
 def run_once(scenario, source: str = "<study>", wall_limit_s: float | None = None) -> Outcome:
-    """Build, check and simulate `scenario` in a worker process of its own (`runner.execute`,
-    one process forked from this one: a crash in compiled code costs this run only), within
-    the wall-time budget `wall_limit_s` (status `wall limit`), and read its record as an
-    Outcome; never raises but on the user's Ctrl-C. A scenario the model or the start check
-    rejects is status `rejected`; any exception out of `simulate` is status `exception` (it
-    must never raise: a bug the study reports)."""
-    import functools
-
-    from .runner import PROCESSES, Runner, execute, failed
-
-    out = []
-    execute(functools.partial(run_record, source=source, wall_limit_s=wall_limit_s), [scenario],
-            Runner(PROCESSES, workers=1, wall_limit_s=wall_limit_s), lambda task, r: out.append(r),
-            lambda task, e: failed(None, 0, e, prediction=_prediction(scenario, source)))
-    return Outcome.of(out[0])
+    """One run of a study, kept nowhere (`Runs`)."""
+    return Runs(source, wall_limit_s)(scenario)
 
 
 def _prediction(scenario, source):

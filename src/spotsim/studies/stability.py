@@ -26,10 +26,11 @@ from ..status import (
 )
 from ..tables import ADAPTIVE
 from .runs import (
+    RUNS_FILE,
     Outcome,
+    Runs,
     StudyRows,
     markdown_table,
-    run_once,
     sig,
     step_scaled,
     warm_up,
@@ -307,24 +308,23 @@ class StabilityReport:
         return [r for r in self.rows if r["verdict"].startswith("FAILED")]
 
 
-def check_gradient(o: Outcome, s, source: str, wall_limit_s) -> Outcome | None:
+def check_gradient(o: Outcome, s, runs: Runs) -> Outcome | None:
     """A case that diverged under the paper's pair law, again with the energy-consistent one
     (`contact.normal_direction: gradient`): the paper's law gains energy on strongly tilted
     faces, which the run's energy check stops as diverged; None for any other outcome."""
     if o.status != "diverged" or s.contact.normal_direction == "gradient":
         return None
-    return run_once(replace(s, contact={"normal_direction": "gradient"}), source, wall_limit_s)
+    return runs(replace(s, contact={"normal_direction": "gradient"}))
 
 
-def checked_row(case: Case, o: Outcome, s, source: str, wall_limit_s) -> dict:
+def checked_row(case: Case, o: Outcome, s, runs: Runs) -> dict:
     """The row of a case's run, with its diverged checks (`check_finer`, `check_gradient`)."""
-    return stability_row(case, o, s, check_finer(o, s, source, wall_limit_s),
-                         check_gradient(o, s, source, wall_limit_s))
+    return stability_row(case, o, s, check_finer(o, s, runs), check_gradient(o, s, runs))
 
 
-def check_finer(o: Outcome, s, source: str, wall_limit_s) -> Outcome | None:
+def check_finer(o: Outcome, s, runs: Runs) -> Outcome | None:
     """A diverged run's case again, FINER times finer; None for any other outcome."""
-    return run_once(finer(s), source, wall_limit_s) if o.status == "diverged" else None
+    return runs(finer(s)) if o.status == "diverged" else None
 
 
 def stability_study(scenario, cases: list[Case], out_dir, *, source: str = "<study>", progress: bool = False,
@@ -333,9 +333,11 @@ def stability_study(scenario, cases: list[Case], out_dir, *, source: str = "<stu
     stability.md into `out_dir`. A misaligned start rejected for interpenetrating is run once
     more with the start gap that clears it (a second row). A diverged case runs again FINER
     times finer (`finer_verdict`): one that still diverges does not diverge for its step.
-    Ctrl-C stops the study and keeps the rows written."""
+    Ctrl-C stops the study and keeps the rows written; every run is kept in runs.jsonl as it
+    ends, and a study started again over `out_dir` runs only what it lacks (`runs.Runs`)."""
     out = Path(out_dir)
     prepare(out, "stability.md")
+    runs = Runs(source, wall_limit_s, out / RUNS_FILE)
     with StudyRows(out / "stability.csv", STABILITY_COLUMNS, len(cases), progress,
                    f"{scenario.name}: stability") as study:
         report = StabilityReport(scenario.name, study.rows)
@@ -347,15 +349,15 @@ def stability_study(scenario, cases: list[Case], out_dir, *, source: str = "<stu
             except SpotsimError as e:
                 s, o = None, Outcome(REJECTED, str(e).replace("\n", "; "))
             else:
-                o = run_once(s, source, wall_limit_s)
-            study.write(checked_row(case, o, s, source, wall_limit_s))
+                o = runs(s)
+            study.write(checked_row(case, o, s, runs))
             gap = clearing_gap(s) if case.misalignment and o.status == REJECTED and s is not None else None
             if gap is not None:  # the same start, with fingers opened wide enough to clear it
                 wide = dc_replace(case, name=f"{case.name}, gap {gap:g} mm",
                                   what=f"{case.what}; start gap {s.end_effector.start_gap_mm:g} -> {gap:g} mm")
                 s = widened(s, gap)
-                o = run_once(s, source, wall_limit_s)
-                study.write(checked_row(wide, o, s, source, wall_limit_s))
+                o = runs(s)
+                study.write(checked_row(wide, o, s, runs))
             study.bar.update(1)
     report.interrupted = study.interrupted
     atomic_write(out / "stability.md", stability_markdown(scenario, report))
