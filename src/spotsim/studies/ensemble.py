@@ -19,7 +19,6 @@ import dataclasses
 import io
 import json
 import math
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -27,8 +26,8 @@ import numpy as np
 
 from ..errors import SpotsimError
 from ..scenario import modules_of, replace
-from ..status import EXCEPTION, REJECTED, WEDGED_OFFSET_MM, WEDGED_TILT_DEG, WORKER_DIED, grasp_outcome
-from .runner import Record, failed
+from ..status import EXCEPTION, REJECTED, WEDGED_OFFSET_MM, WEDGED_TILT_DEG, grasp_outcome
+from .runner import RUN_AGAIN, Record, failed
 
 #: Default perturbation of each module's start: +-10 um on each axis of the offset and
 #: +-0.01 deg on each of roll, pitch, yaw, well below any tolerance a drawing would state and
@@ -138,10 +137,6 @@ def failed_member(task: tuple[int, Start, str | None], error: BaseException) -> 
 
 #: The records file of an ensemble's members (`runner.append_record`), in its output directory.
 MEMBERS_FILE = "members.jsonl"
-#: Statuses of members run again when the ensemble is: not their run's own end.
-RUN_AGAIN = ("interrupted", WORKER_DIED)
-
-
 def _member_key(scenario, start: Start) -> str | None:
     """The key of a member's record (`runner.scenario_key`: its scenario and spotsim's code),
     None for a start that is no valid scenario (such a member is always run)."""
@@ -227,11 +222,10 @@ def ensemble(scenario, n: int, *, seed: int = 0, offset_tol_mm: float = OFFSET_T
     for name, tol in (("offset_tol_mm", offset_tol_mm), ("rpy_tol_deg", rpy_tol_deg)):
         if not (math.isfinite(tol) and tol >= 0):
             raise SpotsimError(f"{name} = {tol}: must be finite and >= 0")
-    if runner is None:
-        workers = min(int(workers or os.cpu_count() or 1), n)
-        if workers < 1:
-            raise SpotsimError(f"workers = {workers}: must be >= 1")
-        runner = Runner(SERIAL if workers == 1 else PROCESSES, workers=workers, wall_limit_s=None, progress=progress)
+    if runner is None:  # a pool of `workers` (Runner checks them); a pool of one: here, one after the other
+        runner = Runner(PROCESSES, workers=workers or None, wall_limit_s=None, progress=progress)
+        if runner.worker_count(n) == 1:
+            runner = dataclasses.replace(runner, backend=SERIAL)
     if model is None:  # here first: a scenario that cannot be built fails before any worker starts
         from ..assemble.model import build_model
 

@@ -40,7 +40,7 @@ import numpy as np
 from ..errors import ScenarioError, SpotsimError
 from ..jit import add_sources
 from ..scenario import modules_of, to_dict, to_yaml
-from ..status import EXCEPTION, WORKER_DIED
+from ..status import EXCEPTION, INTERRUPTED, WALL_LIMIT, WORKER_DIED
 
 SERIAL, PROCESSES, DASK = "serial", "processes", "dask"
 BACKENDS = (SERIAL, PROCESSES, DASK)
@@ -51,6 +51,9 @@ WALL_LIMIT_S = 600.0
 #: `Runner.max_points`): each is a whole run of a second or more, so a larger count is far
 #: more often a mistyped range than a plan; it is refused before any point is built.
 MAX_POINTS = 10_000
+#: Statuses of a record that are not its run's own end: an ensemble or a study started again
+#: over its records runs them again.
+RUN_AGAIN = (INTERRUPTED, WALL_LIMIT, WORKER_DIED)
 #: Models a worker keeps, the least recently used dropped first.
 MODELS_KEPT = 8
 

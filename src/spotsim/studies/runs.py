@@ -20,11 +20,8 @@ from ..status import (
     COMPARABLE,
     COMPLETED,
     EXCEPTION,
-    INTERRUPTED,
     NOT_CAPTURED,
     REJECTED,
-    WALL_LIMIT,
-    WORKER_DIED,
     run_outcome,
 )
 
@@ -130,7 +127,7 @@ class Runs:
         import dataclasses
         import functools
 
-        from .runner import PROCESSES, Runner, append_record, execute, failed, read_records, scenario_key
+        from .runner import PROCESSES, RUN_AGAIN, Runner, append_record, execute, failed, read_records, scenario_key
 
         key = None if self.records is None else scenario_key(scenario)
         if key is not None:
@@ -148,8 +145,6 @@ class Runs:
 
 #: The records file of a study's runs (`Runs`), in its output directory.
 RUNS_FILE = "runs.jsonl"
-#: Statuses of a study's runs that are run again when the study is: not their run's own end.
-RUN_AGAIN = (INTERRUPTED, WALL_LIMIT, WORKER_DIED)
 
 
 def run_once(scenario, source: str = "<study>", wall_limit_s: float | None = None) -> Outcome:
