@@ -16,6 +16,12 @@
    that state.
 3. The bound these set: at one step per tick, a chunk in which the fingers clamp runs at most
    (controller period) / (step at the clamp) times faster than real time.
+4. The bound stiffness sets: at the same state, the accelerations' linearisation in the
+   velocities, da/dv (central differences, the pairs and their memory held): symplectic
+   Euler's velocity update v + h a(v) is stable only for h < 2 / |lambda|, lambda its most
+   negative eigenvalue (the contacts' and joints' damping on the inertia they move), whatever
+   the error tolerance; beside it, the mean step the run's own integrator takes there, and
+   the coordinates that share the fastest mode.
 """
 
 from __future__ import annotations
@@ -37,6 +43,8 @@ from spotsim.sim.step import step
 
 #: The clamp whose step is timed: this long before the first grasp completes, s.
 CLAMP_BEFORE = 0.1
+#: The velocity perturbation of the linearisation da/dv, m/s or rad/s.
+DV = 1e-7
 #: Calls of each stage per timing, and timings (the fastest is kept). Whole steps move the
 #: state on: STEP_CALLS of one controller period stay well within CLAMP_BEFORE.
 CALLS, STEP_CALLS, TIMINGS = 2000, 200, 5
@@ -119,6 +127,43 @@ def controller_period(model) -> float:
     return float(model.sim.drives.period[0])
 
 
+def velocity_names(model) -> list[str]:
+    """Each velocity coordinate's name: its joint's, a floating joint's six components
+    suffixed."""
+    pm, names = model.pin_model, []
+    for j in range(1, pm.njoints):
+        n = pm.nvs[j]
+        names += [pm.names[j]] if n == 1 else [f"{pm.names[j]}.{c}" for c in ("vx", "vy", "vz", "wx", "wy", "wz")[:n]]
+    return names
+
+
+def damping_rates(m, data, h) -> tuple[np.ndarray, np.ndarray]:
+    """The eigenvalues and eigenvectors of da/dv at data's state (1/s), its pairs and their
+    memory held, the bristles bent over h."""
+    def acc(v):
+        d = data.copy()
+        d.v[:] = v
+        repeat_forces(m, d, h, 1)
+        accelerations(m, d)
+        return d.a.copy()
+
+    nv = data.v.shape[0]
+    A = np.empty((nv, nv))
+    for i in range(nv):
+        e = np.zeros(nv)
+        e[i] = DV
+        A[:, i] = (acc(data.v + e) - acc(data.v - e)) / (2 * DV)
+    return np.linalg.eig(A)
+
+
+def mean_step(m, data, h) -> float:
+    """The mean step (s) of STEP_CALLS steps of at most h from a copy of data's state."""
+    d = data.copy()
+    before = d.t
+    repeat_steps(m, d, h, STEP_CALLS)
+    return (d.t - before) / STEP_CALLS
+
+
 def clamp_state(scenario, t: float):
     """The model and data of the scenario stepped to t (s) by steps of one controller period."""
     model = spotsim.build_model(scenario)
@@ -186,6 +231,16 @@ def main() -> None:
         print(f"| {name} | {us:.2f} | {100 * us / whole:.0f} % |")
     print(f"\nAt one step per controller tick, a clamp runs at most {period * 1e6 / whole:.1f} times faster than real "
           f"time ({period * 1e6:g} µs simulated per {whole:.2f} µs step).")
+
+    rates, modes = damping_rates(m, data, h)
+    k = int(np.argmin(rates.real))
+    share = np.abs(modes[:, k]) / np.abs(modes[:, k]).max()
+    names = velocity_names(model)
+    sharing = ", ".join(f"{names[i]} {share[i]:.2f}" for i in np.argsort(-share)[:4])
+    print(f"\nThe stiffest damping at the clamp: da/dv's most negative eigenvalue {rates.real[k]:.0f} 1/s, so an "
+          f"explicit velocity update is stable only for steps below {2e6 / abs(rates.real[k]):.0f} µs; the run's "
+          f"integrator takes {mean_step(m, data, h) * 1e6:.0f} µs there on average (mean of {STEP_CALLS}). "
+          f"The mode's largest coordinates (share of the largest): {sharing}.")
 
 
 if __name__ == "__main__":
