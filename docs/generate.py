@@ -1649,11 +1649,12 @@ def sweep_speed(r=None) -> str:
                     f". Copied by `{GENERATE} pages` from `docs/results/sweep_speed.md`:")
 
 
-def benchmark_table(stem: str) -> str:
-    """A benchmark's table as printed by `benchmarks/<stem>.py` into docs/results/<stem>.md."""
+def benchmark_table(stem: str, command: str | None = None) -> str:
+    """A benchmark's table as printed by `command` (`python benchmarks/<stem>.py`) into
+    docs/results/<stem>.md."""
     path = RESULTS / f"{stem}.md"
     if not path.exists():
-        return f"Not run yet: `python benchmarks/{stem}.py > docs/results/{stem}.md`."
+        return f"Not run yet: `{command or f'python benchmarks/{stem}.py'} > docs/results/{stem}.md`."
     head, *lines = path.read_text().strip().splitlines()
     return (f"{head}. Copied by `{GENERATE} pages` from `docs/results/{stem}.md`:\n\n"
             + "\n".join(lines).strip())
@@ -1677,6 +1678,15 @@ def drive_period(r=None) -> str:
 def profile(r=None) -> str:
     """The profile benchmark's tables (`benchmarks/profile.py`)."""
     return benchmark_table("profile")
+
+
+#: The profile of Case I with compliant joints, which docs/performance.md reads.
+PROFILE_COMPLIANT = "python benchmarks/profile.py --case I --set arm.compliance.joints=compliant"
+
+
+def profile_compliant(r=None) -> str:
+    """The profile benchmark's tables for Case I with a compliant arm."""
+    return benchmark_table("profile_compliant", PROFILE_COMPLIANT)
 
 
 def design_sweep(r=None) -> str:
@@ -1878,6 +1888,7 @@ RENDER = {
     "design-sweep": design_sweep,
     "bristle-damping": bristle_damping,
     "profile": profile,
+    "profile-compliant": profile_compliant,
     "bristle-switches": bristle_switches,
     "drive-period": drive_period,
 }
