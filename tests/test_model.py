@@ -108,3 +108,18 @@ def test_dual_arm_modules_take_their_products_of_inertia():
         model = spotsim.build_model(spotsim.replace(s, **{section: {"inertia_kg_m2": inertia}}))
         I = model.pin_model.inertias[model.modules[k].joint].inertia
         assert (I[0, 1], I[0, 2], I[1, 2]) == pytest.approx((0.01, -0.02, 0.005), abs=1e-15)
+
+
+def test_a_field_set_from_python_is_what_compiled_code_and_copies_read(model_I):
+    """Data is a compiled structure: a field set from Python writes it (not an attribute of the
+    proxy alone), so a step, `view` and `copy` see the new value."""
+    from spotsim.run import Stepper
+    from spotsim.sim.data import make_data
+
+    d = make_data(model_I)
+    d.t = 0.25
+    d.sample_t += 0.125
+    assert d.view().t == 0.25 and d.copy().t == 0.25
+    assert d.copy().sample_t == d.view().sample_t == make_data(model_I).sample_t + 0.125
+    Stepper(model_I, d).step(1e-5)
+    assert d.t > 0.25  # the step went on from the time set, not from the start

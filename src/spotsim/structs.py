@@ -38,13 +38,21 @@ class StructType(types.StructRef):
 
 
 class StructProxy(structref.StructRefProxy):
-    """A structure as Python sees it: its fields as attributes (arrays live, numbers copied)."""
+    """A structure as Python sees it: its fields as attributes (arrays live, numbers copied).
+    Setting a field writes it into the structure (`assign`), where compiled code and `copy`
+    read it, not into an attribute of this proxy alone."""
 
     def __getattr__(self, name):
         fields = _FIELDS[type(self._type)]
         if name in fields._fields:
             return getattr(view(self), name)
         raise AttributeError(f"{type(self).__name__} has no field {name!r}")
+
+    def __setattr__(self, name, value):
+        if name not in structref.StructRefProxy.__slots__ and name in _FIELDS[type(self._type)]._fields:
+            self.assign(**{name: value})
+        else:  # the proxy's own (numba's boxing sets _type and _meminfo)
+            super().__setattr__(name, value)
 
     def view(self):
         """Every field at once, as the fields' NamedTuple: arrays live, numbers copied."""
