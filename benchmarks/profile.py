@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import argparse
 import time
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -44,7 +45,9 @@ from spotsim.sim.step import step
 
 #: The clamp whose step is timed: this long before the first grasp completes, s.
 CLAMP_BEFORE = 0.1
-#: The velocity perturbation of the linearisation da/dv, m/s or rad/s.
+#: The velocity perturbation of the linearisation da/dv, m/s or rad/s: far below the relative
+#: speeds at a clamp and the friction's deadband (1 mm/s), so that no pair's law switches
+#: branch within it, and far above the accelerations' round-off.
 DV = 1e-7
 #: Calls of each stage per timing, and timings (the fastest is kept). Whole steps move the
 #: state on: STEP_CALLS of one controller period stay well within CLAMP_BEFORE.
@@ -83,13 +86,20 @@ def repeat_steps(m, d, h, n):
         step(m, d, h)
 
 
-def evaluations_per_step(m, data, h) -> float:
-    """The force evaluations of a whole step of at most h (s) at data's state, on average over
-    STEP_CALLS steps of a copy."""
+class Steps(NamedTuple):
+    """What STEP_CALLS whole steps of at most h from a state take, on average."""
+
+    evaluations: float  # force evaluations per step
+    step_s: float  # the step taken, s
+
+
+def steps_from(m, data, h) -> Steps:
+    """STEP_CALLS whole steps of at most h (s) from a copy of data's state: their force
+    evaluations and their length, on average."""
     d = data.copy()
-    before = d.evaluations
+    t, evaluations = d.t, d.evaluations
     repeat_steps(m, d, h, STEP_CALLS)
-    return (d.evaluations - before) / STEP_CALLS
+    return Steps((d.evaluations - evaluations) / STEP_CALLS, (d.t - t) / STEP_CALLS)
 
 
 def fastest_us(call, data, calls: int = CALLS) -> float:
@@ -157,14 +167,6 @@ def damping_rates(m, data, h) -> tuple[np.ndarray, np.ndarray]:
     return np.linalg.eig(A)
 
 
-def mean_step(m, data, h) -> float:
-    """The mean step (s) of STEP_CALLS steps of at most h from a copy of data's state."""
-    d = data.copy()
-    before = d.t
-    repeat_steps(m, d, h, STEP_CALLS)
-    return (d.t - before) / STEP_CALLS
-
-
 def clamp_state(scenario, t: float):
     """The model and data of the scenario stepped to t (s) by steps of one controller period."""
     model = spotsim.build_model(scenario)
@@ -212,9 +214,9 @@ def main() -> None:
     model, data = clamp_state(scenario, at)
     m, h = model.sim, period
     n_pairs = len(data.contacts.key)
-    per_step = evaluations_per_step(m, data, h)
+    steps = steps_from(m, data, h)
     timed = {
-        f"whole step ({per_step:.2f} force evaluations, the drive, grasp phase, bookkeeping)": fastest_us(
+        f"whole step ({steps.evaluations:.2f} force evaluations, the drive, grasp phase, bookkeeping)": fastest_us(
             lambda d, n: repeat_steps(m, d, h, n), data, STEP_CALLS),
         "force evaluation (kinematics, pairs, pair forces, wrenches)": fastest_us(
             lambda d, n: repeat_forces(m, d, h, n), data),
@@ -242,7 +244,7 @@ def main() -> None:
     rate = f"{rates[k].real:.0f} {rates[k].imag:+.0f}i"
     print(f"\nThe stiffest damping at the clamp: da/dv's eigenvalue {rate} 1/s bounds an explicit velocity "
           f"update's stable steps to {bounds[k] * 1e6:.0f} µs; the run's integrator takes "
-          f"{mean_step(m, data, h) * 1e6:.0f} µs there on average (mean of {STEP_CALLS}). The mode's largest "
+          f"{steps.step_s * 1e6:.0f} µs there on average (mean of {STEP_CALLS}). The mode's largest "
           f"coordinates (share of the largest): {sharing}.")
 
 
