@@ -152,7 +152,7 @@ def test_a_run_past_its_wall_limit_is_stopped(case_I):
     step still reported."""
     # 1 us steps
     slow = spotsim.replace(case_I, simulation={"substeps": 1000, "integrator": {"method": "symplectic_euler"}})
-    o = runs.run_once(slow, wall_limit_s=1.0)
+    o = runs.Runs(wall_limit_s=1.0)(slow)
     assert o.status == WALL_LIMIT and "wall-time budget of 1 s spent" in o.message
     assert stab.verdict(o) == "no verdict: wall limit" and o.prediction.step_s == pytest.approx(1e-6)
 
@@ -161,7 +161,7 @@ def test_a_run_within_its_wall_limit_is_the_same_run(case_I):
     """In its worker process, within its budget, a run gives what it gives in the study's own
     process without one."""
     short = spotsim.replace(case_I, simulation={"duration_s": 0.5})
-    here, there = runs.Outcome.of(runs.run_record(short)), runs.run_once(short, wall_limit_s=60)
+    here, there = runs.Outcome.of(runs.run_record(short)), runs.Runs(wall_limit_s=60)(short)
     assert there.status == here.status == "incomplete" and there.steps == here.steps
     assert (there.offsets[0] == here.offsets[0]).all() and there.peaks == here.peaks
 

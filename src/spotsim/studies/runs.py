@@ -147,11 +147,6 @@ class Runs:
 RUNS_FILE = "runs.jsonl"
 
 
-def run_once(scenario, source: str = "<study>", wall_limit_s: float | None = None) -> Outcome:
-    """One run of a study, kept nowhere (`Runs`)."""
-    return Runs(source, wall_limit_s)(scenario)
-
-
 def _prediction(scenario, source):
     """stability.predict_step of the scenario's model, or None if it cannot be built."""
     from ..assemble.model import build_model
@@ -335,7 +330,7 @@ def step_scaled(s, factor: float):
 
 def warm_up(scenario, methods, duration_s: float = 0.5) -> None:
     """Run each method briefly here (dopri5 at a loose tolerance), so that no timed run pays for
-    loading its compiled kernels: the processes `run_once` forks inherit them loaded."""
+    loading its compiled kernels: the processes `Runs` forks inherit them loaded."""
     for method in methods:
         integrator = {**to_dict(scenario.simulation.integrator), "method": method}
         if method == "dopri5":
