@@ -14,8 +14,10 @@ from spotsim.assemble.model import with_start
 from spotsim.cli import ensemble_exit, main
 from spotsim.errors import SpotsimError
 from spotsim.studies import ensemble as ens
-from spotsim.studies.ensemble import EnsembleResult, Start, member, member_scenario, perturbed_starts, run_member
+from spotsim.studies import runs
+from spotsim.studies.ensemble import EnsembleResult, Start, member, member_scenario, member_task, perturbed_starts
 from spotsim.studies.runner import keep_model
+from spotsim.studies.runs import run_task
 
 #: Case I at the default step: a whole member runs in well under a second.
 SHORT_S = 0.6  # s simulated where a member need not complete: past first contact (~0.43 s)
@@ -109,7 +111,7 @@ def test_a_member_on_the_shared_model_is_a_fresh_simulate_of_its_scenario(config
     s = spotsim.load_scenario(ROOT / "config" / config)
     start = perturbed_starts(s, 3, seed=11)[2]
     keep_model(spotsim.build_model(s))  # the nominal model a worker holds
-    one = run_member((2, start, None), s)
+    one = run_task(member_task(s, 2, start, keyed=False))
     fresh = spotsim.simulate(member_scenario(s, start))
     assert one.status == fresh.status == "completed"
     assert comparable(one.summary) == comparable(fresh.summary)
@@ -211,14 +213,14 @@ def test_the_command_line_writes_the_ensemble_and_exits_with_its_code(tmp_path, 
 def test_ctrl_c_keeps_the_members_that_finished(tmp_path, monkeypatch):
     """Ctrl-C during member 2 stops the ensemble: members 0 and 1 are kept and written, the
     others are `interrupted`, and the command exits 130."""
-    real = ens.run_member
+    real = runs.run_task
 
-    def interrupting(task, scenario, source="<ensemble>"):
-        if task[0] == 2:
+    def interrupting(task, options):
+        if task.index == 2:
             raise KeyboardInterrupt
-        return real(task, scenario, source)
+        return real(task, options)
 
-    monkeypatch.setattr(ens, "run_member", interrupting)
+    monkeypatch.setattr(runs, "run_task", interrupting)
     out = tmp_path / "ens"
     code = main(["run", str(CASE_I), "--ensemble", "4", "--workers", "1", "--out", str(out), "--quiet",
                  "--set", f"simulation.duration_s={SHORT_S}"])
@@ -234,16 +236,16 @@ def test_an_interrupted_ensemble_started_again_runs_only_the_members_it_lacks(tm
     other code (another fingerprint) it runs them all again."""
     from spotsim.studies import runner as rn
 
-    real = ens.run_member
+    real = runs.run_task
     ran = []
 
-    def interrupting(task, scenario, source="<ensemble>"):
-        ran.append(task[0])
+    def interrupting(task, options):
+        ran.append(task.index)
         if ran == [0, 1, 2]:  # the first command's third member
             raise KeyboardInterrupt
-        return real(task, scenario, source)
+        return real(task, options)
 
-    monkeypatch.setattr(ens, "run_member", interrupting)
+    monkeypatch.setattr(runs, "run_task", interrupting)
     out = tmp_path / "ens"
     cmd = ["run", str(CASE_I), "--ensemble", "4", "--workers", "1", "--out", str(out), "--quiet",
            "--no-error-estimate", "--set", f"simulation.duration_s={SHORT_S}"]

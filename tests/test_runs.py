@@ -14,6 +14,7 @@ import spotsim
 from spotsim.cli import main
 from spotsim.sim.stability import ENERGY_FLOOR_J
 from spotsim.status import NOT_CAPTURED, SEATED, grasp_outcome, run_outcome
+from spotsim.studies.runs import run_task
 
 #: A tenfold reduction of the 3 mm start (the paper reports 0.128-0.131 mm): Case I's converged
 #: runs seat (every member of a 32-member ensemble at 12.5 us: 0.12-0.15 mm).
@@ -365,7 +366,7 @@ def test_a_grasp_that_closes_with_a_finger_outside_its_groove_is_not_captured(tm
     assert main(["plot", str(ens)]) == 0  # an ensemble's directory: its histograms
     assert (ens / "figures" / "ensemble.png").read_bytes().startswith(b"\x89PNG")
     spec = sw.SweepSpec(points=[{"module.initial_offset_mm.1": -11.0}], sets=["end_effector.start_gap_mm=15"])
-    record = sw.run_point(sw.resolve_points(CASE_I, spec)[0], with_estimate=False)
+    record = run_task(sw.resolve_points(CASE_I, spec)[0])
     assert record.status == "not captured"
     assert run_outcome(record.status, record.summary) == NOT_CAPTURED
 

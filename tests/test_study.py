@@ -14,6 +14,7 @@ from spotsim.status import WALL_LIMIT, WEDGED_OFFSET_MM
 from spotsim.studies import accuracy as acc
 from spotsim.studies import runs
 from spotsim.studies import stability as stab
+from spotsim.studies.runner import Task
 
 #: Columns a row may leave as nan, because the quantity does not exist for it: the step of the
 #: adaptive method and the tolerances of the fixed-step ones, the completion time of a run that
@@ -161,7 +162,7 @@ def test_a_run_within_its_wall_limit_is_the_same_run(case_I):
     """In its worker process, within its budget, a run gives what it gives in the study's own
     process without one."""
     short = spotsim.replace(case_I, simulation={"duration_s": 0.5})
-    here, there = runs.Outcome.of(runs.run_record(short)), runs.Runs(wall_limit_s=60)(short)
+    here, there = runs.Outcome.of(runs.run_task(Task(short))), runs.Runs(wall_limit_s=60)(short)
     assert there.status == here.status == "incomplete" and there.steps == here.steps
     assert (there.offsets[0] == here.offsets[0]).all() and there.peaks == here.peaks
 

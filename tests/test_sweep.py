@@ -31,6 +31,7 @@ from spotsim.status import (
 from spotsim.studies import runner as rn
 from spotsim.studies import sweep as sw
 from spotsim.studies.runner import Runner, SchedulerLost, append_record, read_records
+from spotsim.studies.runs import RunOptions, run_task
 
 HERE = Runner("serial")  # fake runs, in the test's own process
 #: Three short Case I points, x_a offset -1, 0 and 1 mm (each ~0.2 s and its companion).
@@ -189,7 +190,7 @@ def test_a_point_that_raises_is_recorded_with_its_status(monkeypatch):
 
     monkeypatch.setattr(run, "simulate", broken)
     point = sw.resolve_points(CASE_I, sw.spec_of(VARY))[0]
-    record = sw.run_point(point)
+    record = run_task(point, RunOptions(estimate=True))
     assert record.status == EXCEPTION and "RuntimeError raised by simulate: a bug" in record.message
 
 
@@ -391,12 +392,12 @@ def fake_run(boundary: dict):
     """A stand-in for a run: captured (complete, residual 0.01 mm) while each axis' start lies
     inside its `boundary`, else not captured; no simulation."""
     def run(point):
-        inside = all(abs(point.values[sw_axis(a)]) < b for a, b in boundary.items())
+        inside = all(abs(point.about["values"][sw_axis(a)]) < b for a, b in boundary.items())
         summary = {"grasps": [{"residual_offset_norm_mm": 0.01, "completed_s": 1.0, "in_grooves": True,
                                "residual_rpy_deg": [0.01, 0.0, 0.0]} if inside else
                               {"residual_offset_norm_mm": None, "completed_s": None}]}
         return rn.Record(point.key, point.index, "completed" if inside else "incomplete", "", summary, 0.0,
-                         about={"values": point.values, "start_gap_mm": None})
+                         about=point.about)
     return run
 
 
@@ -412,7 +413,7 @@ def test_bisection_finds_a_known_boundary_in_log_runs(tmp_path):
     from spotsim.studies import envelope as env
 
     run = fake_run({"x": 3.7, "roll": 12.3})
-    asym = lambda point: run(point) if point.values[sw_axis("x")] >= 0 else fake_run({"x": 2.2})(point)  # noqa: E731
+    asym = lambda point: run(point) if point.about["values"][sw_axis("x")] >= 0 else fake_run({"x": 2.2})(point)  # noqa: E731
     report = env.envelope(CASE_I, tmp_path, env.Search(axes=("x", "roll"), planes=()), runner=HERE, run=asym)
     by = {r.name: r for r in report.rays}
     for name, true in (("x+", 3.7), ("x-", 2.2), ("roll+", 12.3), ("roll-", 12.3)):

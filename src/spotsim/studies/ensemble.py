@@ -26,8 +26,8 @@ import numpy as np
 
 from ..errors import SpotsimError
 from ..scenario import modules_of, replace
-from ..status import EXCEPTION, REJECTED, WEDGED_OFFSET_MM, WEDGED_TILT_DEG, grasp_outcome
-from .runner import RUN_AGAIN, Record, failed
+from ..status import WEDGED_OFFSET_MM, WEDGED_TILT_DEG, grasp_outcome
+from .runner import RUN_AGAIN, Record, Task, scenario_key
 
 #: Default perturbation of each module's start: +-10 um on each axis of the offset and
 #: +-0.01 deg on each of roll, pitch, yaw, well below any tolerance a drawing would state and
@@ -110,42 +110,17 @@ def start_of(m: Record) -> Start:
                  {k: tuple(v["initial_rpy_deg"]) for k, v in start.items()})
 
 
-def run_member(task: tuple[int, Start, str | None], scenario, source: str = "<ensemble>") -> Record:
-    """Run one member, task = (index, start, key), of the ensemble of `scenario`: on the
-    process's model of its scene (`runner.model_for`: the nominal one, built or inherited once
-    per worker) with the member's start swapped in (`assemble.model.with_start`). Never raises
-    but on the user's Ctrl-C: a rejected start or an exception is the member's status."""
-    from .runner import model_for
-    from .runs import attempt, raised
-
-    index, start, key = task
-    try:
-        mine = member_scenario(scenario, start)
-        model = model_for(mine, source)
-    except SpotsimError as e:  # the perturbed start's own problem, found before anything ran
-        return member(index, start, REJECTED, str(e).replace("\n", "; "), key=key)
-    except Exception as e:  # nothing here should raise: the member reports it, the others go on
-        return member(index, start, EXCEPTION, raised(e, "the start"), key=key)
-    status, message, result = attempt(mine, model, source)
-    return member(index, start, status, message, None if result is None else result.summary, key)
-
-
-def failed_member(task: tuple[int, Start, str | None], error: BaseException) -> Record:
-    """The member whose task failed outside its run: its worker died, or it could not be sent."""
-    return failed(task[2], task[0], error, start=task[1].as_dict())
-
-
 #: The records file of an ensemble's members (`runner.append_record`), in its output directory.
 MEMBERS_FILE = "members.jsonl"
-def _member_key(scenario, start: Start) -> str | None:
-    """The key of a member's record (`runner.scenario_key`: its scenario and spotsim's code),
-    None for a start that is no valid scenario (such a member is always run)."""
-    from .runner import scenario_key
-
+def member_task(scenario, index: int, start: Start, keyed: bool) -> Task:
+    """The task of a member (`runner.Task`): the scenario at its start, keyed (`scenario_key`)
+    if `keyed`; a start that is no valid scenario is a task without one (its run `rejected`)."""
+    about = {"start": start.as_dict()}
     try:
-        return scenario_key(member_scenario(scenario, start))
-    except SpotsimError:
-        return None
+        mine = member_scenario(scenario, start)
+    except SpotsimError as e:  # the perturbed start's own problem
+        return Task(None, index, None, about, (str(e).replace("\n", "; "),))
+    return Task(mine, index, scenario_key(mine) if keyed else None, about)
 
 
 # ----------------------------------------------------------------------------- the ensemble
@@ -216,6 +191,7 @@ def ensemble(scenario, n: int, *, seed: int = 0, offset_tol_mm: float = OFFSET_T
         read_records,
         warm_worker,
     )
+    from .runs import RunOptions, run_task
 
     if not (isinstance(n, int | np.integer) and n >= 1):
         raise SpotsimError(f"ensemble size n = {n}: must be an integer >= 1")
@@ -236,13 +212,13 @@ def ensemble(scenario, n: int, *, seed: int = 0, offset_tol_mm: float = OFFSET_T
     starts = perturbed_starts(scenario, n, seed, offset_tol_mm, rpy_tol_deg, family)
     members: list[Record | None] = [None] * n
     records = None if out_dir is None else Path(out_dir) / MEMBERS_FILE
-    keys = [None] * n if records is None else [_member_key(scenario, start) for start in starts]
+    tasks = [member_task(scenario, i, start, records is not None) for i, start in enumerate(starts)]
     done = {} if records is None else read_records(records)
     if records is not None:
         records.parent.mkdir(parents=True, exist_ok=True)
-    for i, key in enumerate(keys):
-        if key in done and done[key].status not in RUN_AGAIN:
-            members[i] = dataclasses.replace(done[key], index=i)
+    for task in tasks:
+        if task.key in done and done[task.key].status not in RUN_AGAIN:
+            members[task.index] = dataclasses.replace(done[task.key], index=task.index)
     reused = sum(m is not None for m in members)
 
     def finished(task, m: Record):
@@ -255,9 +231,8 @@ def ensemble(scenario, n: int, *, seed: int = 0, offset_tol_mm: float = OFFSET_T
     interrupted = False
     wall0 = time.perf_counter()
     try:
-        execute(functools.partial(run_member, scenario=scenario, source=source),
-                [(i, start, keys[i]) for i, start in enumerate(starts) if members[i] is None], runner,
-                finished, failed_member, what="ensemble", total=n - reused,
+        execute(functools.partial(run_task, options=RunOptions(source)), [t for t in tasks if members[t.index] is None],
+                runner, finished, what="ensemble", total=n - reused,
                 warm=functools.partial(warm_worker, scenario, source))
     except KeyboardInterrupt:
         interrupted = True

@@ -3,7 +3,7 @@
 From the centred start, a ray is a direction in the module's misalignment (x_a, y_a in mm;
 roll, pitch, yaw in degrees): along each axis both ways, and fanned over the (x_a, y_a) plane
 and the roll-yaw plane. Along a ray the start is moved by a magnitude r; a probe at r runs the
-scenario from there (`sweep.run_point`, the start gap grown where the misaligned start would
+scenario from there (`runs.run_task`, the start gap grown where the misaligned start would
 interpenetrate) and is captured when its verdict is `seated` (closed within its grooves, its
 residual offset and tilt within the precision, `status.grasp_outcome`). Each ray probes its
 search limit first (a ray captured there has its boundary beyond it), then bisects between its
@@ -33,8 +33,8 @@ from ..errors import ScenarioError
 from ..files import atomic_write, prepare, save_figure
 from ..scenario import TOLERANCE_DEG, TOLERANCE_OFFSET_MM, from_dict, set_value
 from ..status import SEATED, run_outcome
-from .runner import Runner, SchedulerLost, append_record, check_budget, read_records, scenario_key
-from .sweep import POINTS_FILE, PRECISION_MM, Point, run_on
+from .runner import Runner, SchedulerLost, Task, append_record, check_budget, read_records, scenario_key
+from .sweep import POINTS_FILE, PRECISION_MM, run_on
 
 #: The misalignment axes: key path of the module's start, unit.
 AXES = {"x": ("module.initial_offset_mm.0", "mm"), "y": ("module.initial_offset_mm.1", "mm"),
@@ -110,7 +110,7 @@ def rays(axes=tuple(AXES), planes=PLANES, plane_rays: int = PLANE_RAYS, resoluti
     return out
 
 
-def probe_point(raw0: dict, ray: Ray, magnitude: float, index: int, where: str) -> Point:
+def probe_point(raw0: dict, ray: Ray, magnitude: float, index: int, where: str) -> Task:
     """The sweep point of a probe: the module started `magnitude` along `ray` from centred."""
     import json
 
@@ -123,8 +123,8 @@ def probe_point(raw0: dict, ray: Ray, magnitude: float, index: int, where: str) 
     try:
         scenario = from_dict(raw, where)
     except ScenarioError as e:
-        return Point(index, values, f"invalid-{ray.name}-{magnitude}", problems=list(e.problems))
-    return Point(index, values, scenario_key(scenario), scenario)
+        return Task(None, index, f"invalid-{ray.name}-{magnitude}", {"values": values}, tuple(e.problems))
+    return Task(scenario, index, scenario_key(scenario), {"values": values})
 
 
 @dataclass
@@ -185,7 +185,7 @@ class Search:
 def envelope(config, out_dir, search: Search = Search(), *, runner: Runner = Runner(), sets=(),
              run=None) -> EnvelopeReport:
     """Find the capture boundary along every ray of `search` for a single-arm scenario (with
-    the overrides `sets`, as `--set`), its probes run on `runner` (by `sweep.run_point`, or by
+    the overrides `sets`, as `--set`), its probes run on `runner` (by `runs.run_task`, or by
     `run(point) -> record` if given: tests). Probes found in `out_dir`'s points file are not
     run again."""
     import yaml
@@ -264,7 +264,7 @@ def _chances(todo, raw0, search: Search, done: dict, runner: Runner, source: str
                 continue
             for i, start in enumerate(perturbed_starts(base.scenario, search.members, search.seed)):
                 s = member_scenario(base.scenario, start)
-                plan.append((ray, m, Point(i, base.values, scenario_key(s), s)))
+                plan.append((ray, m, Task(s, i, scenario_key(s), base.about)))
     missing = list({p.key: p for _, _, p in plan if p.key not in done}.values())
     if missing:
         run_on(runner, missing, source, lambda p, record: store(record), error_estimate=False, grow_gap=True,

@@ -72,6 +72,9 @@ CLOSED = (COMPLETED, NOT_CAPTURED)
 #: Why a run has no spread over starts, by default.
 NO_SPREAD = ("none: no ensemble and no study of this scenario, and none measured around its start (`spotsim run` "
              "measures one, --spread-members, for a run that completes)")
+#: Why a sweep point's error estimate has no spread over starts, and so no bound.
+POINT_NO_SPREAD = ("none: a sweep point (its spread would take 16 more runs a point); `spotsim run` of the point's "
+                   "scenario measures it and gives the bound")
 #: Roache's factor of safety for a grid convergence index from two grids.
 GCI_SAFETY = 3.0
 METHOD = ("estimate: Richardson, first order: |Q(run) - Q(companion)|, the companion's steps twice as long "

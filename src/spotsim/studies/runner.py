@@ -143,17 +143,30 @@ class Record:
         return cls(**fields, about=about)
 
 
-def failed(key: str | None, index: int, error: BaseException, **about) -> Record:
+@dataclass(frozen=True)
+class Task:
+    """One run a study asks for: its scenario (None for one that is not valid: `problems` say
+    why), its index in the study, its key (`scenario_key`; None: kept nowhere) and the study's
+    own about it (a sweep point's values, an ensemble member's start), which its record keeps."""
+
+    scenario: object = None
+    index: int = 0
+    key: str | None = None
+    about: dict = dataclasses.field(default_factory=dict)
+    problems: tuple = ()
+
+
+def failed(task: Task, error: BaseException) -> Record:
     """The record of a task that failed outside its run: its worker died (twice), or it could
     not be sent."""
-    return Record(key, index, WORKER_DIED if worker_died(error) else EXCEPTION, f"{type(error).__name__}: {error}",
-                  about=about)
+    return Record(task.key, task.index, WORKER_DIED if worker_died(error) else EXCEPTION,
+                  f"{type(error).__name__}: {error}", about=dict(task.about))
 
 
 # ----------------------------------------------------------------------------- execute
 
 
-def execute(run: Callable, tasks, runner: Runner, finished: Callable, failed: Callable, *,
+def execute(run: Callable, tasks, runner: Runner, finished: Callable, failed: Callable = failed, *,
             what: str = "study", total: int | None = None, warm: Callable | None = None) -> int:
     """Call `run(task)` for every task on `runner`'s backend, and for each task a finished one
     brings: `finished(task, record)` is called here as each ends and returns more tasks (or

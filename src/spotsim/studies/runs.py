@@ -8,8 +8,11 @@ from __future__ import annotations
 
 import csv
 import math
+import os
+import time
 import traceback
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -22,31 +25,86 @@ from ..status import (
     EXCEPTION,
     NOT_CAPTURED,
     REJECTED,
+    WALL_LIMIT,
     run_outcome,
 )
+from .runner import Record, Task
 
 # ----------------------------------------------------------------------------- one run
 
 
-def attempt(scenario, model, source: str = "<study>", wall_limit_s: float | None = None,
-            stage: str = "simulate"):
-    """Check `model`'s start and simulate `scenario` on it: (status, message, Result or None).
-    The one place a study's run never raises but on the user's Ctrl-C: a start whose fingers and
-    groove interpenetrate is `rejected`, anything raised out of the run is `exception` (a bug the
-    study reports, named with `stage` and where it was raised)."""
-    from ..run import check_start, simulate
+@dataclass(frozen=True)
+class RunOptions:
+    """How `run_task` runs a task: named `source`, within the wall-time budget `wall_limit_s`
+    (None: none); with `estimate`, the error estimate's companion run too, within what is
+    left of the budget (`estimate.companion`); with `grow_gap`, a start whose fingers and
+    groove interpenetrate runs with the start gap that clears it (`stability.clearing_gap`),
+    kept as `about["start_gap_mm"]`."""
 
+    source: str = "<study>"
+    wall_limit_s: float | None = None
+    estimate: bool = False
+    grow_gap: bool = False
+
+
+def run_task(task: Task, options: RunOptions = RunOptions()) -> Record:
+    """Build, check and simulate a task's scenario here: every study's run. Its record has the
+    run's status, message and summary (with `options.estimate`, its error estimate), the wall
+    time of all of it and, in `about`, the model's predicted stable step (`prediction`) and
+    whether every recorded number is finite (`finite`). Never raises but on the user's
+    Ctrl-C: a scenario that cannot be built or whose fingers and groove interpenetrate is
+    `rejected`; anything raised is `exception` (a bug the study reports, named with its stage
+    and where it was raised)."""
+    from ..run import check_start, initial_contacts, simulate
+    from ..sim.stability import predict_step
+    from .estimate import POINT_NO_SPREAD, companion, error_estimate
+    from .runner import model_for
+    from .stability import clearing_gap, widened
+
+    t0, about = time.perf_counter(), dict(task.about)
+
+    def ended(status, message, summary=None):
+        return Record(task.key, task.index, status, message, summary, time.perf_counter() - t0, os.getpid(), about)
+
+    if task.scenario is None:
+        return ended(REJECTED, "; ".join(task.problems))
+    scenario, source = task.scenario, options.source
     try:
+        model = model_for(scenario, source)
+        if options.grow_gap and initial_contacts(model) and (gap := clearing_gap(scenario)) is not None:
+            scenario = widened(scenario, gap)
+            model = model_for(scenario, source)
+            about["start_gap_mm"] = gap
+        about["prediction"] = predict_step(model)
         check_start(model, source)
-    except SpotsimError as e:  # the start's own problem, found before anything ran
-        return REJECTED, str(e).replace("\n", "; "), None
+    except SpotsimError as e:  # the scenario's or its start's own problem, found before anything ran
+        return ended(REJECTED, str(e).replace("\n", "; "))
+    except Exception as e:  # noqa: BLE001 - a bug: the study reports it and goes on
+        return ended(EXCEPTION, _raised_here(e, "the start"))
     try:
-        result = simulate(scenario, model=model, source=source, wall_limit_s=wall_limit_s)
-    except Exception as e:  # simulate must never raise: the study reports it rather than dies of it
-        if _caused_by_ctrl_c(e):
-            raise KeyboardInterrupt from e
-        return EXCEPTION, raised(e, stage), None
-    return result.status, result.summary["message"], result
+        result = simulate(scenario, model=model, source=source, wall_limit_s=options.wall_limit_s)
+    except Exception as e:  # noqa: BLE001 - simulate must never raise: the study reports it rather than dies of it
+        return ended(EXCEPTION, _raised_here(e, "simulate"))
+    about["finite"] = all(bool(np.all(np.isfinite(a))) for a in result.timeseries.values()
+                          if np.issubdtype(np.asarray(a).dtype, np.floating))
+    summary = result.summary
+    other = companion(scenario) if options.estimate and summary["status"] != WALL_LIMIT else None
+    if other is not None:
+        left = None if options.wall_limit_s is None else max(options.wall_limit_s - (time.perf_counter() - t0), 1e-3)
+        try:
+            twin = simulate(other, model=model_for(other, source), source=source, wall_limit_s=left)
+        except Exception as e:  # noqa: BLE001 - the companion's scene is the run's: a bug to report
+            return ended(EXCEPTION, _raised_here(e, "the error estimate's companion"))
+        summary["error_estimate"] = error_estimate(summary, twin.summary, no_spread=POINT_NO_SPREAD)
+    return ended(summary["status"], summary["message"], summary)
+
+
+def _raised_here(e: Exception, stage: str) -> str:
+    """The message of an exception out of a run (`raised`); Ctrl-C landing in the run is the
+    user's: KeyboardInterrupt."""
+    if _caused_by_ctrl_c(e):
+        raise KeyboardInterrupt from e
+    return raised(e, stage)
 
 
 def raised(e: BaseException, stage: str) -> str:
@@ -85,7 +143,7 @@ class Outcome:
 
     @classmethod
     def of(cls, r) -> Outcome:
-        """What a study keeps of a run's record (`runner.Record`, as `run_record` makes it)."""
+        """What a study keeps of a run's record (`runner.Record`, as `run_task` makes it)."""
         from ..sim.stability import StepPrediction
 
         s, prediction = r.summary, r.about.get("prediction")
@@ -125,9 +183,8 @@ class Runs:
 
     def __call__(self, scenario) -> Outcome:
         import dataclasses
-        import functools
 
-        from .runner import PROCESSES, RUN_AGAIN, Runner, append_record, execute, failed, read_records, scenario_key
+        from .runner import PROCESSES, RUN_AGAIN, Runner, append_record, execute, read_records, scenario_key
 
         key = None if self.records is None else scenario_key(scenario)
         if key is not None:
@@ -135,9 +192,8 @@ class Runs:
             if done is not None and done.status not in RUN_AGAIN:
                 return Outcome.of(done)
         out = []
-        execute(functools.partial(run_record, source=self.source, wall_limit_s=self.wall_limit_s), [scenario],
-                Runner(PROCESSES, workers=1, wall_limit_s=self.wall_limit_s), lambda task, r: out.append(r),
-                lambda task, e: failed(None, 0, e, prediction=_prediction(scenario, self.source)))
+        execute(partial(run_task, options=RunOptions(self.source, self.wall_limit_s)), [Task(scenario, key=key)],
+                Runner(PROCESSES, workers=1, wall_limit_s=self.wall_limit_s), lambda task, r: out.append(r))
         if key is not None and out[0].status not in RUN_AGAIN:
             append_record(self.records, dataclasses.replace(out[0], key=key))
         return Outcome.of(out[0])
@@ -145,17 +201,6 @@ class Runs:
 
 #: The records file of a study's runs (`Runs`), in its output directory.
 RUNS_FILE = "runs.jsonl"
-
-
-def _prediction(scenario, source):
-    """stability.predict_step of the scenario's model, or None if it cannot be built."""
-    from ..assemble.model import build_model
-    from ..sim.stability import predict_step
-
-    try:
-        return predict_step(build_model(scenario, source))
-    except SpotsimError:
-        return None
 
 
 def _caused_by_ctrl_c(e: BaseException) -> bool:
@@ -168,25 +213,6 @@ def _caused_by_ctrl_c(e: BaseException) -> bool:
         seen.add(id(e))
         e = e.__cause__ or e.__context__
     return False
-
-
-def run_record(scenario, source: str = "<study>", wall_limit_s: float | None = None):
-    """Build, check and simulate `scenario` here: its `runner.Record`, with the model's
-    predicted stable step (`about["prediction"]`) and whether every recorded number is finite
-    (`about["finite"]`)."""
-    from ..sim.stability import predict_step
-    from .runner import Record, model_for
-
-    try:
-        model = model_for(scenario, source)
-    except SpotsimError as e:  # the scenario's own problem, found before anything ran
-        return Record(None, 0, REJECTED, str(e).replace("\n", "; "))
-    about = {"prediction": predict_step(model)}
-    status, message, result = attempt(scenario, model, source, wall_limit_s)
-    if result is not None:
-        about["finite"] = all(bool(np.all(np.isfinite(a))) for a in result.timeseries.values()
-                              if np.issubdtype(np.asarray(a).dtype, np.floating))
-    return Record(None, 0, status, message, None if result is None else result.summary, about=about)
 
 
 # ----------------------------------------------------------------------------- comparing
@@ -335,5 +361,5 @@ def warm_up(scenario, methods, duration_s: float = 0.5) -> None:
         integrator = {**to_dict(scenario.simulation.integrator), "method": method}
         if method == "dopri5":
             integrator.update(rtol=1e-3, atol=1e-6)
-        run_record(replace(scenario, simulation={"duration_s": min(duration_s, scenario.simulation.duration_s),
-                                                 "integrator": integrator}), "<warm-up>")
+        run_task(Task(replace(scenario, simulation={"duration_s": min(duration_s, scenario.simulation.duration_s),
+                                                    "integrator": integrator})), RunOptions("<warm-up>"))

@@ -54,24 +54,19 @@ from ..errors import ScenarioError, SpotsimError
 from ..files import atomic_write
 from ..scenario import from_dict, modules_of, parse_yaml, read_yaml, set_value, to_dict
 from ..status import (
-    EXCEPTION,
-    REJECTED,
-    WALL_LIMIT,
     WEDGED_OFFSET_MM,
     run_outcome,
 )
 from .ensemble import Start, grasp_prefix, member_row
 from .runner import (
     MAX_POINTS,
-    WALL_LIMIT_S,
     Record,
     Runner,
     SchedulerLost,
+    Task,
     append_record,
     check_budget,
     execute,
-    failed,
-    model_for,
     plain,
     read_records,
     scenario_key,
@@ -82,9 +77,6 @@ from .runner import (
 #: incomplete, diverged), with the residual offset beyond which a closed grasp is wedged: by
 #: default the ensembles' (`status.WEDGED_OFFSET_MM`). Points that did not run have none.
 PRECISION_MM = WEDGED_OFFSET_MM
-#: Why a point's error estimate has no spread over starts, and so no bound.
-SWEEP_NO_SPREAD = ("none: a sweep point (its spread would take 16 more runs a point); `spotsim run` of the point's "
-                   "scenario measures it and gives the bound")
 SAMPLERS = ("sobol", "lhs")
 #: A grid axis that sets several keys to the same values, together: `--vary a+b=LO:HI:N` (both
 #: bevels of a groove, say), not a product of two axes.
@@ -233,19 +225,6 @@ class SweepSpec:
 # ----------------------------------------------------------------------------- points
 
 
-@dataclass
-class Point:
-    """One point of a sweep: its index in the spec, its values by key path, its key (a hash of
-    its resolved scenario and the code, `scenario_key`) and the scenario, or the problems that
-    made it invalid."""
-
-    index: int
-    values: dict
-    key: str
-    scenario: object = None
-    problems: list = field(default_factory=list)
-
-
 def base_raw(config: Path, sets: list[str]) -> dict:
     """The raw mapping of a scenario file with the fixed overrides applied, validated once."""
     from ..scenario import load_scenario, set_override
@@ -257,9 +236,11 @@ def base_raw(config: Path, sets: list[str]) -> dict:
     return raw
 
 
-def resolve_points(config: Path, spec: SweepSpec) -> list[Point]:
-    """The spec's points as scenarios. A key path the scenario does not have is an error of the
-    whole sweep (ScenarioError); a value its rule refuses makes that point invalid."""
+def resolve_points(config: Path, spec: SweepSpec) -> list[Task]:
+    """The spec's points as tasks (`runner.Task`): the point's values in `about["values"]`, its
+    key a hash of its resolved scenario and the code (`scenario_key`). A key path the scenario
+    does not have is an error of the whole sweep (ScenarioError); a value its rule refuses
+    makes that point invalid."""
     raw0 = base_raw(config, spec.sets)
     base = from_dict(raw0, str(config))
     known = to_dict(base)
@@ -274,10 +255,10 @@ def resolve_points(config: Path, spec: SweepSpec) -> list[Point]:
                 set_value(raw, k, v)
             scenario = from_dict(raw, f"{config} [point {i}]")
         except ScenarioError as e:
-            points.append(Point(i, values, hashlib.sha256(repr(sorted(values.items())).encode()).hexdigest()[:16],
-                                problems=list(e.problems)))
+            points.append(Task(None, i, hashlib.sha256(repr(sorted(values.items())).encode()).hexdigest()[:16],
+                               {"values": values}, tuple(e.problems)))
             continue
-        points.append(Point(i, values, scenario_key(scenario), scenario))
+        points.append(Task(scenario, i, scenario_key(scenario), {"values": values}))
     return points
 
 
@@ -291,61 +272,6 @@ def _has_path(tree, path: str) -> bool:
         else:
             return False
     return True
-
-
-# ----------------------------------------------------------------------------- one point (worker)
-
-
-def run_point(point: Point, wall_limit_s: float | None = WALL_LIMIT_S, with_estimate: bool = True,
-              source: str = "<sweep>", grow_gap: bool = False) -> Record:
-    """Run one point (in a worker) and return its record: status, message, wall time, the
-    run's summary and its error estimate, the point's values (`about`). Never raises: a
-    problem is the point's status. grow_gap: a start whose fingers and groove interpenetrate
-    runs with the start gap that clears it (`stability.clearing_gap`, the time the longer
-    travel takes added), recorded as `about["start_gap_mm"]`."""
-    from ..run import initial_contacts
-    from .estimate import companion, error_estimate
-    from .runs import attempt, raised
-    from .stability import clearing_gap, widened
-
-    t0 = time.perf_counter()
-    about = {"values": point.values, "start_gap_mm": None}
-
-    def ended(status, message, summary=None):
-        return Record(point.key, point.index, status, message, summary, time.perf_counter() - t0, os.getpid(), about)
-
-    if point.scenario is None:
-        return ended(REJECTED, "; ".join(point.problems))
-
-    scenario = point.scenario
-    try:
-        model = model_for(scenario, source)
-        if grow_gap and initial_contacts(model):
-            gap = clearing_gap(scenario)
-            if gap is not None:
-                scenario = widened(scenario, gap)
-                model = model_for(scenario, source)
-                about["start_gap_mm"] = gap
-    except SpotsimError as e:  # the point's own scenario cannot be built
-        return ended(REJECTED, str(e).replace("\n", "; "))
-    except Exception as e:  # the point reports it; the sweep goes on
-        return ended(EXCEPTION, raised(e, "the start"))
-    status, message, result = attempt(scenario, model, source, wall_limit_s)
-    if result is None:
-        return ended(status, message)
-    summary = result.summary
-    other = companion(scenario) if with_estimate and summary["status"] != WALL_LIMIT else None
-    if other is not None:
-        left = None if wall_limit_s is None else max(wall_limit_s - (time.perf_counter() - t0), 1e-3)
-        try:
-            comp_model = model_for(other, source)
-        except Exception as e:  # noqa: BLE001 - the companion's scene is the run's: a bug to report
-            return ended(EXCEPTION, raised(e, "the error estimate's companion"))
-        c_status, c_message, comp = attempt(other, comp_model, source, left, stage="the error estimate's companion")
-        if comp is None:
-            return ended(c_status, c_message)
-        summary["error_estimate"] = error_estimate(summary, comp.summary, no_spread=SWEEP_NO_SPREAD)
-    return ended(summary["status"], summary["message"], summary)
 
 
 # ----------------------------------------------------------------------------- rows
@@ -461,7 +387,7 @@ def run_sweep(config, spec: SweepSpec, out_dir, *, runner: Runner = Runner(), pr
         atomic_write(out / SPEC_FILE, yaml.safe_dump(
             {"scenario": str(config), "set": spec.sets, "keys": keys,
              "points": [{"key": p.key, **{k: plain(v) if isinstance(v, np.generic) else v
-                                          for k, v in p.values.items()}} for p in points]}, sort_keys=False))
+                                          for k, v in p.about["values"].items()}} for p in points]}, sort_keys=False))
     except OSError as e:
         raise SpotsimError(f"{out}: cannot write the sweep's files: {e.strerror}") from e
     todo = list({p.key: p for p in points if p.key not in done}.values())
@@ -480,7 +406,7 @@ def run_sweep(config, spec: SweepSpec, out_dir, *, runner: Runner = Runner(), pr
         except SchedulerLost as e:
             lost = e
     # a record may come from an earlier sweep over the directory: this spec's index and values
-    rows = [table_row(dataclasses.replace(done[p.key], index=p.index, about={**done[p.key].about, "values": p.values}),
+    rows = [table_row(dataclasses.replace(done[p.key], index=p.index, about={**done[p.key].about, **p.about}),
                       p.scenario, keys, precision_mm) for p in points if p.key in done]
     try:
         table = write_table(rows, out)
@@ -524,26 +450,21 @@ def sweep(config, *, vary=(), spec: SweepSpec | str | Path | None = None, sets=(
     return table
 
 
-def failed_record(point: Point, error: BaseException) -> Record:
-    """The record of a point whose task failed: its worker died (twice) or it could not run
-    there."""
-    return failed(point.key, point.index, error, values=point.values, start_gap_mm=None)
-
-
-def run_on(runner: Runner, first: list[Point], source: str, finished, *, error_estimate: bool = True,
+def run_on(runner: Runner, first: list[Task], source: str, finished, *, error_estimate: bool = True,
            grow_gap: bool = False, what: str = "sweep", total: int | None = None, run=None) -> int:
-    """Run points on `runner` (`run_point`, every worker warmed first on the first point's
+    """Run points on `runner` (`runs.run_task`, every worker warmed first on the first point's
     scenario; or `run(point) -> record` if given: tests): the points `first`, then whatever
     `finished(point, record)` returns for each that ends (none for a sweep, a ray's next probe
     for the envelope). Returns how many ran."""
+    from .runs import RunOptions, run_task
+
     scenario = next((p.scenario for p in first if p.scenario is not None), None)
     warm = None if scenario is None or run is not None else functools.partial(warm_worker, scenario, source)
-    run = run or functools.partial(run_point, wall_limit_s=runner.wall_limit_s, with_estimate=error_estimate,
-                                   source=source, grow_gap=grow_gap)
-    return execute(run, first, runner, finished, failed_record, what=what, total=total, warm=warm)
+    run = run or functools.partial(run_task, options=RunOptions(source, runner.wall_limit_s, error_estimate, grow_gap))
+    return execute(run, first, runner, finished, what=what, total=total, warm=warm)
 
 
-def run_points(todo: list[Point], out: Path, done: dict, runner: Runner, source: str, *,
+def run_points(todo: list[Task], out: Path, done: dict, runner: Runner, source: str, *,
                error_estimate: bool = True, grow_gap: bool = False, on_record=None) -> int:
     """Run the points `todo` on `runner`, each record appended to out's points file and put
     in `done` as it ends (then `on_record(record)`); returns how many ran."""
