@@ -190,7 +190,7 @@ def test_a_point_that_raises_is_recorded_with_its_status(monkeypatch):
 
     monkeypatch.setattr(run, "simulate", broken)
     point = sw.resolve_points(CASE_I, sw.spec_of(VARY))[0]
-    record = run_task(point, RunOptions(estimate=True))
+    record = run_task(point, RunOptions(companion=True))
     assert record.status == EXCEPTION and "RuntimeError raised by simulate: a bug" in record.message
 
 

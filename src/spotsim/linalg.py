@@ -45,14 +45,6 @@ def mv9(R, x):
 
 
 @njit
-def mtv9(R, x):
-    """`mtv3` for R a 9-tuple, row by row."""
-    return (R[0] * x[0] + R[3] * x[1] + R[6] * x[2],
-            R[1] * x[0] + R[4] * x[1] + R[7] * x[2],
-            R[2] * x[0] + R[5] * x[1] + R[8] * x[2])
-
-
-@njit
 def mm9(A, B):
     """A B for A (3, 3) and B a 9-tuple, as a 9-tuple (row by row)."""
     return (A[0, 0] * B[0] + A[0, 1] * B[3] + A[0, 2] * B[6],

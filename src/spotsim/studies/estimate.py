@@ -42,7 +42,7 @@ from ..errors import SpotsimError
 from ..scenario import fingerprint, modules_of
 from ..status import COMPLETED, NOT_CAPTURED
 from .ensemble import grasp_key, headline_statistics
-from .runs import step_scaled
+from .runs import companion
 
 
 class Quantity(NamedTuple):
@@ -80,15 +80,6 @@ GCI_SAFETY = 3.0
 METHOD = ("estimate: Richardson, first order: |Q(run) - Q(companion)|, the companion's steps twice as long "
           "(adaptive_euler: velocity_tol_m_s x4, onset_depth_m x2; symplectic_euler: substeps / 2); uncertainty: "
           "Roache's grid convergence index from two steps, 3 x estimate")
-
-
-def companion(scenario):
-    """The scenario with steps twice as long (`runs.step_scaled`), or None when the integrator
-    has none to offer: rk4 and dopri5, which are not first order, or symplectic_euler at an odd
-    number of substeps."""
-    if scenario.simulation.integrator.method not in ("symplectic_euler", "adaptive_euler"):
-        return None
-    return step_scaled(scenario, 2.0)
 
 
 def quantities(summary: dict) -> list[dict]:

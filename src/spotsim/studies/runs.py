@@ -30,36 +30,90 @@ from ..status import (
 )
 from .runner import Record, Task
 
+# ----------------------------------------------------------------------------- a scenario's variants
+
+
+def step_scaled(s, factor: float):
+    """`s` with its dynamics steps `factor` times as long, or None where that is not a whole
+    number of substeps. Fixed steps: substeps / factor. adaptive_euler: its steps go as
+    velocity_tol^(1/2) and its onset guard's as onset_depth, so velocity_tol x factor^2 and
+    onset_depth x factor. dopri5: rtol and atol x factor."""
+    i = s.simulation.integrator
+    if i.method == "dopri5":
+        return replace(s, simulation={"integrator": {**to_dict(i), "rtol": i.rtol * factor, "atol": i.atol * factor}})
+    if i.method == "adaptive_euler":
+        return replace(s, simulation={"integrator": {**to_dict(i), "velocity_tol_m_s": i.velocity_tol_m_s * factor**2,
+                                                     "onset_depth_m": i.onset_depth_m * factor}})
+    substeps = s.simulation.substeps / factor
+    if substeps < 1 or not math.isclose(substeps, round(substeps)):
+        return None
+    return replace(s, simulation={"substeps": round(substeps)})
+
+
+def companion(scenario):
+    """The scenario with steps twice as long (`step_scaled`), or None when the integrator
+    has none to offer: rk4 and dopri5, which are not first order, or symplectic_euler at an odd
+    number of substeps."""
+    if scenario.simulation.integrator.method not in ("symplectic_euler", "adaptive_euler"):
+        return None
+    return step_scaled(scenario, 2.0)
+
+
+#: The start gaps tried, mm, for a misaligned start that interpenetrates at the scenario's.
+START_GAPS_MM = (12.0, 15.0, 20.0, 25.0, 30.0, 40.0)
+
+
+def clearing_gap(s) -> float | None:
+    """The smallest of START_GAPS_MM at which `s`'s fingers and groove do not interpenetrate at
+    the start, mm (None if none does)."""
+    from ..assemble.model import build_model
+    from ..run import initial_contacts
+
+    for gap in START_GAPS_MM:
+        if gap > s.end_effector.start_gap_mm:
+            wider = replace(s, end_effector={"start_gap_mm": gap})
+            if not initial_contacts(build_model(wider)):
+                return gap
+    return None
+
+
+def widened(s, gap_mm: float):
+    """`s` with its fingers starting `gap_mm` from a centred groove, and as much more time as
+    the longer travel takes, for the run and for every grasp phase."""
+    extra = (gap_mm - s.end_effector.start_gap_mm) * 1e-3 / s.end_effector.closing_speed_m_s
+    return replace(s, end_effector={"start_gap_mm": gap_mm}, simulation={"duration_s": s.simulation.duration_s + extra},
+                   completion={"phase_timeout_s": s.completion.phase_timeout_s + extra})
+
+
 # ----------------------------------------------------------------------------- one run
 
 
 @dataclass(frozen=True)
 class RunOptions:
     """How `run_task` runs a task: named `source`, within the wall-time budget `wall_limit_s`
-    (None: none); with `estimate`, the error estimate's companion run too, within what is
-    left of the budget (`estimate.companion`); with `grow_gap`, a start whose fingers and
-    groove interpenetrate runs with the start gap that clears it (`stability.clearing_gap`),
-    kept as `about["start_gap_mm"]`."""
+    (None: none); with `companion`, the error estimate's companion run too, within what is
+    left of the budget (`companion`: the same scenario with steps twice as long), its summary
+    kept as `about["companion"]` for the study's error estimate (`estimate.error_estimate`);
+    with `grow_gap`, a start whose fingers and groove interpenetrate runs with the start gap
+    that clears it (`clearing_gap`), kept as `about["start_gap_mm"]`."""
 
     source: str = "<study>"
     wall_limit_s: float | None = None
-    estimate: bool = False
+    companion: bool = False
     grow_gap: bool = False
 
 
 def run_task(task: Task, options: RunOptions = RunOptions()) -> Record:
     """Build, check and simulate a task's scenario here: every study's run. Its record has the
-    run's status, message and summary (with `options.estimate`, its error estimate), the wall
-    time of all of it and, in `about`, the model's predicted stable step (`prediction`) and
-    whether every recorded number is finite (`finite`). Never raises but on the user's
-    Ctrl-C: a scenario that cannot be built or whose fingers and groove interpenetrate is
-    `rejected`; anything raised is `exception` (a bug the study reports, named with its stage
-    and where it was raised)."""
+    run's status, message and summary, the wall time of all of it and, in `about`, the
+    model's predicted stable step (`prediction`), whether every recorded number is finite
+    (`finite`) and, with `options.companion`, the companion's summary. Never raises but on
+    the user's Ctrl-C: a scenario that cannot be built or whose fingers and groove
+    interpenetrate is `rejected`; anything raised is `exception` (a bug the study reports,
+    named with its stage and where it was raised)."""
     from ..run import check_start, initial_contacts, simulate
     from ..sim.stability import predict_step
-    from .estimate import POINT_NO_SPREAD, companion, error_estimate
     from .runner import model_for
-    from .stability import clearing_gap, widened
 
     t0, about = time.perf_counter(), dict(task.about)
 
@@ -80,35 +134,30 @@ def run_task(task: Task, options: RunOptions = RunOptions()) -> Record:
     except SpotsimError as e:  # the scenario's or its start's own problem, found before anything ran
         return ended(REJECTED, str(e).replace("\n", "; "))
     except Exception as e:  # noqa: BLE001 - a bug: the study reports it and goes on
-        return ended(EXCEPTION, _raised_here(e, "the start"))
+        return ended(EXCEPTION, raised(e, "the start"))
     try:
         result = simulate(scenario, model=model, source=source, wall_limit_s=options.wall_limit_s)
     except Exception as e:  # noqa: BLE001 - simulate must never raise: the study reports it rather than dies of it
-        return ended(EXCEPTION, _raised_here(e, "simulate"))
+        return ended(EXCEPTION, raised(e, "simulate"))
     about["finite"] = all(bool(np.all(np.isfinite(a))) for a in result.timeseries.values()
                           if np.issubdtype(np.asarray(a).dtype, np.floating))
     summary = result.summary
-    other = companion(scenario) if options.estimate and summary["status"] != WALL_LIMIT else None
+    other = companion(scenario) if options.companion and summary["status"] != WALL_LIMIT else None
     if other is not None:
         left = None if options.wall_limit_s is None else max(options.wall_limit_s - (time.perf_counter() - t0), 1e-3)
         try:
             twin = simulate(other, model=model_for(other, source), source=source, wall_limit_s=left)
         except Exception as e:  # noqa: BLE001 - the companion's scene is the run's: a bug to report
-            return ended(EXCEPTION, _raised_here(e, "the error estimate's companion"))
-        summary["error_estimate"] = error_estimate(summary, twin.summary, no_spread=POINT_NO_SPREAD)
+            return ended(EXCEPTION, raised(e, "the error estimate's companion"))
+        about["companion"] = twin.summary
     return ended(summary["status"], summary["message"], summary)
 
 
-def _raised_here(e: Exception, stage: str) -> str:
-    """The message of an exception out of a run (`raised`); Ctrl-C landing in the run is the
-    user's: KeyboardInterrupt."""
+def raised(e: Exception, stage: str) -> str:
+    """The message of an exception out of a run's `stage`: its type, text and where. Ctrl-C
+    landing in the run is the user's: KeyboardInterrupt."""
     if _caused_by_ctrl_c(e):
         raise KeyboardInterrupt from e
-    return raised(e, stage)
-
-
-def raised(e: BaseException, stage: str) -> str:
-    """The message of an exception out of a run's `stage`: its type, text and where."""
     where = traceback.extract_tb(e.__traceback__)[-1]
     return f"{type(e).__name__} raised by {stage}: {e} ({Path(where.filename).name}:{where.lineno})"
 
@@ -335,23 +384,6 @@ def percent(x) -> str:
     if isinstance(x, (float, np.floating)) and math.isnan(x):
         return "–"
     return f"{100 * x:.3g} %"
-
-
-def step_scaled(s, factor: float):
-    """`s` with its dynamics steps `factor` times as long, or None where that is not a whole
-    number of substeps. Fixed steps: substeps / factor. adaptive_euler: its steps go as
-    velocity_tol^(1/2) and its onset guard's as onset_depth, so velocity_tol x factor^2 and
-    onset_depth x factor. dopri5: rtol and atol x factor."""
-    i = s.simulation.integrator
-    if i.method == "dopri5":
-        return replace(s, simulation={"integrator": {**to_dict(i), "rtol": i.rtol * factor, "atol": i.atol * factor}})
-    if i.method == "adaptive_euler":
-        return replace(s, simulation={"integrator": {**to_dict(i), "velocity_tol_m_s": i.velocity_tol_m_s * factor**2,
-                                                     "onset_depth_m": i.onset_depth_m * factor}})
-    substeps = s.simulation.substeps / factor
-    if substeps < 1 or not math.isclose(substeps, round(substeps)):
-        return None
-    return replace(s, simulation={"substeps": round(substeps)})
 
 
 def warm_up(scenario, methods, duration_s: float = 0.5) -> None:

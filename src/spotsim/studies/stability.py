@@ -30,10 +30,12 @@ from .runs import (
     Outcome,
     Runs,
     StudyRows,
+    clearing_gap,
     markdown_table,
     sig,
     step_scaled,
     warm_up,
+    widened,
 )
 
 #: A stability case's wall-time budget, s: a hundred times Case I's run at its default step.
@@ -59,42 +61,6 @@ class Case:
 
     def describe(self, changed) -> str:
         return self.what if self.detail is None else f"{self.what}: {self.detail(changed)}"
-
-
-#: The start gaps tried, mm, for a misaligned start that interpenetrates at the scenario's.
-START_GAPS_MM = (12.0, 15.0, 20.0, 25.0, 30.0, 40.0)
-
-
-def _travel_time(s, gap_mm: float) -> float:
-    """The time the fingers take to close `gap_mm`, s."""
-    return gap_mm * 1e-3 / s.end_effector.closing_speed_m_s
-
-
-def _later(s, dt_s: float) -> dict:
-    """Changes that give every grasp phase and the run `dt_s` more time."""
-    return {"simulation": {"duration_s": s.simulation.duration_s + dt_s},
-            "completion": {"phase_timeout_s": s.completion.phase_timeout_s + dt_s}}
-
-
-def clearing_gap(s) -> float | None:
-    """The smallest of START_GAPS_MM at which `s`'s fingers and groove do not interpenetrate at
-    the start, mm (None if none does)."""
-    from ..assemble.model import build_model
-    from ..run import initial_contacts
-
-    for gap in START_GAPS_MM:
-        if gap > s.end_effector.start_gap_mm:
-            wider = replace(s, end_effector={"start_gap_mm": gap})
-            if not initial_contacts(build_model(wider)):
-                return gap
-    return None
-
-
-def widened(s, gap_mm: float):
-    """`s` with its fingers starting `gap_mm` from a centred groove, and as much more time as
-    the longer travel takes."""
-    extra = _travel_time(s, gap_mm - s.end_effector.start_gap_mm)
-    return replace(s, end_effector={"start_gap_mm": gap_mm}, **_later(s, extra))
 
 
 def _closing(speed_m_s: float):

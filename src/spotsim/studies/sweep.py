@@ -467,8 +467,15 @@ def run_on(runner: Runner, first: list[Task], source: str, finished, *, error_es
 def run_points(todo: list[Task], out: Path, done: dict, runner: Runner, source: str, *,
                error_estimate: bool = True, grow_gap: bool = False, on_record=None) -> int:
     """Run the points `todo` on `runner`, each record appended to out's points file and put
-    in `done` as it ends (then `on_record(record)`); returns how many ran."""
+    in `done` as it ends (then `on_record(record)`), with its error estimate from its
+    companion's summary (`runs.RunOptions.companion`); returns how many ran."""
+    from . import estimate
+
     def finished(p, record):
+        twin = record.about.pop("companion", None)
+        if twin is not None:
+            record.summary["error_estimate"] = estimate.error_estimate(record.summary, twin,
+                                                                       no_spread=estimate.POINT_NO_SPREAD)
         append_record(out / POINTS_FILE, record)
         done[p.key] = record
         if on_record is not None:
