@@ -371,6 +371,31 @@ def test_a_grasp_that_closes_with_a_finger_outside_its_groove_is_not_captured(tm
     assert run_outcome(record.status, record.summary) == NOT_CAPTURED
 
 
+def test_a_command_that_compiles_kernels_says_so_once_on_a_terminal(monkeypatch, capsys, tmp_path):
+    """The first kernel a command compiles (not loaded from the cache: minutes on a fresh
+    install) is announced on stderr when it is a terminal, once; nothing with --quiet."""
+    import numba
+
+    import spotsim.cli as cli
+
+    real = cli._load_or_report
+
+    def compiling(path, overrides):
+        numba.njit(lambda x: x + 1)(1)  # compiled here, as a fresh install compiles every kernel
+        numba.njit(lambda x: x + 2)(1)
+        return real(path, overrides)
+
+    monkeypatch.setattr(cli, "_load_or_report", compiling)
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: True)
+    assert main(["validate", str(CASE_I)]) == 0
+    err = capsys.readouterr().err
+    assert err.count("spotsim: compiling its kernels for this machine") == 1 and numba.config.CACHE_DIR in err
+    quiet = ["run", str(CASE_I), "--quiet", "--no-error-estimate", "--no-figures", "--out", str(tmp_path / "run"),
+             "--set", "simulation.duration_s=0.01"]
+    assert main(quiet) == 3  # incomplete: 10 ms; its kernels compiled all the same
+    assert "compiling" not in capsys.readouterr().err
+
+
 def test_a_run_with_overrides_gets_a_results_directory_of_its_own():
     """Without --out, --set names the directory after the changes: a changed run never lands in
     (and overwrites) the scenario's own results; a long list ends in a hash of it."""

@@ -17,6 +17,7 @@ import sys
 from pathlib import Path
 
 from .errors import ScenarioError, SpotsimError
+from .jit import announce_compiling
 from .measures import CAMERA_HZ
 from .paths import results_dir
 from .status import (
@@ -788,11 +789,20 @@ def main(argv=None) -> int:
         return 1
 
 
+def _compiling() -> None:
+    import numba
+
+    print(f"spotsim: compiling its kernels for this machine, once after an install or an update: a few minutes "
+          f"(cached in {numba.config.CACHE_DIR})", file=sys.stderr, flush=True)
+
+
 def _main(argv) -> int:
     try:
         args = _parser().parse_args(argv)
     except SystemExit as e:  # --help (0) or a bad option (2, one line printed)
         return e.code
+    # on a terminal, as the progress bars
+    announce_compiling(None if getattr(args, "quiet", False) or not sys.stderr.isatty() else _compiling)
     if args.command == "list":
         return _list()
     if args.command == "replay":

@@ -14,6 +14,7 @@ import os
 from pathlib import Path
 
 import numba
+import numba.core.event
 
 
 def add_sources(digest, root: Path, paths) -> None:
@@ -35,6 +36,32 @@ def _cache_dir() -> str:
 
 if not os.environ.get("NUMBA_CACHE_DIR"):  # a directory the user chose wins
     numba.config.CACHE_DIR = _cache_dir()
+
+class _FirstCompile(numba.core.event.Listener):
+    """Calls its `say()` at the first compilation it hears of, once."""
+
+    say = None
+
+    def on_start(self, event) -> None:
+        if self.say is not None:
+            say, self.say = self.say, None
+            say()
+
+    def on_end(self, event) -> None:
+        pass
+
+
+_first_compile = _FirstCompile()
+numba.core.event.register("numba:compile", _first_compile)
+
+
+def announce_compiling(say) -> None:
+    """Call `say()` when the next kernel this process needs is compiled rather than loaded
+    from the cache (numba's `numba:compile` event fires only then): the first run after an
+    install or an edit of the kernels, which takes minutes. Once; a later call replaces a
+    `say` not yet called (None: say nothing)."""
+    _first_compile.say = say
+
 
 #: Compiled, cached, and bit-for-bit IEEE arithmetic (no fast-math reassociation): the culled
 #: and the literal searches must give identical forces.
