@@ -396,6 +396,27 @@ def test_a_command_that_compiles_kernels_says_so_once_on_a_terminal(monkeypatch,
     assert "compiling" not in capsys.readouterr().err
 
 
+def test_old_kernel_caches_are_pruned_and_the_recent_ones_kept(tmp_path):
+    """Beside the cache in use, the CACHES_KEPT - 1 most recently used stay, and any other used
+    within CACHE_IDLE_S; older ones go (a directory without its mark, by its own time)."""
+    import time
+
+    from spotsim import jit
+
+    now, day = time.time(), 86_400.0
+    for name, days in {"a": 1, "b": 2, "c": 3, "d": 30, "e": 40, "f": 50}.items():
+        d = tmp_path / name
+        d.mkdir()
+        mark = d if name == "f" else d / jit.LAST_USED
+        mark.touch()
+        os.utime(mark, (now - days * day, now - days * day))
+    assert jit.CACHES_KEPT == 3 and jit.CACHE_IDLE_S == 7 * day
+    removed = jit.prune_caches(tmp_path / "in_use")
+    assert sorted(d.name for d in removed) == ["d", "e", "f"]
+    assert sorted(d.name for d in tmp_path.iterdir()) == ["a", "b", "c", "in_use"]
+    assert (tmp_path / "in_use" / jit.LAST_USED).stat().st_mtime >= now - 1
+
+
 def test_a_run_with_overrides_gets_a_results_directory_of_its_own():
     """Without --out, --set names the directory after the changes: a changed run never lands in
     (and overwrites) the scenario's own results; a long list ends in a hash of it."""

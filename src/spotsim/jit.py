@@ -4,13 +4,15 @@ The contact kernels loop over sphere pairs; numba compiles them once and later p
 them from the cache in milliseconds. Numba checks a cached kernel against its own source file
 only, not against the kernels it calls from other files, so the cache lives in a directory
 named by a digest of every source file that defines kernels: any edit to one starts a fresh
-cache.
+cache. Each holds 100-300 MB, so the older ones are pruned (`prune_caches`).
 """
 
 from __future__ import annotations
 
 import hashlib
 import os
+import shutil
+import time
 from pathlib import Path
 
 import numba
@@ -25,17 +27,50 @@ def add_sources(digest, root: Path, paths) -> None:
         digest.update(path.read_bytes())
 
 
-def _cache_dir() -> str:
+#: The cache directories kept (`prune_caches`): the most recently used ones, the one in use
+#: among them; an older one goes once it has not been used for CACHE_IDLE_S.
+CACHES_KEPT = 3
+CACHE_IDLE_S = 7 * 86_400.0
+#: The file whose modification time is a cache directory's last use.
+LAST_USED = "last_used"
+
+
+def prune_caches(current: Path, kept: int = CACHES_KEPT, idle_s: float = CACHE_IDLE_S) -> list[Path]:
+    """Mark the cache directory `current` used now, and remove those beside it beyond the
+    `kept` most recently used (`current` among them) that no process has used for `idle_s`:
+    every update of spotsim, or edit of a kernel, starts a new one. Returns those removed."""
+    def last_use(d: Path) -> float:
+        try:
+            return (d / LAST_USED).stat().st_mtime
+        except OSError:  # one made before its use was marked
+            return d.stat().st_mtime
+
+    current.mkdir(parents=True, exist_ok=True)
+    (current / LAST_USED).touch()
+    others = sorted((d for d in current.parent.iterdir() if d.is_dir() and d != current), key=last_use, reverse=True)
+    now = time.time()
+    removed = [d for d in others[kept - 1:] if now - last_use(d) > idle_s]
+    for d in removed:
+        shutil.rmtree(d, ignore_errors=True)
+    return removed
+
+
+def _cache_dir() -> Path:
     package = Path(__file__).resolve().parent
     digest = hashlib.sha256()
     # kernels call only kernels, so the files that define them are all they read
     add_sources(digest, package, [f for f in sorted(package.rglob("*.py")) if b"@njit" in f.read_bytes()])
     base = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "spotsim" / "numba"
-    return str(base / digest.hexdigest()[:16])
+    return base / digest.hexdigest()[:16]
 
 
 if not os.environ.get("NUMBA_CACHE_DIR"):  # a directory the user chose wins
-    numba.config.CACHE_DIR = _cache_dir()
+    numba.config.CACHE_DIR = str(_cache_dir())
+    try:
+        prune_caches(Path(numba.config.CACHE_DIR))
+    except OSError:  # a cache numba cannot write either: it compiles without one
+        pass
+
 
 class _FirstCompile(numba.core.event.Listener):
     """Calls its `say()` at the first compilation it hears of, once."""
