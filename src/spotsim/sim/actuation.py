@@ -274,8 +274,8 @@ def _set_closing(m, d, r1, r2, speed):
     `kinematics`, which must be made at d.q; their responses made here."""
     t = m.tree
     j1, j2 = m.actuators.joint[r1], m.actuators.joint[r2]
-    joint_response(m, d, j1, d.response[r1])
-    joint_response(m, d, j2, d.response[r2])
+    joint_response(m, d, j1, d.response[r1], np.bool_(True))
+    joint_response(m, d, j2, d.response[r2], np.bool_(True))
     iv1, iv2 = t.idx_v[j1], t.idx_v[j2]
     # the responses scaled to order one: their determinant must not underflow (heavy fingers)
     scale = max(d.response[r1, iv1], d.response[r2, iv2])

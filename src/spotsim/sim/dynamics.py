@@ -250,7 +250,7 @@ def _root_columns(kind, R, p, X):
 
 
 @njit
-def _articulated(m, d, b, bias, out, inertias=True):
+def _articulated(m, d, b, bias, out, inertias):
     """Branch b by the articulated-body algorithm in the world frame, at the kinematics of the
     last `kinematics` (d.R_W ...): its joints' accelerations into out (nv,).
 
@@ -481,7 +481,7 @@ def accelerations(m, d):
         if mode == NEWTON_EULER:
             _newton_euler(m, d, b)
         elif mode == ARTICULATED:
-            _articulated(m, d, b, True, d.a)
+            _articulated(m, d, b, np.bool_(True), d.a, np.bool_(True))
         else:  # every joint prescribed
             for i in range(br.first[b], br.stop[b]):
                 iv = m.tree.idx_v[br.members[i]]
@@ -590,12 +590,12 @@ def transmissions(m, d):
             j = m.actuators.joint[r]
             d.drive_free[r] = d.a[m.tree.idx_v[j]]
             d.drive_force[r] = 0.0
-            joint_response(m, d, j, d.response[r], False)  # the same frames as the pass just made
+            joint_response(m, d, j, d.response[r], np.bool_(False))  # the same frames as the pass just made
         apply_screw(m, d, ee, r1, r2, screw_force(m, d, ee, r1, r2))
 
 
 @njit
-def joint_response(m, d, j, out, inertias=True):
+def joint_response(m, d, j, out, inertias):
     """out (nv,): M^-1 e_j, the accelerations that a unit force on one-dof joint j gives its
     branch (zero elsewhere), or the velocity change a unit impulse on it gives; at the frames
     of the last `kinematics`. Its rows for two joints are the joints' block of M^-1.
@@ -605,7 +605,7 @@ def joint_response(m, d, j, out, inertias=True):
     iv = t.idx_v[j]
     out[:] = 0.0
     d.work.unit[iv] = 1.0
-    _articulated(m, d, t.branch[j], False, out, inertias)
+    _articulated(m, d, t.branch[j], np.bool_(False), out, inertias)
     d.work.unit[iv] = 0.0
 
 
@@ -625,7 +625,7 @@ def velocity_jump(m, d, joints, speeds):
         for b in range(br.joint.shape[0]):
             if br.mode[b] != ARTICULATED or not _jumps(m, d, b):
                 continue
-            _articulated(m, d, b, False, w.jump)
+            _articulated(m, d, b, np.bool_(False), w.jump, np.bool_(True))
             for k in range(br.first[b], br.stop[b]):
                 j = br.members[k]
                 if not t.prescribed[j]:

@@ -408,7 +408,7 @@ def adaptive_euler(m, d, h):
                 # samples: the step moves with it, and its error estimate compares the end
                 # with the start without it
                 with_share = (d.contacts, d.loads, d.summary, d.a.copy())
-                contact_forces(m, d, h, False)
+                contact_forces(m, d, h, np.bool_(False))
                 accelerations(m, d)
                 d.evaluations += 1
                 error_rates(m, d, acc[0])
@@ -420,7 +420,7 @@ def adaptive_euler(m, d, h):
             external[:3] = d.loads.external_force_W
             external[3:] = d.loads.external_torque_O_W
         _euler_update(m, d, h)
-        forces(m, d, h, False)
+        forces(m, d, h, np.bool_(False))
         accelerations(m, d)
         d.evaluations += 1
         error_rates(m, d, acc[1])
@@ -558,7 +558,7 @@ def _stage(m, d, y, dt, commit, external):
     its external wrench goes into external (6,). commit: the memory is then that of this
     evaluation."""
     unpack(m, d, y)
-    forces(m, d, dt, False)
+    forces(m, d, dt, np.bool_(False))
     if commit:
         commit_memory(d)
     accelerations(m, d)
@@ -604,12 +604,12 @@ def runge_kutta(m, d, h):
         k[0] = d.fsal_dy
         external[0] = d.fsal_external
     else:
-        k[0] = _stage(m, d, y0, 0.0, False, external[0])
+        k[0] = _stage(m, d, y0, 0.0, np.bool_(False), external[0])
     if p.adaptive and d.h_next > 0.0:  # its last step's estimate (before any, h as asked)
         h = min(h, d.h_next)
     while True:
         for i in range(1, s):
-            k[i] = _stage(m, d, _combine(y0, h, p.A[i], k, i), p.c[i] * h, False, external[i])
+            k[i] = _stage(m, d, _combine(y0, h, p.A[i], k, i), p.c[i] * h, np.bool_(False), external[i])
         y1 = _combine(y0, h, p.b, k, s)
         if not p.adaptive:
             break
@@ -633,7 +633,7 @@ def runge_kutta(m, d, h):
     # the accepted end: commit the pair memory; this is the next step's first stage (it
     # leaves d at y1)
     end = np.empty(6)
-    d.fsal_dy[:] = _stage(m, d, y1, h, True, end)
+    d.fsal_dy[:] = _stage(m, d, y1, h, np.bool_(True), end)
     d.fsal, d.fsal_t = True, d.t + h
     d.jumped = False
     d.fsal_external[:] = end
