@@ -1689,6 +1689,16 @@ def profile_compliant(r=None) -> str:
     return benchmark_table("profile_compliant", PROFILE_COMPLIANT)
 
 
+#: The cold-start benchmark, which docs/performance.md reads: against the commit before the
+#: kernels' flags were passed as np.bool_ (fc1bab7).
+COLD_START = "python benchmarks/cold_start.py --case I --against 27bdb2a"
+
+
+def cold_start(r=None) -> str:
+    """The cold-start benchmark's printout (`benchmarks/cold_start.py`), verbatim."""
+    return printout("cold_start.md", COLD_START, f". Copied by `{GENERATE} pages` from `docs/results/cold_start.md`:")
+
+
 def design_sweep(r=None) -> str:
     """The design sweep example's printout (`examples/design_sweep.py`), verbatim."""
     return printout("design_sweep.txt", "python examples/design_sweep.py", ":")
@@ -1889,6 +1899,7 @@ RENDER = {
     "bristle-damping": bristle_damping,
     "profile": profile,
     "profile-compliant": profile_compliant,
+    "cold-start": cold_start,
     "bristle-switches": bristle_switches,
     "drive-period": drive_period,
 }
