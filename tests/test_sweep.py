@@ -194,6 +194,19 @@ def test_a_point_that_raises_is_recorded_with_its_status(monkeypatch):
     assert record.status == EXCEPTION and "RuntimeError raised by simulate: a bug" in record.message
 
 
+def test_a_start_that_interpenetrates_runs_with_the_gap_that_clears_it_when_asked():
+    """An envelope's probe (grow_gap): the start gap widened to the smallest of START_GAPS_MM at
+    which fingers and groove clear, kept in the record; without it, the start is rejected."""
+    from spotsim.studies.runs import START_GAPS_MM
+
+    s = load_scenario(CASE_I, ["end_effector.start_gap_mm=1.0", "simulation.duration_s=0.3"])
+    task = rn.Task(s, 0, "k", {"values": {}})
+    plain, grown = run_task(task), run_task(task, RunOptions(grow_gap=True))
+    assert plain.status == REJECTED and "interpenetrate" in plain.message and "start_gap_mm" not in plain.about
+    assert grown.status != REJECTED and grown.about["start_gap_mm"] == START_GAPS_MM[0] == 12.0
+    assert grown.about["values"] == {} and grown.summary is not None
+
+
 # ----------------------------------------------------------------------------- on Dask
 
 
