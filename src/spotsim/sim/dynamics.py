@@ -513,7 +513,7 @@ def accelerations(m, d):
 @njit_inline
 def drive_fingers(m, ee):
     """The actuator rows of end-effector ee's two fingers, (-1, -1) if they are not in the model."""
-    first = second = -1
+    first = second = np.int64(-1)  # not a literal: the kernels it is passed to compile once (jit.py)
     for i in range(m.actuators.joint.shape[0]):
         if m.actuators.drive[i] == ee:
             if first < 0:
