@@ -231,8 +231,6 @@ class Runs:
     records: Path | None = None
 
     def __call__(self, scenario) -> Outcome:
-        import dataclasses
-
         from .runner import PROCESSES, RUN_AGAIN, Runner, append_record, execute, read_records, scenario_key
 
         key = None if self.records is None else scenario_key(scenario)
@@ -244,7 +242,7 @@ class Runs:
         execute(partial(run_task, options=RunOptions(self.source, self.wall_limit_s)), [Task(scenario, key=key)],
                 Runner(PROCESSES, workers=1, wall_limit_s=self.wall_limit_s), lambda task, r: out.append(r))
         if key is not None and out[0].status not in RUN_AGAIN:
-            append_record(self.records, dataclasses.replace(out[0], key=key))
+            append_record(self.records, out[0])  # keyed by its task
         return Outcome.of(out[0])
 
 
