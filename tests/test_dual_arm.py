@@ -86,12 +86,13 @@ def test_the_first_grasp_moves_ee2_against_tm2_before_the_second_starts(run):
 
 @pytest.mark.slow
 def test_second_grasp_disturbs_the_robot_less(run):
-    """The heavier composite moves less and is hit less hard in the second grasp."""
+    """The heavier composite (the robot with TM-1 welded to it) moves less in the second grasp.
+    Its peaks are not ordered: over 32 perturbed starts the second grasp's peak force spans
+    259-312 N and the first's 248-430 N (docs/validation.md), so one start may order them
+    either way."""
     first, second = run.summary["grasps"]
     d1, d2 = (np.linalg.norm(g["robot_centroid_displacement_mm"]) for g in (first, second))
     assert d2 < d1
-    assert second["peak_force_norm_N"] < first["peak_force_norm_N"]
-    assert second["peak_torque_norm_Nm"] < first["peak_torque_norm_Nm"]
 
 
 @pytest.mark.slow
