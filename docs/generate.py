@@ -1902,6 +1902,7 @@ RENDER = {
     "cold-start": cold_start,
     "bristle-switches": bristle_switches,
     "drive-period": drive_period,
+    "onset-guard": lambda r: benchmark_table("onset_guard"),
 }
 PAGES = [ROOT / "README.md", DOCS / "usage.md", DOCS / "validation.md", DOCS / "performance.md"]
 

@@ -11,10 +11,12 @@ from spotsim.contact.forces import Memory, no_contacts
 from spotsim.contact.friction import BristleParams, bristle
 from spotsim.contact.normal import hertz_stiffness, indentation, normal_force
 from spotsim.run import Stepper
-from spotsim.sim.actuation import current_speed
+from spotsim.sim.actuation import current_speed, next_event
 from spotsim.sim.dynamics import accelerations, velocity_jump
 from spotsim.sim.forces import forces
-from spotsim.sim.integrators import SWITCH_WINDOW, error_rates, euler_error, switch_fraction, tableau
+from spotsim.sim.integrators import SWITCH_WINDOW, error_rates, euler_error, onset_step, switch_fraction, tableau
+from spotsim.sim.loop import set_near
+from spotsim.sim.model import sim_model
 from spotsim.sim.tree import kinematics
 
 #: Round-off on O(1) numbers over a few thousand steps.
@@ -467,3 +469,40 @@ def test_adaptive_euler_judges_a_try_after_a_new_finger_rate_without_its_held_sh
             assert not first_try_accepted(state, scale, estimate * (1.0 - ESTIMATE_BRACKET))
             checked += 1
     assert checked >= 3
+
+
+def test_onset_guard_takes_the_clearance_only_where_asked_and_known(model_I, recorded_states):
+    """`onset_guard: clearance`: at a state its last search was made at, the step the guard
+    allows is the travel guard's times (clearance + onset depth) / onset depth, longer wherever
+    the search found a clearance; once the broad phase's face pairs are set anew, that
+    clearance no longer holds and the two guards allow the same step."""
+    fields = model_I.sim.fields
+    clear = sim_model(fields._replace(integrator=fields.integrator._replace(onset_clearance=True)))
+    depth = fields.integrator.onset_depth
+    longer = 0
+    for state in recorded_states:
+        d = state.copy()
+        travel = onset_step(model_I.sim, d)
+        assert onset_step(clear, d) == pytest.approx(travel * (d.candidates.clearance + depth) / depth, rel=1e-12)
+        longer += onset_step(clear, d) > travel
+        set_near(d, d.near.copy())
+        assert onset_step(clear, d) == travel
+    assert longer > len(recorded_states) // 2
+
+
+def test_clearance_guard_keeps_a_new_pairs_first_penetration_within_the_onset_depth(case_I):
+    """Along Case I's approach and self-centring with `onset_guard: clearance`, every pair that
+    starts is no deeper than the onset depth at the first evaluation that finds it: the
+    travel guard's promise, kept with steps that also close the clearance."""
+    s = spotsim.replace(case_I, simulation={"integrator": {"onset_guard": "clearance"}})
+    model = spotsim.build_model(s)
+    stepper, m = Stepper(model), model.sim
+    d = stepper.data
+    before, new = set(), []
+    while d.t < 0.8:
+        stepper.step(min(d.h_next if d.h_next > 0 else m.h, next_event(m, d) - d.t))
+        keys = d.contacts.key
+        new += [float(d.contacts.phi[i]) for i, k in enumerate(keys) if k not in before]
+        before = set(keys.tolist())
+    assert len(new) > 300
+    assert max(new) <= s.simulation.integrator.onset_depth_m

@@ -3,7 +3,16 @@
 import numpy as np
 import pinocchio as pin
 
-from spotsim.contact.search import GAP_SLACK, _moved, by_key, empty_pair_list, face_frame, grid_search, listed_search
+from spotsim.contact.search import (
+    GAP_SLACK,
+    _moved,
+    by_key,
+    empty_pair_list,
+    face_frame,
+    grid_search,
+    listed_search,
+    world_spheres,
+)
 from spotsim.run import Stepper
 from spotsim.sim.broadphase import BroadPhase
 from spotsim.sim.step import travel_rate
@@ -149,6 +158,54 @@ def test_found_pairs_are_put_in_key_order_at_any_count():
         keys = rng.choice(400 * n_slave, size=n, replace=False)  # unique, as a step's pairs are
         master, slave = keys // n_slave, keys % n_slave
         order = np.argsort(keys)
-        found = by_key(master.copy(), slave.copy(), n_slave)
+        found = by_key(master.copy(), slave.copy(), n_slave, 0.0)
         assert np.array_equal(found.key, keys[order])
         assert np.array_equal(found.master, master[order]) and np.array_equal(found.slave, slave[order])
+
+
+def brute_clearance(m, data, near, candidates) -> float:
+    """The least |c1 - c2| - (r1 + r2) over the sphere pairs of the face pairs `near` that are
+    not among `candidates`, every distance computed."""
+    C1, _, C2, _ = world_spheres(m, data)
+    faces, n_slave, R = m.faces, C2.shape[0], m.law.r1 + m.law.r2
+    slave = np.arange(n_slave)
+    listed = set(candidates.key.tolist())
+    least = np.inf
+    for f in near:
+        rows = np.arange(faces.master_start[f], faces.master_stop[f])
+        cols = slave[m.slave.face == faces.slave_face[f]]
+        gap = np.linalg.norm(C1[rows, None, :] - C2[None, cols, :], axis=2) - R
+        keys = rows[:, None] * n_slave + cols[None, :]
+        other = ~np.isin(keys, list(listed)) if listed else np.ones(keys.shape, dtype=bool)
+        least = min(least, gap[other].min(initial=np.inf))
+    return least
+
+
+def test_listed_search_bounds_the_clearance_of_every_other_pair(model_I, recorded_states):
+    """The onset guard's clearance (`Candidates.clearance`): on contact states moved at random
+    after the list was built (up to 40 um and 1 mrad, or turned up to 0.5 rad), it never exceeds
+    the least distance between the spheres of any pair of the state's face pairs that the
+    search did not return (all of them computed), it is 0 when a face pair is searched anew
+    (off the ball regime), and it is not 0 everywhere."""
+    rng = np.random.default_rng(5)
+    m = model_I.sim
+    iq = model_I.pin_model.idx_qs[model_I.module_joint]
+    positive = scanned = 0
+    for k in range(40):
+        data = recorded_states[k % len(recorded_states)].copy()
+        near = data.view().near.copy()  # the broad phase's face pairs at that state
+        kinematics(m, data)
+        _, _, built, _ = both_searches(model_I, data, near, empty_pair_list(len(near)))
+        axis = rng.normal(size=3)
+        turn = pin.Quaternion(pin.AngleAxis(rng.uniform(0.0, 1e-3 if k % 4 else 0.5), axis / np.linalg.norm(axis)))
+        q = data.q
+        q[iq + 3:iq + 7] = (pin.Quaternion(q[iq + 6], *q[iq + 3:iq + 6]) * turn).coeffs()
+        q[iq:iq + 3] += rng.uniform(-40e-6, 40e-6) * rng.normal(size=3) / np.sqrt(3)
+        kinematics(m, data)
+        _, listed, kept, _ = both_searches(model_I, data, near, built)
+        assert 0.0 <= listed.clearance <= max(brute_clearance(m, data, near, listed), 0.0) + 1e-12
+        if any(kept.scan[f] for f in near):
+            scanned += 1
+            assert listed.clearance == 0.0
+        positive += listed.clearance > 0.0
+    assert positive > 10 and scanned > 0

@@ -117,6 +117,10 @@ class Integrator:
     velocity_tol_m_s: float = key(1e-5, _positive, "adaptive_euler: a step's error in any contact sphere's velocity")
     onset_depth_m: float = key(1e-6, _positive, "adaptive_euler: while pairs may start, the most a step moves two "
                                "spheres closer (a new pair's first penetration)")
+    onset_guard: str = key("travel", _choice("travel", "clearance"),
+                           "adaptive_euler: how far a step may move two spheres closer while pairs may start: the "
+                           "onset depth (travel), or the least clearance of the sphere pairs not in contact plus the "
+                           "onset depth (clearance: fewer steps, the same first penetration)")
     bristle_switches: str = key("within_step", _choice("within_step", "located"),
                                 "adaptive_euler: where a bristle that saturates or lets go in a step switches its "
                                 "damping c_b v_t: at the step's end (within_step), or at its own time, the step cut "

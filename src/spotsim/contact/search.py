@@ -39,11 +39,16 @@ INSERTION_SORT_MAX = 64
 
 
 class Candidates(NamedTuple):
-    """Sphere pairs to test, sorted by key = master * |S2| + slave (keys unique)."""
+    """Sphere pairs to test, sorted by key = master * |S2| + slave (keys unique), and how far
+    every other sphere pair of the searched face pairs is from touching."""
 
     master: np.ndarray  # (k,)
     slave: np.ndarray  # (k,)
     key: np.ndarray  # (k,)
+    # a lower bound on |c1 - c2| - (r1 + r2) over the sphere pairs of the face pairs searched
+    # that are not candidates, m: how far spheres may close before a new pair can start (0:
+    # no bound known, as for a face pair searched anew at every step or the literal search)
+    clearance: float
 
 
 class PairList(NamedTuple):
@@ -74,7 +79,7 @@ def empty_pair_list(n_face_pairs: int) -> PairList:
 
 def no_candidates() -> Candidates:
     none = np.zeros(0, dtype=np.int64)
-    return Candidates(none, none.copy(), none.copy())
+    return Candidates(none, none.copy(), none.copy(), 0.0)
 
 
 @njit
@@ -226,7 +231,7 @@ def grid_search(m, d, near):
                         n_found += 1
     key = found_m[:n_found] * m.slave.centre_J.shape[0] + found_s[:n_found]
     order = np.argsort(key)
-    return Candidates(found_m[:n_found][order], found_s[:n_found][order], key[order])
+    return Candidates(found_m[:n_found][order], found_s[:n_found][order], key[order], 0.0)
 
 
 @njit
@@ -377,6 +382,11 @@ def listed_search(m, d):
     out = np.empty((2, n_out), dtype=np.int64)
     out_m, out_s = out[0], out[1]
     n = n_searched = 0
+    # in the ball regime a pair touches only once its centres are closer than R: the least
+    # |c1 - c2| - R of the pairs that are not candidates bounds how far spheres may close
+    # before a new pair starts (a tested pair's, exact; an untested one's, its gap at the build
+    # less the bound on the motion since; a pair beyond the list, at least LIST_SKIN less it)
+    clearance = math.inf
     for i in range(k):
         f = d.near[i]
         if d.pair_list.scan[f]:
@@ -388,8 +398,10 @@ def listed_search(m, d):
         a00, a01, a02, a10, a11, a12 = F[0, 0], F[0, 1], F[0, 2], F[1, 0], F[1, 1], F[1, 2]
         a20, a21, a22, o0, o1, o2 = F[2, 0], F[2, 1], F[2, 2], F[3, 0], F[3, 1], F[3, 2]
         reach = moved[i] + GAP_SLACK
+        untested = LIST_SKIN
         for idx in range(d.pair_list.start[f], d.pair_list.stop[f]):
             if d.pair_list.gap[idx] > reach:
+                untested = d.pair_list.gap[idx]
                 break  # ordered by gap: no later candidate can touch either
             c0, c1, c2 = d.pair_list.centre_J[idx, 0], d.pair_list.centre_J[idx, 1], d.pair_list.centre_J[idx, 2]
             lift = a20 * c0 + a21 * c1 + a22 * c2 + o2 - radius
@@ -398,8 +410,12 @@ def listed_search(m, d):
             if _node_hit(du, dv, lift, lift * lift - R * R, nu, nv, nh, cutoff):
                 out_m[n], out_s[n] = d.pair_list.master[idx], d.pair_list.slave[idx]
                 n += 1
+            else:
+                clearance = min(clearance, math.sqrt(du * du + dv * dv + lift * lift) - R)
+        clearance = min(clearance, untested - moved[i])
     out_m, out_s = out_m[:n], out_s[:n]
-    if n_searched:  # face pairs outside the ball regime: searched anew
+    if n_searched:  # face pairs outside the ball regime: searched anew, no clearance known
+        clearance = 0.0
         searched = np.empty(n_searched, dtype=np.int64)
         n_searched = 0
         for f in d.near:
@@ -408,18 +424,18 @@ def listed_search(m, d):
                 n_searched += 1
         found = grid_search(m, d, searched)
         out_m, out_s = np.concatenate((out_m, found.master)), np.concatenate((out_s, found.slave))
-    return by_key(out_m, out_s, m.slave.centre_J.shape[0])
+    return by_key(out_m, out_s, m.slave.centre_J.shape[0], max(clearance, 0.0))
 
 
 @njit
-def by_key(master, slave, n_slave):
-    """Candidates of (master, slave), ordered by key = master n_slave + slave (keys unique);
-    master and slave are reordered in place."""
+def by_key(master, slave, n_slave, clearance):
+    """Candidates of (master, slave), ordered by key = master n_slave + slave (keys unique),
+    with their `clearance`; master and slave are reordered in place."""
     n = master.shape[0]
     key = master * n_slave + slave
     if n > INSERTION_SORT_MAX:
         order = np.argsort(key)
-        return Candidates(master[order], slave[order], key[order])
+        return Candidates(master[order], slave[order], key[order], clearance)
     for a in range(1, n):
         k, mm, s = key[a], master[a], slave[a]
         b = a - 1
@@ -427,7 +443,7 @@ def by_key(master, slave, n_slave):
             key[b + 1], master[b + 1], slave[b + 1] = key[b], master[b], slave[b]
             b -= 1
         key[b + 1], master[b + 1], slave[b + 1] = k, mm, s
-    return Candidates(master, slave, key)
+    return Candidates(master, slave, key, clearance)
 
 
 @njit
@@ -523,4 +539,4 @@ def literal_search(m, d):
                     n_found += 1
     key = found_m[:n_found] * C2.shape[0] + found_s[:n_found]
     order = np.argsort(key)
-    return Candidates(found_m[:n_found][order], found_s[:n_found][order], key[order])
+    return Candidates(found_m[:n_found][order], found_s[:n_found][order], key[order], 0.0)

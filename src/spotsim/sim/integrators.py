@@ -283,11 +283,16 @@ def onset_step(m, d):
     """The longest step adaptive_euler's onset guard allows at d's state, s: while a pair may
     start (coal keeps face pairs within its margin), a step moves no two spheres closer by
     more than the onset depth, so that a pair that starts during a step sinks no deeper into
-    it before the error estimate sees its force. inf when no pair can start."""
+    it before the error estimate sees its force; with `onset_clearance`, by more than the
+    clearance of the pairs not in contact (the last search's, `Candidates.clearance`, when it
+    was made at this state) plus the onset depth. inf when no pair can start."""
     if not m.literal and d.near.shape[0] == 0:
         return math.inf
     rate = travel_rate(m, d)
-    return m.integrator.onset_depth / rate if rate > 0.0 else math.inf
+    # the last search's clearance, if it was made at this state (the step's first stage)
+    here = d.fsal and d.fsal_t == d.t
+    clearance = d.candidates.clearance if m.integrator.onset_clearance and here else 0.0
+    return (clearance + m.integrator.onset_depth) / rate if rate > 0.0 else math.inf
 
 
 @njit

@@ -13,6 +13,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ..contact.search import Candidates
 from ..jit import njit
 from ..tables import COMPLETE
 from .actuation import current_speed, next_event
@@ -68,9 +69,13 @@ def phase_ended(m, d):
 
 @njit
 def set_near(d, near):
-    """The broad phase's face pairs `near`, fresh: the travel since starts at zero."""
+    """The broad phase's face pairs `near`, fresh: the travel since starts at zero, and the
+    last search's clearance no longer holds (it knew only the face pairs before) until the
+    next search."""
     d.near = near
     d.travel = 0.0
+    c = d.candidates
+    d.candidates = Candidates(c.master, c.slave, c.key, 0.0)
 
 
 @njit

@@ -99,6 +99,7 @@ class IntegratorParams(NamedTuple):
     h_max: float  # s
     velocity_tol: float  # adaptive_euler: a step's error in any contact sphere's velocity, m/s
     onset_depth: float  # adaptive_euler: how far a step may move two spheres closer while pairs may start, m
+    onset_clearance: bool  # adaptive_euler: ... beyond the clearance of the pairs not in contact (`onset_step`)
     locate_switches: bool  # adaptive_euler: a step ends where a bristle saturates or lets go
     # (n_branches + n_internal,) adaptive_euler's lever of each error row (`integrators.error_rates`):
     # a floating branch's farthest contact sphere from its centroid, m; a joint's motion of the
