@@ -10,14 +10,23 @@ from spotsim.contact.detection import penetration
 from spotsim.contact.forces import Memory, no_contacts
 from spotsim.contact.friction import BristleParams, bristle
 from spotsim.contact.normal import hertz_stiffness, indentation, normal_force
+from spotsim.contact.search import LIST_SKIN, world_spheres
 from spotsim.run import Stepper
 from spotsim.sim.actuation import current_speed, next_event
 from spotsim.sim.dynamics import accelerations, velocity_jump
 from spotsim.sim.forces import forces
-from spotsim.sim.integrators import SWITCH_WINDOW, error_rates, euler_error, onset_step, switch_fraction, tableau
+from spotsim.sim.integrators import (
+    SWITCH_WINDOW,
+    approach_rate,
+    error_rates,
+    euler_error,
+    onset_step,
+    switch_fraction,
+    tableau,
+)
 from spotsim.sim.loop import set_near
 from spotsim.sim.model import sim_model
-from spotsim.sim.tree import kinematics
+from spotsim.sim.tree import kinematics, travel_rate
 
 #: Round-off on O(1) numbers over a few thousand steps.
 ROUND_OFF = 1e-12
@@ -472,10 +481,11 @@ def test_adaptive_euler_judges_a_try_after_a_new_finger_rate_without_its_held_sh
 
 
 def test_onset_guard_takes_the_clearance_only_where_asked_and_known(model_I, recorded_states):
-    """`onset_guard: clearance`: at a state its last search was made at, the step the guard
-    allows is the travel guard's times (clearance + onset depth) / onset depth, longer wherever
-    the search found a clearance; once the broad phase's face pairs are set anew, that
-    clearance no longer holds and the two guards allow the same step."""
+    """`onset_guard: clearance`: at a state its last search was made at, the guard allows a
+    step that closes the clearance as well as the onset depth at the face pairs' own approach
+    rate (where it is below the bound on any two spheres'), longer than the travel guard's
+    wherever the search found a clearance; once the broad phase's face pairs are set anew, that
+    clearance no longer holds and the step's closing is the onset depth alone."""
     fields = model_I.sim.fields
     clear = sim_model(fields._replace(integrator=fields.integrator._replace(onset_clearance=True)))
     depth = fields.integrator.onset_depth
@@ -483,11 +493,50 @@ def test_onset_guard_takes_the_clearance_only_where_asked_and_known(model_I, rec
     for state in recorded_states:
         d = state.copy()
         travel = onset_step(model_I.sim, d)
-        assert onset_step(clear, d) == pytest.approx(travel * (d.candidates.clearance + depth) / depth, rel=1e-12)
+        rate = min(travel_rate(model_I.sim, d), approach_rate(clear, d))
+        assert onset_step(clear, d) == pytest.approx((d.candidates.clearance + depth) / rate, rel=1e-12)
+        assert onset_step(clear, d) >= travel
         longer += onset_step(clear, d) > travel
         set_near(d, d.near.copy())
-        assert onset_step(clear, d) == travel
+        assert onset_step(clear, d) == pytest.approx(depth / rate, rel=1e-12)
     assert longer > len(recorded_states) // 2
+
+
+def test_approach_rate_bounds_how_fast_the_spheres_of_near_face_pairs_close(model_I, recorded_states):
+    """At contact states given random body velocities (up to 50 mm/s and 1 rad/s on the module
+    and 50 mm/s on each finger), no master and slave sphere of a face pair in d.near that lie
+    within reach of touching (their gap at most LIST_SKIN plus the onset depth) close faster
+    than `approach_rate`, every pair's closing speed computed from the bodies' motion."""
+    rng = np.random.default_rng(9)
+    m = model_I.sim
+    iv = model_I.pin_model.idx_vs[model_I.module_joint]
+    R = m.law.r1 + m.law.r2
+    reach = R + LIST_SKIN + m.integrator.onset_depth
+    checked = 0
+    for k in range(20):
+        d = recorded_states[k % len(recorded_states)].copy()
+        d.v[iv:iv + 3] = rng.uniform(-0.05, 0.05, 3)
+        d.v[iv + 3:iv + 6] = rng.uniform(-1.0, 1.0, 3)
+        for f in model_I.fingers:
+            d.v[model_I.pin_model.idx_vs[f.joint]] = rng.uniform(-0.05, 0.05)
+        kinematics(m, d)
+        C1, _, C2, _ = world_spheres(m, d)
+        bound = approach_rate(m, d)
+        for f in d.near:
+            jm, js = m.faces.master_joint[f], m.faces.slave_joint[f]
+            rows = np.arange(m.faces.master_start[f], m.faces.master_stop[f])
+            cols = np.flatnonzero(m.slave.face == m.faces.slave_face[f])
+            e = C1[rows, None, :] - C2[None, cols, :]
+            dist = np.linalg.norm(e, axis=2)
+            near = dist <= reach
+            if not near.any():
+                continue
+            v1 = d.vo_W[jm] + np.cross(d.w_W[jm], C1[rows] - d.p_W[jm])
+            v2 = d.vo_W[js] + np.cross(d.w_W[js], C2[cols] - d.p_W[js])
+            closing = -np.einsum("ijk,ijk->ij", e, v1[:, None, :] - v2[None, :, :]) / dist
+            assert closing[near].max() <= bound * (1 + 1e-12)
+            checked += int(near.sum())
+    assert checked > 1000
 
 
 def test_clearance_guard_keeps_a_new_pairs_first_penetration_within_the_onset_depth(case_I):

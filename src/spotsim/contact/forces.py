@@ -91,7 +91,7 @@ def commit_memory(d):
 
 
 @njit
-def _point_velocity(vo, w, o, point):
+def point_velocity(vo, w, o, point):
     """Velocity of `point` riding on a body whose origin o moves at vo and which turns at w
     (world), as a 3-tuple."""
     r0, r1, r2 = point[0] - o[0], point[1] - o[1], point[2] - o[2]
@@ -136,8 +136,8 @@ def pair_forces(m, d, h, jump):
         if not hit:
             continue
         point = contact_point(c1, c2, r1, r2, n_c, phi)
-        v_A = _point_velocity(d.vo_W[j1], d.w_W[j1], d.p_W[j1], point)
-        v_B = _point_velocity(d.vo_W[j2], d.w_W[j2], d.p_W[j2], point)
+        v_A = point_velocity(d.vo_W[j1], d.w_W[j1], d.p_W[j1], point)
+        v_B = point_velocity(d.vo_W[j2], d.w_W[j2], d.p_W[j2], point)
         v_rel = (v_A[0] - v_B[0], v_A[1] - v_B[1], v_A[2] - v_B[2])
         g = force_direction(c1, c2, n_c, phi, m.law.gradient, side)
         # rate of delta = phi / 2, which is linear: the indentation of phi's rate -(v . g)

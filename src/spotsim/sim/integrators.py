@@ -29,7 +29,8 @@ import math
 
 import numpy as np
 
-from ..contact.forces import commit_memory
+from ..contact.forces import commit_memory, point_velocity
+from ..contact.search import LIST_SKIN
 from ..jit import njit, njit_inline
 from ..linalg import add3, axpy3, cross3, mv3, mv9, put3, quat_times_exp4, sub3
 from ..tables import ADAPTIVE_EULER, FREE_FLYER, METHODS, MOTOR, SYMPLECTIC_EULER
@@ -283,16 +284,40 @@ def onset_step(m, d):
     """The longest step adaptive_euler's onset guard allows at d's state, s: while a pair may
     start (coal keeps face pairs within its margin), a step moves no two spheres closer by
     more than the onset depth, so that a pair that starts during a step sinks no deeper into
-    it before the error estimate sees its force; with `onset_clearance`, by more than the
-    clearance of the pairs not in contact (the last search's, `Candidates.clearance`, when it
-    was made at this state) plus the onset depth. inf when no pair can start."""
+    it before the error estimate sees its force, at the bound on any two spheres' approach
+    (`tree.travel_rate`). With `onset_clearance`, where the last search was made at this state
+    (the step's first stage), by more than the clearance of the pairs not in contact
+    (`Candidates.clearance`) plus the onset depth, at the bound on the approach of the spheres
+    of its face pairs (`approach_rate`). inf when no pair can start."""
     if not m.literal and d.near.shape[0] == 0:
         return math.inf
-    rate = travel_rate(m, d)
-    # the last search's clearance, if it was made at this state (the step's first stage)
-    here = d.fsal and d.fsal_t == d.t
-    clearance = d.candidates.clearance if m.integrator.onset_clearance and here else 0.0
+    rate, clearance = travel_rate(m, d), 0.0
+    if m.integrator.onset_clearance and not m.literal and d.fsal and d.fsal_t == d.t:
+        rate, clearance = min(rate, approach_rate(m, d)), d.candidates.clearance
     return (clearance + m.integrator.onset_depth) / rate if rate > 0.0 else math.inf
+
+
+@njit
+def approach_rate(m, d):
+    """A bound on how fast a master and a slave sphere of any face pair in d.near that may
+    start touching within a step approach each other, m/s, at d's kinematics: per face pair,
+    the relative velocity of its two bodies at its master spheres' centre, plus their relative
+    turn times the master spheres' spread about it, plus the slave body's turn times the
+    distance of such a pair (r1 + r2 + LIST_SKIN + the onset depth; `Candidates.clearance` is
+    at most LIST_SKIN)."""
+    faces = m.faces
+    reach = m.law.r1 + m.law.r2 + LIST_SKIN + m.integrator.onset_depth
+    rate = 0.0
+    for f in d.near:
+        jm, js = faces.master_joint[f], faces.slave_joint[f]
+        c = add3(mv3(d.R_W[jm], faces.master_centre_J[f]), (d.p_W[jm, 0], d.p_W[jm, 1], d.p_W[jm, 2]))
+        rel = sub3(point_velocity(d.vo_W[jm], d.w_W[jm], d.p_W[jm], c),
+                   point_velocity(d.vo_W[js], d.w_W[js], d.p_W[js], c))
+        turn = sub3((d.w_W[jm, 0], d.w_W[jm, 1], d.w_W[jm, 2]), (d.w_W[js, 0], d.w_W[js, 1], d.w_W[js, 2]))
+        w_s = math.sqrt(d.w_W[js, 0] ** 2 + d.w_W[js, 1] ** 2 + d.w_W[js, 2] ** 2)
+        rate = max(rate, math.sqrt(rel[0] ** 2 + rel[1] ** 2 + rel[2] ** 2)
+                   + math.sqrt(turn[0] ** 2 + turn[1] ** 2 + turn[2] ** 2) * faces.master_radius[f] + w_s * reach)
+    return rate
 
 
 @njit
