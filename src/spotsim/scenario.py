@@ -119,8 +119,9 @@ class Integrator:
                                "spheres closer (a new pair's first penetration)")
     onset_guard: str = key("travel", _choice("travel", "clearance"),
                            "adaptive_euler: how far a step may move two spheres closer while pairs may start: the "
-                           "onset depth (travel), or the least clearance of the sphere pairs not in contact plus the "
-                           "onset depth (clearance: fewer steps, the same first penetration)")
+                           "onset depth at the bound on any two spheres' approach (travel), or the least clearance "
+                           "of the sphere pairs not in contact plus the onset depth at the approach rate of its face "
+                           "pairs' spheres (clearance: about half the steps)")
     bristle_switches: str = key("within_step", _choice("within_step", "located"),
                                 "adaptive_euler: where a bristle that saturates or lets go in a step switches its "
                                 "damping c_b v_t: at the step's end (within_step), or at its own time, the step cut "
