@@ -19,7 +19,7 @@ import argparse
 import csv
 
 import numpy as np
-from speed import ROOT, measured_at
+from speed import ROOT, measured_at, pct
 
 import spotsim
 from spotsim.studies.accuracy_ensemble import compare
@@ -51,10 +51,6 @@ def reference_rows(name: str) -> list[dict]:
     for r in rows:
         r["member"] = int(r["member"])
     return rows
-
-
-def pct(x: float, err: float | None = None) -> str:
-    return f"{100 * x:+.1f} %" + (f" ± {100 * err:.1f} %" if err is not None else "")
 
 
 def main() -> None:

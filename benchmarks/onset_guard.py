@@ -19,7 +19,7 @@ from __future__ import annotations
 import argparse
 
 import numpy as np
-from speed import ROOT, measured_at
+from speed import ROOT, measured_at, pct
 
 import spotsim
 from spotsim.studies.accuracy_ensemble import compare
@@ -35,10 +35,6 @@ FINE_SUBSTEPS = 320
 def rows_of(e) -> list[dict]:
     n_grasps = len(e.members[0].grasps())
     return [member_row(m, n_grasps, n_grasps > 1) for m in e.members]
-
-
-def pct(x: float, err: float | None = None) -> str:
-    return f"{100 * x:+.1f} %" + (f" ± {100 * err:.1f} %" if err is not None else "")
 
 
 def main() -> None:

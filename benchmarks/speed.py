@@ -64,6 +64,11 @@ def head_commit() -> str:
                           text=True).stdout.strip()
 
 
+def pct(x: float, err: float | None = None) -> str:
+    """A relative difference in per cent, signed, with its sampling error if given."""
+    return f"{100 * x:+.1f} %" + (f" ± {100 * err:.1f} %" if err is not None else "")
+
+
 def measured_at() -> str:
     """Where a benchmark ran: `spotsim COMMIT on CPU, N cores`, COMMIT marked -dirty when
     tracked files other than the results (docs/results/) differ from it."""
