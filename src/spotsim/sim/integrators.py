@@ -303,10 +303,11 @@ def approach_rate(m, d):
     start touching within a step approach each other, m/s, at d's kinematics: per face pair,
     the relative velocity of its two bodies at its master spheres' centre, plus their relative
     turn times the master spheres' spread about it, plus the slave body's turn times the
-    distance of such a pair (r1 + r2 + LIST_SKIN + the onset depth; `Candidates.clearance` is
-    at most LIST_SKIN)."""
+    distance of such a pair: the search's cutoff (off the ball regime a pair may touch with its
+    centres that far apart; r1 + r2 in it, if larger) plus what the step may close
+    (`Candidates.clearance` is at most LIST_SKIN, plus the onset depth)."""
     faces = m.faces
-    reach = m.law.r1 + m.law.r2 + LIST_SKIN + m.integrator.onset_depth
+    reach = max(m.law.cutoff, m.law.r1 + m.law.r2) + LIST_SKIN + m.integrator.onset_depth
     rate = 0.0
     for f in d.near:
         jm, js = faces.master_joint[f], faces.slave_joint[f]
