@@ -1660,21 +1660,6 @@ def benchmark_table(stem: str, command: str | None = None) -> str:
             + "\n".join(lines).strip())
 
 
-def bristle_damping(r=None) -> str:
-    """The bristle-damping benchmark's table (`benchmarks/bristle_damping.py`)."""
-    return benchmark_table("bristle_damping")
-
-
-def bristle_switches(r=None) -> str:
-    """The bristle-switch benchmark's table (`benchmarks/bristle_switches.py`)."""
-    return benchmark_table("bristle_switches")
-
-
-def drive_period(r=None) -> str:
-    """The drive-period benchmark's table (`benchmarks/drive_period.py`)."""
-    return benchmark_table("drive_period")
-
-
 def profile(r=None) -> str:
     """The profile benchmark's tables (`benchmarks/profile.py`)."""
     return benchmark_table("profile")
@@ -1689,8 +1674,8 @@ def profile_compliant(r=None) -> str:
     return benchmark_table("profile_compliant", PROFILE_COMPLIANT)
 
 
-#: The cold-start benchmark, which docs/performance.md reads: against the commit before the
-#: kernels' flags were passed as np.bool_ (fc1bab7).
+#: The cold-start benchmark, which docs/performance.md reads: against 27bdb2a, the commit before
+#: fc1bab7 passed the kernels' flags as np.bool_.
 COLD_START = "python benchmarks/cold_start.py --case I --against 27bdb2a"
 
 
@@ -1896,12 +1881,12 @@ RENDER = {
     "speed": speed,
     "sweep-speed": sweep_speed,
     "design-sweep": design_sweep,
-    "bristle-damping": bristle_damping,
+    "bristle-damping": lambda r: benchmark_table("bristle_damping"),
     "profile": profile,
     "profile-compliant": profile_compliant,
     "cold-start": cold_start,
-    "bristle-switches": bristle_switches,
-    "drive-period": drive_period,
+    "bristle-switches": lambda r: benchmark_table("bristle_switches"),
+    "drive-period": lambda r: benchmark_table("drive_period"),
     "onset-guard": lambda r: benchmark_table("onset_guard"),
 }
 PAGES = [ROOT / "README.md", DOCS / "usage.md", DOCS / "validation.md", DOCS / "performance.md"]

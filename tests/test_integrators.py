@@ -30,6 +30,9 @@ from spotsim.sim.tree import kinematics, travel_rate
 
 #: Round-off on O(1) numbers over a few thousand steps.
 ROUND_OFF = 1e-12
+#: One formula's value computed by the compiled kernels and again here, or a bound compared with
+#: what it bounds where the triangle inequality can be tight: relative, a few ulps' worth.
+SAME_FORMULA_RTOL = 1e-12
 #: A tumbling module far from the fingers: smooth, contact-free, gyroscopic.
 TUMBLE_S = 0.02
 TUMBLE_V = (0.004, -0.003, 0.002, 3.0, -2.0, 4.0)  # the module's twist (v_O, omega), body frame
@@ -494,11 +497,11 @@ def test_onset_guard_takes_the_clearance_only_where_asked_and_known(model_I, rec
         d = state.copy()
         travel = onset_step(model_I.sim, d)
         rate = min(travel_rate(model_I.sim, d), approach_rate(clear, d))
-        assert onset_step(clear, d) == pytest.approx((d.candidates.clearance + depth) / rate, rel=1e-12)
+        assert onset_step(clear, d) == pytest.approx((d.candidates.clearance + depth) / rate, rel=SAME_FORMULA_RTOL)
         assert onset_step(clear, d) >= travel
         longer += onset_step(clear, d) > travel
         set_near(d, d.near.copy())
-        assert onset_step(clear, d) == pytest.approx(depth / rate, rel=1e-12)
+        assert onset_step(clear, d) == pytest.approx(depth / rate, rel=SAME_FORMULA_RTOL)
     assert longer > len(recorded_states) // 2
 
 
@@ -534,7 +537,7 @@ def test_approach_rate_bounds_how_fast_the_spheres_of_near_face_pairs_close(mode
             v1 = d.vo_W[jm] + np.cross(d.w_W[jm], C1[rows] - d.p_W[jm])
             v2 = d.vo_W[js] + np.cross(d.w_W[js], C2[cols] - d.p_W[js])
             closing = -np.einsum("ijk,ijk->ij", e, v1[:, None, :] - v2[None, :, :]) / dist
-            assert closing[near].max() <= bound * (1 + 1e-12)
+            assert closing[near].max() <= bound * (1 + SAME_FORMULA_RTOL)
             checked += int(near.sum())
     assert checked > 1000
 

@@ -387,6 +387,7 @@ def listed_search(m, d):
     # before a new pair starts (a tested pair's, exact; an untested one's, its gap at the build
     # less the bound on the motion since; a pair beyond the list, at least LIST_SKIN less it)
     clearance = math.inf
+    nearest_sq = math.inf  # the least |c1 - c2|^2 of the tested pairs that miss: one root at the end
     for i in range(k):
         f = d.near[i]
         if d.pair_list.scan[f]:
@@ -411,8 +412,9 @@ def listed_search(m, d):
                 out_m[n], out_s[n] = d.pair_list.master[idx], d.pair_list.slave[idx]
                 n += 1
             else:
-                clearance = min(clearance, math.sqrt(du * du + dv * dv + lift * lift) - R)
+                nearest_sq = min(nearest_sq, du * du + dv * dv + lift * lift)
         clearance = min(clearance, untested - moved[i])
+    clearance = min(clearance, math.sqrt(nearest_sq) - R)
     out_m, out_s = out_m[:n], out_s[:n]
     if n_searched:  # face pairs outside the ball regime: searched anew, no clearance known
         clearance = 0.0

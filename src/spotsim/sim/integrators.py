@@ -279,6 +279,13 @@ def symplectic_euler(m, d, h):
 # ------------------------------------------------------------------- adaptive symplectic Euler
 
 
+@njit_inline
+def evaluated_here(d):
+    """Whether d's last force evaluation was made at its present state (a kept step's end, the
+    next step's first stage)."""
+    return d.fsal and d.fsal_t == d.t
+
+
 @njit
 def onset_step(m, d):
     """The longest step adaptive_euler's onset guard allows at d's state, s: while a pair may
@@ -292,7 +299,7 @@ def onset_step(m, d):
     if not m.literal and d.near.shape[0] == 0:
         return math.inf
     rate, clearance = travel_rate(m, d), 0.0
-    if m.integrator.onset_clearance and not m.literal and d.fsal and d.fsal_t == d.t:
+    if m.integrator.onset_clearance and not m.literal and evaluated_here(d):
         rate, clearance = min(rate, approach_rate(m, d)), d.candidates.clearance
     return (clearance + m.integrator.onset_depth) / rate if rate > 0.0 else math.inf
 
@@ -413,7 +420,7 @@ def adaptive_euler(m, d, h):
     # its bristles bent over the try from the committed memory, as symplectic Euler bends
     # them. A new rate changes the pairs' normal damping at once, and a sliding pair's
     # bristle left at its old limit would hold, adding c_b v_t for a whole step.
-    here = d.fsal and d.fsal_t == d.t  # the last evaluation was made at this state
+    here = evaluated_here(d)
     changed = d.jumped
     fresh = not here or changed
     acc, external = d.rates, d.start_external
@@ -631,7 +638,7 @@ def runge_kutta(m, d, h):
     y0 = pack(m, d)
     k = np.empty((s, y0.shape[0]))
     external = np.empty((s, 6))
-    if d.fsal and d.fsal_t == d.t and not d.jumped:
+    if evaluated_here(d) and not d.jumped:
         k[0] = d.fsal_dy
         external[0] = d.fsal_external
     else:
