@@ -490,12 +490,13 @@ def test_onset_guard_takes_the_clearance_only_where_asked_and_known(model_I, rec
     wherever the search found a clearance; once the broad phase's face pairs are set anew, that
     clearance no longer holds and the step's closing is the onset depth alone."""
     fields = model_I.sim.fields
-    clear = sim_model(fields._replace(integrator=fields.integrator._replace(onset_clearance=True)))
+    by_travel, clear = (sim_model(fields._replace(integrator=fields.integrator._replace(onset_clearance=c)))
+                        for c in (False, True))
     depth = fields.integrator.onset_depth
     longer = 0
     for state in recorded_states:
         d = state.copy()
-        travel = onset_step(model_I.sim, d)
+        travel = onset_step(by_travel, d)
         rate = min(travel_rate(model_I.sim, d), approach_rate(clear, d))
         assert onset_step(clear, d) == pytest.approx((d.candidates.clearance + depth) / rate, rel=SAME_FORMULA_RTOL)
         assert onset_step(clear, d) >= travel

@@ -22,9 +22,11 @@ THREE_MM = ROOT / "config" / "spot_testbed_3mm.yaml"
 #: millimetre-to-metre numbers.
 HEIGHT_ROUND_OFF_M = 1e-12
 TILT_ROUND_OFF_RAD = 1e-12
-#: In-plane momentum and angular momentum about the normal, relative to the largest body's:
-#: the free-floating runs' bound (test_dual_arm.LINEAR_MOMENTUM_BOUND), measured ~1e-12.
+#: In-plane momentum, relative to the largest body's: the free-floating runs' bound
+#: (test_dual_arm.LINEAR_MOMENTUM_BOUND), measured ~1e-12.
 MOMENTUM_BOUND = 1e-9
+#: Halving a first-order error: measured 1.98 over the first 0.6 s (test_dual_arm's band).
+FIRST_ORDER_RATIO = (1.6, 2.5)
 #: The configs' arm angles are written to 6 decimals of a radian; twelve such roundings tilt a
 #: grasp frame by at most about 1e-5 rad.
 ANGLE_DIGITS_RAD = 1e-6
@@ -67,10 +69,20 @@ def test_planar_bodies_keep_height_roll_and_pitch_through_both_grasps_and_the_we
     assert np.ptp(ts["TM-2_pos_m"] @ np.array([1.0, 0.0, 0.0])) > MOVED_M
 
 
-def test_in_plane_momentum_and_angular_momentum_about_the_normal_are_conserved(run):
+def test_in_plane_momentum_is_conserved_and_angular_momentum_to_the_steps_order(run):
+    """The in-plane momentum to round-off. The angular momentum about the normal as the
+    integrators keep it: a body on a joint of a turning branch (a finger, TM-1 after its weld)
+    sits where the branch's turn puts it, nonlinear in the angle, so symplectic Euler keeps
+    it to first order: halving the step halves the drift."""
     m = run.summary["momentum"]
     assert "table's normal" in m["definition"]
-    assert m["linear_drift_rel"] <= MOMENTUM_BOUND and m["angular_drift_rel"] <= MOMENTUM_BOUND
+    assert m["linear_drift_rel"] <= MOMENTUM_BOUND
+
+    def drift(substeps):
+        s = spotsim.replace(run.scenario, simulation={"duration_s": 0.6, "substeps": substeps,
+                                                      "integrator": {"method": "symplectic_euler"}})
+        return spotsim.simulate(s).summary["momentum"]["angular_drift_rel"]
+    assert FIRST_ORDER_RATIO[0] <= drift(10) / drift(20) <= FIRST_ORDER_RATIO[1]
 
 
 def test_the_grasps_press_the_table_and_the_table_reacts(run):
