@@ -391,8 +391,8 @@ def test_every_setting_runs_from_the_same_seeded_starts(accuracy_ensembles):
 
 def test_ensemble_accuracy_study_writes_a_row_per_setting(accuracy_ensembles):
     """One CSV row per setting (reference, confirmation, sweep), every column filled; the
-    reference compared with itself meets every target; a members table per setting, the
-    markdown and the work-precision plot are written."""
+    reference compared with itself meets every target; a members table per setting and the
+    markdown are written, and the work-precision plot is drawn from them (`spotsim plot`)."""
     report, out, rows = accuracy_ensembles
     assert [r["role"] for r in rows] == ["reference", "confirmation", "sweep"]
     assert all(v != "" for r in rows for v in r.values())
@@ -406,4 +406,4 @@ def test_ensemble_accuracy_study_writes_a_row_per_setting(accuracy_ensembles):
     assert len(list((out / "members").glob("*.csv"))) == 3
     text = (out / "accuracy_ensemble.md").read_text()
     assert report.confirmation_text() in text and "all targets" in text
-    assert (out / "work_precision_ensemble.png").exists()
+    assert main(["plot", str(out)]) == 0 and (out / "work_precision_ensemble.png").exists()

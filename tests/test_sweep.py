@@ -447,6 +447,18 @@ def test_a_ray_captured_at_its_limit_has_its_boundary_beyond(tmp_path):
     assert all(r.boundary == math.inf and len(r.probes) == 1 for r in report.rays)
 
 
+def test_an_envelopes_figure_is_drawn_from_its_files(tmp_path):
+    """`spotsim plot` on an envelope's directory draws its planes from envelope.csv and its
+    points file; a directory without its runs is one line and exit 2."""
+    from spotsim.studies import envelope as env
+
+    env.envelope(CASE_I, tmp_path, env.Search(axes=("x", "y"), planes=(("x", "y"),), plane_rays=8), runner=HERE,
+                 run=fake_run({"x": 3.7, "y": 5.0}))
+    assert main(["plot", str(tmp_path)]) == 0 and (tmp_path / "envelope.png").stat().st_size > 0
+    (tmp_path / "points.jsonl").unlink()
+    assert main(["plot", str(tmp_path)]) == 2
+
+
 def test_bad_envelopes_are_refused(tmp_path):
     assert main(["envelope", str(CASE_I), "--axes", "q", "--out", str(tmp_path)]) == 2
     assert main(["envelope", str(CASE_I), "--resolution-mm", "0", "--out", str(tmp_path)]) == 2

@@ -16,6 +16,7 @@ import os
 import sys
 from pathlib import Path
 
+from . import study_figures
 from .errors import ScenarioError, SpotsimError
 from .jit import announce_compiling
 from .measures import CAMERA_HZ
@@ -125,8 +126,8 @@ def _parser() -> argparse.ArgumentParser:
     sub.add_parser("list", help="the shipped scenarios: their names (which run, validate, sweep, envelope and "
                                 "study take in place of a file) and descriptions")
     val.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE")
-    plot = sub.add_parser("plot", help="regenerate the figures of a run's results directory, or draw an ensemble's "
-                                       "or a sweep's")
+    plot = sub.add_parser("plot", help="regenerate the figures of a run's results directory, or draw an ensemble's, "
+                                       "a sweep's, an envelope's or an accuracy study's")
     plot.add_argument("result_dir")
     plot.add_argument("--sample-hz", type=_rate, default=CAMERA_HZ, metavar="HZ",
                       help=f"the camera rate of the displacement figure's samples (default {CAMERA_HZ:g} Hz)")
@@ -207,6 +208,7 @@ def _envelope(args) -> int:
         report = envelope(path, out, search, runner=runner, sets=args.set)
     except SpotsimError as e:
         return _bad_input(e)
+    _draw(study_figures.plot_envelope, out)
     print((out / "envelope.md").read_text(), end="")
     probes = sum(len(r.probes) for r in report.rays)
     near = sum(n for r in report.rays for _, n in r.chance.values())
@@ -465,7 +467,7 @@ def _study(args) -> int:
     try:
         if args.study == "accuracy":
             report = accuracy.accuracy_study(scenario, chosen.settings(), chosen.reference, out, source=str(path),
-                                             progress=progress, wall_limit_s=args.wall_limit, plot=not args.no_plot,
+                                             progress=progress, wall_limit_s=args.wall_limit,
                                              ensemble=args.ensemble, seed=args.seed, workers=args.workers,
                                              confirmation_members=args.confirmation_members)
             if args.ensemble is None:
@@ -477,6 +479,9 @@ def _study(args) -> int:
                 lines = (report.confirmation_text(), report.fastest_text())
             for line in lines:
                 print(f"  {line}")
+            if not args.no_plot and report.rows:
+                report.files += _draw(study_figures.plot_accuracy if args.ensemble is None else
+                                      study_figures.plot_accuracy_ensemble, out)
         else:
             report = stability.stability_study(scenario, cases, out, source=str(path), progress=progress,
                                            wall_limit_s=args.wall_limit)
@@ -494,6 +499,16 @@ def _study(args) -> int:
         print("interrupted: the rows written are the runs that finished", file=sys.stderr)
         return 130
     return 1 if args.study == "stability" and report.failures else 0
+
+
+def _draw(plot, out: Path) -> list[Path]:
+    """A study's figure (`study_figures`), drawn from the tables it wrote; a figure that fails
+    is one line on stderr and never costs the study's results."""
+    try:
+        return plot(out)
+    except Exception as e:  # noqa: BLE001 - the results are written: the figure is extra
+        print(f"{out}: no figure: {type(e).__name__}: {e}", file=sys.stderr)
+        return []
 
 
 def _estimate_study(scenario, reference, args, out: Path, progress: bool) -> int:

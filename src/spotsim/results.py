@@ -367,16 +367,18 @@ def replot(result_dir: str | Path, sample_hz: float = measures.CAMERA_HZ, marker
     """Regenerate a results directory's figures from its timeseries.npz and summary.json: the
     figures' paths and, with a measured marker record (`measures.read_markers`), the error of
     the simulation against it per grasp and column (`measures.compare`), also written to
-    markers_comparison.csv beside figures/. An ensemble's or a sweep's directory gets its own
-    figures (`study_figures`)."""
+    markers_comparison.csv beside figures/. A study's directory (an ensemble's, a sweep's, an
+    envelope's, an accuracy study's) gets its own figures (`study_figures`)."""
     from . import study_figures
 
     d = Path(result_dir)
-    for marker, plot in (("ensemble.json", study_figures.plot_ensemble), ("sweep.parquet", study_figures.plot_sweep)):
+    for marker, plot in (("ensemble.json", study_figures.plot_ensemble), ("sweep.parquet", study_figures.plot_sweep),
+                         ("envelope.csv", study_figures.plot_envelope), ("accuracy.csv", study_figures.plot_accuracy),
+                         ("accuracy_ensemble.csv", study_figures.plot_accuracy_ensemble)):
         if (d / marker).is_file():
             if markers is not None:
-                raise SpotsimError(f"{d}: --markers compares a run's record; this is an {marker.split('.')[0]}'s "
-                                   "directory")
+                raise SpotsimError(f"{d}: --markers compares a run's record; this is a study's directory "
+                                   f"({marker})")
             return plot(d), []
     summary, ts = read_results(d)
     if len(ts.get("t", ())) < 2:

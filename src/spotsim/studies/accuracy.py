@@ -10,14 +10,13 @@ drift, its wall time and its status; then a markdown table and a work-precision 
 from __future__ import annotations
 
 import math
-import textwrap
 from dataclasses import dataclass, field
 from dataclasses import replace as dc_replace
 from pathlib import Path
 
 import numpy as np
 
-from ..files import atomic_write, prepare, save_figure
+from ..files import atomic_write, prepare
 from ..scenario import Integrator, modules_of, replace, to_dict
 from ..tables import ADAPTIVE, METHODS
 from .runs import (
@@ -378,10 +377,10 @@ def perturbed(s, d_mm: float = PERTURBATION_MM):
 
 def accuracy_study(scenario, settings: list[Setting], reference: Setting, out_dir, *,
                    source: str = "<study>", progress: bool = False, wall_limit_s: float | None = None,
-                   plot: bool = True, ensemble: int | None = None, seed: int = 0, workers: int | None = None,
+                   ensemble: int | None = None, seed: int = 0, workers: int | None = None,
                    confirmation_members: int | None = None):
     """Run the reference and its confirmation, then every setting; write accuracy.csv (a row per
-    run as it ends), accuracy.md and work_precision.png into `out_dir`.
+    run as it ends) and accuracy.md into `out_dir` (its figure: `study_figures.plot_accuracy`).
 
     With `ensemble` = N, every setting is instead an N-member ensemble from the same starts
     (`seed`), compared with the reference's ensemble (`accuracy_ensemble.accuracy_ensemble_study`,
@@ -402,7 +401,7 @@ def accuracy_study(scenario, settings: list[Setting], reference: Setting, out_di
         return accuracy_ensemble_study(scenario, settings, reference, out_dir, ensemble, default=setting_of(scenario),
                                        seed=seed, workers=workers,
                                        confirmation_members=confirmation_members, source=source,
-                                       progress=progress, plot=plot)
+                                       progress=progress)
     out = Path(out_dir)
     prepare(out, "accuracy.md")
     runs = Runs(source, wall_limit_s, out / RUNS_FILE)
@@ -461,9 +460,6 @@ def accuracy_study(scenario, settings: list[Setting], reference: Setting, out_di
     report.interrupted = study.interrupted
     report.files = [study.path, out / "accuracy.md"]
     atomic_write(out / "accuracy.md", accuracy_markdown(scenario, report))
-    if plot and report.rows:
-        work_precision_plot(scenario, report, out / "work_precision.png")
-        report.files.append(out / "work_precision.png")
     return report
 
 
@@ -502,84 +498,3 @@ def accuracy_markdown(scenario, report: AccuracyReport) -> str:
               "bound of it (wall time, error):\n\n"
               + report.ladder_table().rstrip()) if report.rows else ""
     return "\n".join(text) + ladder + "\n\nEvery run:\n\n" + markdown_table(header, rows)
-
-
-def work_precision_plot(scenario, report: AccuracyReport, path: Path) -> None:
-    """Error against wall time, log-log, one line per integrator (and sphere scale): the offset
-    error (mm), the peak force's relative error and, on a free-floating robot, the centroid
-    displacement's. The worst grasp's error where there are several. Runs with no error (diverged,
-    stopped) are drawn as crosses on the top edge; the paper's setting is circled."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from matplotlib.ticker import NullFormatter
-
-    names = grasp_names(scenario)
-    panels = [("offset_err_mm", "residual offset error (mm)"), ("peak_force_err_rel", "peak force error (relative)")]
-    if free_floating(scenario):
-        panels.append(("centroid_err_rel", "centroid displacement error (relative)"))
-    fig, axes = plt.subplots(1, len(panels), figsize=(5.2 * len(panels), 5.2), squeeze=False)
-    rows = [r for r in report.rows if r["role"] not in ("reference", "perturbed") and not math.isnan(r["wall_time_s"])]
-    ref = next((r for r in report.rows if r["role"] == "reference"), None)
-    moved = next((r for r in report.rows if r["role"] == "perturbed"), None)
-    for ax, (key, label) in zip(axes[0], panels):
-        def err(r, key=key):
-            return max((r[f"{p}{key}"] for p in names), default=math.nan)
-
-        good = [err(r) for r in rows if not math.isnan(err(r))]
-        floor = min([e for e in good if e > 0], default=1e-6) / 3
-        top = max(good, default=1.0) * 3
-        lines = {}
-        for r in rows:
-            lines.setdefault((r["method"], r.get("sphere_scale", 1.0)), []).append(r)
-        for (method, scale), group in lines.items():
-            group.sort(key=lambda r: r["rtol"] if method == "dopri5" else r["tol"] if method == "adaptive_euler"
-                       else -r["substeps"], reverse=True)
-            xs = [r["wall_time_s"] for r in group if not math.isnan(err(r))]
-            ys = [max(err(r), floor) for r in group if not math.isnan(err(r))]
-            name = method + (f", spheres x{scale:g}" if scale != 1.0 else "")
-            (line,) = ax.loglog(xs, ys, "o-", lw=1.2, ms=4, label=name)
-            for r in group:
-                short = (f"rtol {r['rtol']:g}" if method == "dopri5" else f"tol {r['tol']:g}"
-                         if method == "adaptive_euler" else f"{r['step_ms']:g} ms")
-                if math.isnan(err(r)):
-                    ax.plot(r["wall_time_s"], top, "x", color=line.get_color(), ms=8, mew=2)
-                    ax.annotate(f"{short}: {r['status']}", (r["wall_time_s"], top), fontsize=7,
-                                rotation=90, va="top", ha="right", color=line.get_color())
-                else:
-                    ax.annotate(short, (r["wall_time_s"], max(err(r), floor)), fontsize=6,
-                                xytext=(3, 3), textcoords="offset points", color=line.get_color())
-        for r in rows:
-            if r["role"] == "paper":
-                y = top if math.isnan(err(r)) else max(err(r), floor)
-                ax.plot(r["wall_time_s"], y, "o", ms=14, mfc="none", mec="black", mew=1.5,
-                        label=f"paper's setting (symplectic Euler, 1 ms): {r['status']}")
-            if r["role"] == "default":
-                ax.plot(r["wall_time_s"], max(err(r), floor) if not math.isnan(err(r)) else top, "s", ms=11,
-                        mfc="none", mec="tab:gray", mew=1.5, label="the scenario's setting")
-        if ref is not None and not math.isnan(ref["wall_time_s"]):
-            ax.axvline(ref["wall_time_s"], ls=":", color="black", lw=1,
-                       label=f"reference: {ref['setting']}")
-        if moved is not None and not math.isnan(err(moved)) and err(moved) > 0:
-            ax.axhline(err(moved), ls="-.", color="tab:purple", lw=1,
-                       label=f"the reference started {PERTURBATION_MM * 1e6:g} nm off")
-        if key.endswith("_rel"):
-            ax.axhline(WITHIN_REL, ls="--", color="tab:green", lw=1, label="1 %")
-        elif ref is not None:
-            one = max((WITHIN_REL * ref[f"{p}offset_norm_mm"] for p in names), default=math.nan)
-            if not math.isnan(one):
-                ax.axhline(one, ls="--", color="tab:green", lw=1, label="1 % of the reference's offset")
-        ax.set_xlabel("wall time (s)")
-        ax.set_ylabel(label)
-        ax.xaxis.set_minor_formatter(NullFormatter())  # the decades alone: minor labels collide
-        ax.grid(alpha=0.3, which="both")
-    handles, labels = axes[0][0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="lower center", ncol=3, fontsize=7, frameon=False)
-    fig.suptitle(f"{report.scenario}: error against wall time\n{textwrap.shorten(report.confirmation_text(), 150)}",
-                 fontsize=9)
-    fig.tight_layout(rect=(0, 0.14, 1, 1))
-    save_figure(fig, path)
-    plt.close(fig)
-
-

@@ -34,13 +34,12 @@ from __future__ import annotations
 
 import math
 import re
-import textwrap
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from ..files import atomic_write, prepare, save_figure
+from ..files import atomic_write, prepare
 from ..scenario import modules_of
 from ..status import SEATED, WEDGED
 from .ensemble import (
@@ -305,16 +304,16 @@ def setting_row(setting, role: str, e: EnsembleResult, ref: EnsembleResult, dt_s
 
 def accuracy_ensemble_study(scenario, settings: list, reference, out_dir, n: int, *, default, seed: int = 0,
                             workers: int | None = None, confirmation_members: int | None = None,
-                            source: str = "<study>", progress: bool = False,
-                            plot: bool = True) -> EnsembleAccuracyReport:
+                            source: str = "<study>", progress: bool = False) -> EnsembleAccuracyReport:
     """Run the reference, its confirmation (its refinement; `confirmation_members`, by default
     n, of the same starts) and every setting as an n-member ensemble from the same seeded
     starts; write accuracy_ensemble.csv (a row per setting as it ends), members/<setting>.csv
-    (each ensemble's members table), accuracy_ensemble.md and work_precision_ensemble.png into
-    `out_dir`; `default`: the scenario's own setting (`accuracy.setting_of`). Ctrl-C stops the
-    study and keeps the rows written (report.interrupted); every member's run is kept in
-    members/members.jsonl as it ends, and a study started again over `out_dir` runs only the
-    members it lacks (`ensemble.ensemble`'s out_dir)."""
+    (each ensemble's members table) and accuracy_ensemble.md into `out_dir` (its figure:
+    `study_figures.plot_accuracy_ensemble`); `default`: the scenario's own setting
+    (`accuracy.setting_of`). Ctrl-C stops the study and keeps the rows written
+    (report.interrupted); every member's run is kept in members/members.jsonl as it ends, and a
+    study started again over `out_dir` runs only the members it lacks (`ensemble.ensemble`'s
+    out_dir)."""
     out = Path(out_dir)
     prepare(out, "accuracy_ensemble.md")
     (out / "members").mkdir(exist_ok=True)
@@ -346,9 +345,6 @@ def accuracy_ensemble_study(scenario, settings: list, reference, out_dir, n: int
     md = out / "accuracy_ensemble.md"
     atomic_write(md, ensemble_markdown(scenario, report))
     report.files = [writer.path, md]
-    if plot and report.rows:
-        work_precision_ensemble_plot(report, out / "work_precision_ensemble.png")
-        report.files.append(out / "work_precision_ensemble.png")
     return report
 
 
@@ -436,68 +432,3 @@ def ensemble_markdown(scenario, report: EnsembleAccuracyReport) -> str:
          "seated / wedged (ref)", "roll median deg (KS p); pitch, yaw KS p", *det_heads], values)
     return ("\n".join(head) + "\n\nTargets (the worst grasp):\n\n" + target_table
             + "\nValues per grasp:\n\n" + value_table)
-
-
-def work_precision_ensemble_plot(report: EnsembleAccuracyReport, path: Path) -> None:
-    """Error measures against wall time per member, log-log, one line per integrator: the worst
-    member-by-member difference of the deterministic quantities, the residual median's, and the residual's
-    smallest KS p-value (linear-log); the targets dashed, the confirmation a star."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from matplotlib.ticker import NullFormatter
-
-    panels = [("max_deterministic_rel", "deterministic, member by member: worst relative difference",
-               DETERMINISTIC_REL),
-              ("max_residual_median_rel", "residual offset median: relative difference", RESIDUAL_MEDIAN_REL),
-              ("min_residual_ks_p", "residual offset: KS p-value vs the reference", KS_ALPHA)]
-    fig, axes = plt.subplots(1, 3, figsize=(15.6, 5.2), squeeze=False)
-    rows = [r for r in report.rows if r["role"] != "reference" and not math.isnan(r["wall_per_member_s"])]
-    ref = report.row("reference")
-    for ax, (key, label, target) in zip(axes[0], panels):
-        ks = key.endswith("_p")
-        good = [r[key] for r in rows if not math.isnan(r[key])]
-        # p-values run down to ~1e-18 (two disjoint samples of 32): the floor follows the data
-        floor = max(min([e for e in good if e > 0], default=1e-6) / 3, 1e-30)
-        lines: dict = {}
-        for r in rows:
-            if r["role"] != "confirmation":
-                lines.setdefault(r["method"], []).append(r)
-        for method, group in lines.items():
-            group.sort(key=lambda r: r["wall_per_member_s"])
-            xs = [r["wall_per_member_s"] for r in group if not math.isnan(r[key])]
-            ys = [max(r[key], floor) for r in group if not math.isnan(r[key])]
-            (line,) = ax.plot(xs, ys, "o-", lw=1.2, ms=4, label=method)
-            for r in group:
-                if not math.isnan(r[key]):
-                    short = f"tol {r['tol']:g}" if method == "adaptive_euler" else f"{r['step_ms'] * 1e3:g} us"
-                    ax.annotate(short, (r["wall_per_member_s"], max(r[key], floor)), fontsize=6, xytext=(3, 3),
-                                textcoords="offset points", color=line.get_color())
-                if r["role"] == "default":
-                    ax.plot(r["wall_per_member_s"], max(r[key], floor) if not math.isnan(r[key]) else floor, "s",
-                            ms=11, mfc="none", mec="tab:gray", mew=1.5, label="the scenario's setting")
-        c = report.row("confirmation")
-        if c is not None and not math.isnan(c[key]):
-            ax.plot(c["wall_per_member_s"], max(c[key], floor), "*", ms=12, color="black",
-                    label=f"confirmation: {c['setting']}")
-        if ref is not None:
-            ax.axvline(ref["wall_per_member_s"], ls=":", color="black", lw=1, label=f"reference: {ref['setting']}")
-        ax.axhline(target, ls="--", color="tab:green", lw=1, label="target")
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        if ks:
-            ax.set_ylim(floor, 1.5)
-        ax.set_xlabel("wall time per member (s)")
-        ax.set_ylabel(label)
-        ax.xaxis.set_minor_formatter(NullFormatter())
-        ax.grid(alpha=0.3, which="both")
-    handles, labels = axes[0][0].get_legend_handles_labels()
-    seen = dict(zip(labels, handles))
-    fig.legend(seen.values(), seen.keys(), loc="lower center", ncol=4, fontsize=7, frameon=False)
-    fig.suptitle(f"{report.scenario}: ensembles of {report.members} (seed {report.seed}), error against wall time\n"
-                 f"{textwrap.shorten(report.confirmation_text(), 160)}", fontsize=9)
-    fig.tight_layout(rect=(0, 0.1, 1, 1))
-    save_figure(fig, path)
-    plt.close(fig)
-

@@ -27,10 +27,8 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
-
 from ..errors import ScenarioError
-from ..files import atomic_write, prepare, save_figure
+from ..files import atomic_write, prepare
 from ..scenario import TOLERANCE_DEG, TOLERANCE_OFFSET_MM, from_dict, set_value
 from ..status import SEATED, run_outcome
 from .runner import Runner, SchedulerLost, Task, append_record, check_budget, read_records, scenario_key
@@ -302,8 +300,8 @@ def _bisect(todo, probe, settle, runner: Runner, source: str, run) -> None:
 
 
 def write_envelope(report: EnvelopeReport) -> None:
-    """envelope.csv (a row per ray: its direction, bracket, boundary and runs), envelope.md
-    (claimed against measured per axis) and envelope.png."""
+    """envelope.csv (a row per ray: its direction, bracket, boundary and runs) and envelope.md
+    (claimed against measured per axis); its figure: `study_figures.plot_envelope`."""
     import csv
     import io
 
@@ -326,58 +324,7 @@ def write_envelope(report: EnvelopeReport) -> None:
         lines.append(f"| {row['axis']} ({row['unit']}) | ±{row['claimed']:g} | {fmt('+')} | {fmt('-')} | "
                      f"{row['beyond+'] or '–'} / {row['beyond-'] or '–'} | {row['runs']} |")
     atomic_write(out / "envelope.md", "\n".join(lines) + "\n")
-    try:
-        plot_envelope(report, out / "envelope.png")
-    except Exception:  # noqa: BLE001 - a figure never costs the envelope's results
-        pass
 
 
 def _fraction(chance) -> str:
     return "" if not chance else f"{chance[0] / chance[1]:.3g}"
-
-
-def plot_envelope(report: EnvelopeReport, path: Path) -> None:
-    """The planes in the paper's Fig. 16 style: every probe coloured by its residual offset
-    (seated) or marked by its verdict, the boundary joined around the rays, and the
-    claimed tolerance rectangle."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    planes = [(a, b) for a, b in PLANES if any(set(r.direction) == {a, b} for r in report.rays)]
-    fig, axes = plt.subplots(1, max(len(planes), 1), figsize=(6.2 * max(len(planes), 1), 5.6), squeeze=False)
-    for ax, (a, b) in zip(axes[0], planes):
-        ua, ub = AXES[a][1], AXES[b][1]
-        xs, ys, res = [], [], []
-        bx = []
-        for r in report.rays:
-            if not set(r.direction) <= {a, b}:
-                continue
-            da, db = r.direction.get(a, 0.0), r.direction.get(b, 0.0)
-            for m, v, key in r.probes:
-                rec = report.records.get(key)
-                s = (rec.summary if rec is not None else None) or {}
-                g = (s.get("grasps") or [{}])[0]
-                xs.append(m * da)
-                ys.append(m * db)
-                res.append(g.get("residual_offset_norm_mm") if v == SEATED else np.nan)
-                if v != SEATED:
-                    ax.plot(m * da, m * db, "x", color="0.3", ms=5)
-            edge = min(r.boundary, r.limit)
-            bx.append((math.atan2(db, da), edge * da, edge * db))
-        sc = ax.scatter(xs, ys, c=res, cmap="viridis", s=18, zorder=3)
-        if bx:
-            bx.sort()
-            ax.plot([p[1] for p in bx] + [bx[0][1]], [p[2] for p in bx] + [bx[0][2]], "-", color="C3",
-                    label="capture boundary")
-        ca, cb = CLAIMED[a], CLAIMED[b]
-        ax.plot([-ca, ca, ca, -ca, -ca], [-cb, -cb, cb, cb, -cb], "--", color="k", label="claimed tolerance")
-        ax.set_xlabel(f"{a} ({ua})")
-        ax.set_ylabel(f"{b} ({ub})")
-        ax.set_title(f"capture envelope, {a}-{b} (x: not seated)")
-        ax.legend(loc="upper right", fontsize=8)
-        fig.colorbar(sc, ax=ax, label="residual offset (mm)")
-    fig.tight_layout()
-    save_figure(fig, path)
-    plt.close(fig)
