@@ -32,7 +32,7 @@ from ..files import atomic_write, prepare
 from ..scenario import TOLERANCE_DEG, TOLERANCE_OFFSET_MM, from_dict, set_value
 from ..status import SEATED, run_outcome
 from .runner import Runner, SchedulerLost, Task, append_record, check_budget, read_records, scenario_key
-from .sweep import POINTS_FILE, PRECISION_MM, run_on
+from .sweep import POINTS_FILE, PRECISION_MM, point_task, run_on
 
 #: The misalignment axes: key path of the module's start, unit.
 AXES = {"x": ("module.initial_offset_mm.0", "mm"), "y": ("module.initial_offset_mm.1", "mm"),
@@ -110,19 +110,8 @@ def rays(axes=tuple(AXES), planes=PLANES, plane_rays: int = PLANE_RAYS, resoluti
 
 def probe_point(raw0: dict, ray: Ray, magnitude: float, index: int, where: str) -> Task:
     """The sweep point of a probe: the module started `magnitude` along `ray` from centred."""
-    import json
-
-    raw = json.loads(json.dumps(raw0))
-    values = {}
-    for axis in AXES:
-        values[AXES[axis][0]] = round(magnitude * ray.direction.get(axis, 0.0), 9) + 0.0
-    for k, v in values.items():
-        set_value(raw, k, v)
-    try:
-        scenario = from_dict(raw, where)
-    except ScenarioError as e:
-        return Task(None, index, f"invalid-{ray.name}-{magnitude}", {"values": values}, tuple(e.problems))
-    return Task(scenario, index, scenario_key(scenario), {"values": values})
+    values = {AXES[axis][0]: round(magnitude * ray.direction.get(axis, 0.0), 9) + 0.0 for axis in AXES}
+    return point_task(raw0, values, index, where)
 
 
 @dataclass

@@ -247,19 +247,23 @@ def resolve_points(config: Path, spec: SweepSpec) -> list[Task]:
     bad = [k for k in spec.keys() if not _has_path(known, k)]
     if bad:
         raise ScenarioError([f"{config}: {k}: not a key path of the scenario" for k in bad])
-    points = []
-    for i, values in enumerate(spec.resolved()):
-        raw = json.loads(json.dumps(raw0))  # a deep copy of plain data
-        try:
-            for k, v in values.items():
-                set_value(raw, k, v)
-            scenario = from_dict(raw, f"{config} [point {i}]")
-        except ScenarioError as e:
-            points.append(Task(None, i, hashlib.sha256(repr(sorted(values.items())).encode()).hexdigest()[:16],
-                               {"values": values}, tuple(e.problems)))
-            continue
-        points.append(Task(scenario, i, scenario_key(scenario), {"values": values}))
-    return points
+    return [point_task(raw0, values, i, f"{config} [point {i}]") for i, values in enumerate(spec.resolved())]
+
+
+def point_task(raw0: dict, values: dict, index: int, where: str) -> Task:
+    """The task of a point (a sweep's, an envelope's probe): the raw scenario `raw0` with the
+    key paths of `values` set, its values in `about["values"]`, keyed by its scenario and the
+    code (`scenario_key`); a value that a rule refuses makes a task without a scenario, keyed
+    by its values."""
+    raw = json.loads(json.dumps(raw0))  # a deep copy of plain data
+    try:
+        for k, v in values.items():
+            set_value(raw, k, v)
+        scenario = from_dict(raw, where)
+    except ScenarioError as e:
+        key = hashlib.sha256(repr(sorted(values.items())).encode()).hexdigest()[:16]
+        return Task(None, index, key, {"values": values}, tuple(e.problems))
+    return Task(scenario, index, scenario_key(scenario), {"values": values})
 
 
 def _has_path(tree, path: str) -> bool:
