@@ -5,8 +5,8 @@ fine fixed step from the same starts.
 
 Cases I-III and the dual-arm run, each on both families of perturbed starts (`spotsim run
 --perturb`: all axes and angles, and one axis at a time), as ensembles of MEMBERS starts (seed
-0) at: adaptive Euler with the default guard (`simulation.integrator.onset_guard: travel`), with
-the clearance guard (`clearance`), and symplectic Euler at 3.125 us (the drive comparison's
+0) at: adaptive Euler with the travel guard (`simulation.integrator.onset_guard: travel`), with
+the clearance guard (`clearance`, the default), and symplectic Euler at 3.125 us (the drive comparison's
 fine step, computed here from the same starts). Each adaptive ensemble is compared, by the
 ensemble accuracy study's own comparison (`studies.accuracy_ensemble.compare`), with the
 fine one. Printed per case, family, guard and grasp: the steps and the wall time per member,

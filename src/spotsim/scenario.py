@@ -117,7 +117,7 @@ class Integrator:
     velocity_tol_m_s: float = key(1e-5, _positive, "adaptive_euler: a step's error in any contact sphere's velocity")
     onset_depth_m: float = key(1e-6, _positive, "adaptive_euler: while pairs may start, the most a step moves two "
                                "spheres closer (a new pair's first penetration)")
-    onset_guard: str = key("travel", _choice("travel", "clearance"),
+    onset_guard: str = key("clearance", _choice("clearance", "travel"),
                            "adaptive_euler: how far a step may move two spheres closer while pairs may start: the "
                            "onset depth at the bound on any two spheres' approach (travel), or the least clearance "
                            "of the sphere pairs not in contact plus the onset depth at the approach rate of its face "
