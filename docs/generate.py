@@ -1673,7 +1673,8 @@ def profile(r=None) -> str:
 
 
 #: The profile of Case I with compliant joints, which docs/performance.md reads.
-PROFILE_COMPLIANT = "python benchmarks/profile.py --case I --set arm.compliance.joints=compliant"
+PROFILE_COMPLIANT = ("python benchmarks/profile.py --case I --set arm.compliance.joints=compliant "
+                     "--set simulation.duration_s=5 --set completion.phase_timeout_s=5")
 
 
 def profile_compliant(r=None) -> str:
