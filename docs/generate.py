@@ -857,7 +857,8 @@ def study_commands(r: Results) -> str:
     for s in r.meta["studies"]:
         out = s.get("out") or f"docs/results/{s['command'].split()[2]}/{Path(s['command'].split()[3]).stem}"
         at = f" (at commit `{s['commit']}`)" if s.get("commit") and s["commit"] != r.meta["commit"] else ""
-        lines.append(f"- `{s['command']} --out {out}`: {num(s['wall_time_s'], 2)} s{at}")
+        command = s["command"] if "--out" in s["command"].split() else f"{s['command']} --out {out}"
+        lines.append(f"- `{command}`: {num(s['wall_time_s'], 2)} s{at}")
     return "\n".join(lines)
 
 
