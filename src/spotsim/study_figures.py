@@ -16,12 +16,11 @@ QUANTITIES = (("residual_norm_mm", "residual offset e (mm)"), ("peak_force_norm_
               ("completed_s", "completion time (s)"))
 
 
-def _saved(fig, d: Path, name: str) -> Path:
-    """`fig`, laid out, as d/figures/`name` (whole or not at all), and closed."""
+def _saved(fig, path: Path, rect=(0, 0, 1, 1)) -> Path:
+    """`fig`, laid out within `rect` of it, saved as `path` (whole or not at all), and closed."""
     import matplotlib.pyplot as plt
 
-    fig.tight_layout()
-    path = d / "figures" / name
+    fig.tight_layout(rect=rect)
     path.parent.mkdir(exist_ok=True)
     save_figure(fig, path)
     plt.close(fig)
@@ -56,7 +55,7 @@ def plot_ensemble(d: Path) -> list[Path]:
         axes[g][0].set_title(f"{key}: {classes}", loc="left", fontsize=9)
     fig.suptitle(f"{e['scenario']}: ensemble of {e['members']} (seed {e['seed']}), members whose grasp completed",
                  fontsize=10)
-    return [_saved(fig, d, "ensemble.png")]
+    return [_saved(fig, d / "figures" / "ensemble.png")]
 
 
 def plot_sweep(d: Path) -> list[Path]:
@@ -106,7 +105,7 @@ def plot_sweep(d: Path) -> list[Path]:
         if len(keys) > 2:
             ax.set_title(f"over the first two of {len(keys)} varied keys", fontsize=9)
     fig.suptitle(f"sweep of {len(t)} points: {d}", fontsize=10)
-    return [_saved(fig, d, "sweep.png")]
+    return [_saved(fig, d / "figures" / "sweep.png")]
 
 
 # ----------------------------------------------------------------------------- work-precision
@@ -170,10 +169,7 @@ def _work_precision(panels: list, lines: dict, x: str, short, title: str, path: 
     seen = dict(zip(labels, handles))
     fig.legend(seen.values(), seen.keys(), loc="lower center", ncol=3, fontsize=7, frameon=False)
     fig.suptitle(title, fontsize=9)
-    fig.tight_layout(rect=(0, 0.14, 1, 1))
-    save_figure(fig, path)
-    plt.close(fig)
-    return [path]
+    return [_saved(fig, path, rect=(0, 0.14, 1, 1))]
 
 
 def _short(r: dict) -> str:
@@ -289,7 +285,6 @@ def plot_envelope(d: Path) -> list[Path]:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    import numpy as np
     import yaml
 
     from .status import SEATED, run_outcome
@@ -320,7 +315,7 @@ def plot_envelope(d: Path) -> list[Path]:
             g = (rec.summary or {}).get("grasps") or [{}]
             xs.append(start[a])
             ys.append(start[b])
-            res.append(g[0].get("residual_offset_norm_mm") if seated else np.nan)
+            res.append(g[0].get("residual_offset_norm_mm") if seated else math.nan)
             if not seated:
                 ax.plot(start[a], start[b], "x", color="0.3", ms=5)
         sc = ax.scatter(xs, ys, c=res, cmap="viridis", s=18, zorder=3)
@@ -336,7 +331,4 @@ def plot_envelope(d: Path) -> list[Path]:
         ax.set_title(f"capture envelope, {a}-{b} (x: not seated)")
         ax.legend(loc="upper right", fontsize=8)
         fig.colorbar(sc, ax=ax, label="residual offset (mm)")
-    fig.tight_layout()
-    save_figure(fig, d / "envelope.png")
-    plt.close(fig)
-    return [d / "envelope.png"]
+    return [_saved(fig, d / "envelope.png")]
