@@ -207,10 +207,9 @@ def norm(v) -> float:
 
 
 def table(header: list[str], rows: list[list[str]]) -> str:
-    lines = ["| " + " | ".join(h.replace("|", "\\|") for h in header) + " |",
-             "| " + " | ".join("---" for _ in header) + " |"]
-    lines += ["| " + " | ".join(str(c).replace("|", "\\|") for c in row) + " |" for row in rows]
-    return "\n".join(lines)
+    from spotsim.study_reports import markdown_table
+
+    return markdown_table(header, rows)
 
 
 def setting_label(row: dict) -> str:

@@ -15,8 +15,8 @@ from spotsim.cli import ensemble_exit, main
 from spotsim.errors import SpotsimError
 from spotsim.studies import ensemble as ens
 from spotsim.studies import runs
-from spotsim.studies.ensemble import EnsembleResult, Start, member, member_scenario, member_task, perturbed_starts
-from spotsim.studies.runner import keep_model
+from spotsim.studies.ensemble import EnsembleResult, Start, member_scenario, member_task, perturbed_starts
+from spotsim.studies.runner import Record, keep_model
 from spotsim.studies.runs import run_task
 
 #: Case I at the default step: a whole member runs in well under a second.
@@ -154,7 +154,7 @@ def _member(i, status, norm=None, roll=0.0, peak=50.0, completed=1.0):
              "peak_force_norm_N": peak, "peak_torque_norm_Nm": 1.0}
     start = Start({"module": (0.0, -3.0, 0.0)}, {"module": (0.0, 0.0, 0.0)})
     summary = None if status == "interrupted" else {"grasps": [grasp], "sim_time_s": 1.0, "wall_time_s": 0.1}
-    return member(i, start, status, status, summary)
+    return Record(None, i, status, status, summary, about={"start": start.as_dict()})
 
 
 def test_statistics_and_classes_of_hand_made_members(case_I):

@@ -9,6 +9,7 @@ import pytest
 from conftest import CASE_I
 
 import spotsim
+from spotsim import study_reports
 from spotsim.cli import main
 from spotsim.status import WALL_LIMIT, WEDGED_OFFSET_MM
 from spotsim.studies import accuracy as acc
@@ -188,7 +189,7 @@ def test_ctrl_c_keeps_the_rows_written_and_the_study_started_again_runs_only_wha
     cases = stab.select_cases(["baseline", "Ex10", "Ex100"])
     report = stab.stability_study(short, cases, tmp_path)
     assert report.interrupted and len(read_csv(tmp_path / "stability.csv")) == 2
-    assert "interrupted" in (tmp_path / "stability.md").read_text()
+    assert "interrupted" in study_reports.stability_markdown(short, report)
     assert len((tmp_path / runs.RUNS_FILE).read_text().splitlines()) == 2
 
     real_execute, executed = runner.execute, []
@@ -374,6 +375,7 @@ def accuracy_ensembles(tmp_path_factory):
     scenario = spotsim.load_scenario(CASE_I)
     report = acc.accuracy_study(scenario, [acc.Setting("symplectic_euler", 5)], acc.Setting("symplectic_euler", 10),
                                 out, ensemble=3, seed=7, workers=1)
+    study_reports.write_markdown(scenario, report, out)
     return report, out, read_csv(out / "accuracy_ensemble.csv")
 
 
@@ -405,5 +407,5 @@ def test_ensemble_accuracy_study_writes_a_row_per_setting(accuracy_ensembles):
     assert float(rows[1]["wall_per_member_s"]) > 0 and rows[2]["step_ms"] == "0.2"
     assert len(list((out / "members").glob("*.csv"))) == 3
     text = (out / "accuracy_ensemble.md").read_text()
-    assert report.confirmation_text() in text and "all targets" in text
+    assert study_reports.ensemble_confirmation(report) in text and "all targets" in text
     assert main(["plot", str(out)]) == 0 and (out / "work_precision_ensemble.png").exists()

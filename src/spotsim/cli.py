@@ -16,7 +16,7 @@ import os
 import sys
 from pathlib import Path
 
-from . import study_figures
+from . import study_figures, study_reports
 from .errors import ScenarioError, SpotsimError
 from .jit import announce_compiling
 from .measures import CAMERA_HZ
@@ -470,24 +470,21 @@ def _study(args) -> int:
                                              progress=progress, wall_limit_s=args.wall_limit,
                                              ensemble=args.ensemble, seed=args.seed, workers=args.workers,
                                              confirmation_members=args.confirmation_members)
-            if args.ensemble is None:
-                print(f"{scenario.name}: accuracy, {len(report.rows)} runs")
-                lines = (report.confirmation_text(), report.sensitivity_text(), report.fastest_text())
-            else:
-                print(f"{scenario.name}: accuracy over ensembles of {args.ensemble} (seed {args.seed}), "
-                      f"{len(report.rows)} settings")
-                lines = (report.confirmation_text(), report.fastest_text())
-            for line in lines:
+            print(f"{scenario.name}: accuracy, {len(report.rows)} runs" if args.ensemble is None else
+                  f"{scenario.name}: accuracy over ensembles of {args.ensemble} (seed {args.seed}), "
+                  f"{len(report.rows)} settings")
+            for line in study_reports.findings(report):
                 print(f"  {line}")
-            if not args.no_plot and report.rows:
-                report.files += _draw(study_figures.plot_accuracy if args.ensemble is None else
-                                      study_figures.plot_accuracy_ensemble, out)
         else:
             report = stability.stability_study(scenario, cases, out, source=str(path), progress=progress,
                                            wall_limit_s=args.wall_limit)
             print(f"{scenario.name}: stability, {len(report.rows)} cases")
             for r in report.rows:
                 print(f"  {r['case']}: {r['verdict']} - {r['message']}")
+        report.files += study_reports.write_markdown(scenario, report, out)
+        if args.study == "accuracy" and not args.no_plot and report.rows:
+            report.files += _draw(study_figures.plot_accuracy if args.ensemble is None else
+                                  study_figures.plot_accuracy_ensemble, out)
     except OSError as e:
         print(f"{out}: cannot write results: {e.strerror}", file=sys.stderr)
         return 2

@@ -16,21 +16,17 @@ from pathlib import Path
 
 import numpy as np
 
-from ..files import atomic_write, prepare
+from ..files import prepare
 from ..scenario import Integrator, modules_of, replace, to_dict
 from ..tables import ADAPTIVE, METHODS
+from .ensemble import grasp_names
 from .runs import (
-    COMPARABLE,
     RUNS_FILE,
     Outcome,
     Runs,
     StudyRows,
     errors,
     free_floating,
-    grasp_names,
-    markdown_table,
-    percent,
-    sig,
     warm_up,
     worst,
 )
@@ -253,31 +249,6 @@ class AccuracyReport:
     def confirmed(self) -> bool:
         return self.change_rel < CONFIRM_REL
 
-    def confirmation_text(self) -> str:
-        r, c = self.reference.label(self.dt_s), self.confirmation.label(self.dt_s)
-        if not self.reference_outcome.comparable:
-            return (f"reference not usable: {r} ended {self.reference_outcome.status} "
-                    f"({self.reference_outcome.message}); no errors computed")
-        if self.confirmation_outcome is None:
-            return f"reference not confirmed: the study stopped before its confirmation ({c}) ran"
-        if math.isnan(self.change_rel):
-            text = (f"reference not confirmed: its refinement {c} ended {self.confirmation_outcome.status} "
-                    f"({self.confirmation_outcome.message})")
-            if self.coarser is not None and not math.isnan(self.coarser_change_rel):
-                text += (f"; the setting one refinement coarser, {self.coarser.label(self.dt_s)}, differs from "
-                         f"it by up to {100 * self.coarser_change_rel:.3g} % ({self.coarser_change_what})")
-            return text
-        verdict = "confirmed" if self.confirmed else "not confirmed"
-        return (f"reference {verdict}: refining {r} to {c} changes the reported quantities by at most "
-                f"{100 * self.change_rel:.3g} % ({self.change_what}; the bound is {100 * CONFIRM_REL:g} %)")
-
-    def sensitivity_text(self) -> str:
-        if math.isnan(self.sensitivity_rel):
-            return "sensitivity not measured"
-        return (f"sensitivity: starting the reference {PERTURBATION_MM * 1e6:g} nm off in y changes the reported "
-                f"quantities by at most {100 * self.sensitivity_rel:.3g} % ({self.sensitivity_what}); no setting "
-                f"can be expected to agree with the reference more closely than that")
-
     def fastest_within(self, rel: float = WITHIN_REL, key: str = "max_err_rel") -> dict | None:
         """The row of the fastest setting whose error `key` (by default the largest of every
         reported quantity) is within `rel` of the reference: a swept setting, not the reference,
@@ -287,45 +258,6 @@ class AccuracyReport:
         ok = [r for r in self.rows if r["role"] not in ("reference", "perturbed", "confirmation") and r["status"] == ref
               and not math.isnan(r[key]) and r[key] <= rel]
         return min(ok, key=lambda r: r["wall_time_s"]) if ok else None
-
-    def ladder_table(self) -> str:
-        """The fastest setting within 1 % and each of LADDER_REL, on every quantity at once and
-        on each alone, next to how much refining and perturbing the reference changes each: a
-        markdown table."""
-        keys = ["max_err_rel"] + [k for k in self.rows[0] if k.endswith("_err_rel") and k != "max_err_rel"]
-        bounds = (WITHIN_REL, *LADDER_REL)
-        by_role = {r["role"]: r for r in self.rows}
-        checks = {"confirmation": "refining the reference changes it by",
-                  "coarser check": "the coarser check differs by",
-                  "perturbed": f"a {PERTURBATION_MM * 1e6:g} nm start changes it by"}
-        checks = {role: text for role, text in checks.items() if role in by_role}
-        rows = []
-        for key in keys:
-            cells = [percent(by_role[role][key]) for role in checks]
-            for rel in bounds:
-                best = self.fastest_within(rel, key)
-                cells.append("none" if best is None else
-                             f"{best['setting']} ({best['wall_time_s']:.3g} s, {100 * best[key]:.2g} %)")
-            name = "every quantity" if key == "max_err_rel" else key.removesuffix("_err_rel").replace("_", " ")
-            rows.append([name, *cells])
-        return markdown_table(["error of", *checks.values(), *(f"fastest within {100 * b:g} %" for b in bounds)],
-                              rows)
-
-    def fastest_text(self) -> str:
-        best = self.fastest_within()
-        if not self.reference_outcome.comparable:
-            return "fastest setting within 1 % of the reference: none (no usable reference)"
-        u = self.uncertainty_rel
-        resolution = "" if u <= WITHIN_REL else (
-            f"; the reference itself is uncertain by {100 * u:.3g} %, more than 1 %, so this is within 1 % "
-            f"of the reference, not of the converged answer" if not math.isnan(u) else
-            "; how far the reference is from the converged answer is not known")
-        if best is None:
-            return f"fastest setting within 1 % of the reference: none of the settings swept{resolution}"
-        return (f"fastest setting within 1 % of the reference: {best['setting']} ({best['role']}), "
-                f"{best['wall_time_s']:.3g} s of wall time, largest error {100 * best['max_err_rel']:.3g} %"
-                f"{resolution}")
-
 
 def accuracy_columns(scenario, sphere_sweep: bool) -> list[str]:
     cols = ["role", "setting", "method", "substeps", "step_ms", "rtol", "atol", "tol"]
@@ -380,7 +312,7 @@ def accuracy_study(scenario, settings: list[Setting], reference: Setting, out_di
                    ensemble: int | None = None, seed: int = 0, workers: int | None = None,
                    confirmation_members: int | None = None):
     """Run the reference and its confirmation, then every setting; write accuracy.csv (a row per
-    run as it ends) and accuracy.md into `out_dir` (its figure: `study_figures.plot_accuracy`).
+    run as it ends) into `out_dir` (its page: `study_reports`, its figure: `study_figures`).
 
     With `ensemble` = N, every setting is instead an N-member ensemble from the same starts
     (`seed`), compared with the reference's ensemble (`accuracy_ensemble.accuracy_ensemble_study`,
@@ -421,80 +353,31 @@ def accuracy_study(scenario, settings: list[Setting], reference: Setting, out_di
                    f"{scenario.name}: accuracy") as study:
         report = AccuracyReport(scenario.name, dt, reference, Outcome("interrupted", "not run"), confirmation,
                                 None, math.nan, "", study.rows)
-        bar, writer = study.bar, study
         warm_up(scenario, sorted({s.method for s in (*settings, reference)}))
-        for setting, name in ((reference, "reference"), (confirmation, "confirmation")):
-            bar.set_postfix_str(setting.label(dt))
-            o = runs(setting.apply(scenario))
-            if name == "reference":
-                report.reference_outcome = o
-            else:
-                report.confirmation_outcome = o
-            row = accuracy_row(scenario, setting, name, o, report.reference_outcome)
-            writer.write(row)
-            bar.update(1)
         names, centroid = grasp_names(scenario), free_floating(scenario)
-        change = errors(report.confirmation_outcome, report.reference_outcome, names, centroid)
-        report.change_rel, report.change_what = change["max_err_rel"], worst(change)
+
+        def run(setting: Setting, role: str, s=scenario, label: str | None = None):
+            """One run: its row written; its outcome and its largest error against the reference."""
+            study.bar.set_postfix_str(label or setting.label(dt))
+            o = runs(setting.apply(s))
+            ref = o if role == "reference" else report.reference_outcome
+            study.write(accuracy_row(scenario, setting, role, o, ref))
+            study.bar.update(1)
+            change = errors(o, ref, names, centroid)
+            return o, change["max_err_rel"], worst(change)
+
+        report.reference_outcome = run(reference, "reference")[0]
+        report.confirmation_outcome, report.change_rel, report.change_what = run(confirmation, "confirmation")
         coarser = reference.coarsened()
         if math.isnan(report.change_rel) and report.reference_outcome.comparable and coarser is not None:
             # the refinement gave nothing to compare (it diverged): bound the reference from below
-            bar.set_postfix_str(coarser.label(dt))
-            o = runs(coarser.apply(scenario))
-            writer.write(accuracy_row(scenario, coarser, "coarser check", o, report.reference_outcome))
-            change = errors(o, report.reference_outcome, names, centroid)
-            report.coarser, report.coarser_change_rel, report.coarser_change_what = coarser, change["max_err_rel"], \
-                worst(change)
+            report.coarser = coarser
+            _, report.coarser_change_rel, report.coarser_change_what = run(coarser, "coarser check")
             todo = [s for s in todo if s != coarser]
-        bar.set_postfix_str(f"{reference.label(dt)}, started {PERTURBATION_MM * 1e6:g} nm off")
-        o = runs(reference.apply(perturbed(scenario)))
-        writer.write(accuracy_row(scenario, reference, "perturbed", o, report.reference_outcome))
-        change = errors(o, report.reference_outcome, names, centroid)
-        report.sensitivity_rel, report.sensitivity_what = change["max_err_rel"], worst(change)
-        bar.update(1)
+        off = f"{reference.label(dt)}, started {PERTURBATION_MM * 1e6:g} nm off"
+        _, report.sensitivity_rel, report.sensitivity_what = run(reference, "perturbed", perturbed(scenario), off)
         for setting in todo:
-            bar.set_postfix_str(setting.label(dt))
-            o = runs(setting.apply(scenario))
-            writer.write(accuracy_row(scenario, setting, role(setting), o, report.reference_outcome))
-            bar.update(1)
+            run(setting, role(setting))
     report.interrupted = study.interrupted
-    report.files = [study.path, out / "accuracy.md"]
-    atomic_write(out / "accuracy.md", accuracy_markdown(scenario, report))
+    report.files = [study.path]
     return report
-
-
-def accuracy_markdown(scenario, report: AccuracyReport) -> str:
-    names, centroid = grasp_names(scenario), free_floating(scenario)
-    header = ["setting", "role", "status", "wall (s)", "force evals"]
-    for p in names:
-        g = f"{p[:-1]} " if p else ""
-        header += [f"{g}offset (mm)", f"{g}offset error (mm)", f"{g}offset error", f"{g}peak force (N)",
-                   f"{g}peak force error"]
-        if centroid:
-            header += [f"{g}centroid displ. (mm)", f"{g}centroid error"]
-    header += ["within 1 %", "momentum drift lin / ang"]
-    rows = []
-    for r in report.rows:
-        cells = [r["setting"], r["role"], r["status"] if r["status"] in COMPARABLE else
-                 f"{r['status']}: {r['message']}", sig(r["wall_time_s"]), sig(r["force_evaluations"], 4)]
-        for p in names:
-            cells += [sig(r[f"{p}offset_norm_mm"], 4), sig(r[f"{p}offset_err_mm"], 2), percent(r[f"{p}offset_err_rel"]),
-                      sig(r[f"{p}peak_force_N"], 4), percent(r[f"{p}peak_force_err_rel"])]
-            if centroid:
-                cells += [sig(r[f"{p}centroid_norm_mm"], 4), percent(r[f"{p}centroid_err_rel"])]
-        cells += ["yes" if r["within_1pct"] else "no",
-                  f"{sig(r['linear_drift_rel'], 2)} / {sig(r['angular_drift_rel'], 2)}"]
-        rows.append(cells)
-    text = [f"# Accuracy study: {report.scenario}", "",
-            (f"Errors against the reference, {report.reference.label(report.dt_s)}. The offset is O_b from "
-             f"O_a at the end of the run (the residual offset of a completed grasp); its error is the norm "
-             f"of the vector difference. Wall time is the simulation loop's."), "",
-            f"- {report.confirmation_text()}",
-            f"- {report.sensitivity_text()}",
-            f"- {report.fastest_text()}"]
-    if report.interrupted:
-        text.append("- **interrupted**: the study was stopped; the rows below are the runs that finished")
-    ladder = ("\n\nPer quantity: how well the reference is known, and the fastest setting within each "
-              "bound of it (wall time, error):\n\n"
-              + report.ladder_table().rstrip()) if report.rows else ""
-    return "\n".join(text) + ladder + "\n\nEvery run:\n\n" + markdown_table(header, rows)

@@ -43,8 +43,6 @@ from ..files import atomic_write, prepare
 from ..scenario import modules_of
 from ..status import SEATED, WEDGED
 from .ensemble import (
-    OFFSET_TOL_MM,
-    RPY_TOL_DEG,
     EnsembleResult,
     ensemble,
     finite,
@@ -52,7 +50,7 @@ from .ensemble import (
     members_csv,
     statistics,
 )
-from .runs import StudyRows, markdown_table, percent, sig, warm_up
+from .runs import StudyRows, warm_up
 
 #: Targets of a setting against the reference (issue 14): the near-deterministic quantities
 #: within 2 %, member by member (`paired_rel`); the residual offset's distribution not told
@@ -229,32 +227,6 @@ class EnsembleAccuracyReport:
               and (method is None or r["method"] == method)]
         return min(ok, key=lambda r: r["wall_per_member_s"]) if ok else None
 
-    def confirmation_text(self) -> str:
-        c = self.row("confirmation")
-        ref = self.reference.label(self.dt_s)
-        if self.row("reference") is None:
-            return "reference not run"
-        if c is None:
-            return "reference not confirmed: the study stopped before its confirmation ran"
-        fewer = (f" ({c['members']} members, against the reference's first {c['members']})"
-                 if c["members"] < self.members else "")
-        return (f"refining the reference {ref} to {self.confirmation.label(self.dt_s)}{fewer} changes the "
-                f"deterministic quantities, member by member, by at most {percent(c['max_deterministic_rel'])} "
-                f"({c['worst_deterministic']}); the residual's KS p = {sig(c['min_residual_ks_p'], 2)}, its "
-                f"median by {percent(c['max_residual_median_rel'])}: "
-                f"{'within' if c['meets_targets'] else 'NOT within'} the targets")
-
-    def fastest_text(self) -> str:
-        best = self.fastest_meeting()
-        text = ("fastest setting meeting every target: none of the settings swept" if best is None else
-                f"fastest setting meeting every target: {best['setting']}, {best['wall_per_member_s']:.3g} s "
-                f"per member")
-        adaptive = self.fastest_meeting("adaptive_euler")
-        if adaptive is not None and adaptive is not best:
-            text += f"; fastest adaptive_euler: tol {adaptive['tol']:g} m/s, {adaptive['wall_per_member_s']:.3g} s"
-        return text
-
-
 def columns(n_grasps: int, dual: bool) -> list[str]:
     cols = ["role", "setting", "method", "substeps", "step_ms", "tol", "members", "seed", "statuses",
             "wall_per_member_s", "wall_time_s", "steps_per_member", "force_evaluations_per_member"]
@@ -308,8 +280,8 @@ def accuracy_ensemble_study(scenario, settings: list, reference, out_dir, n: int
     """Run the reference, its confirmation (its refinement; `confirmation_members`, by default
     n, of the same starts) and every setting as an n-member ensemble from the same seeded
     starts; write accuracy_ensemble.csv (a row per setting as it ends), members/<setting>.csv
-    (each ensemble's members table) and accuracy_ensemble.md into `out_dir` (its figure:
-    `study_figures.plot_accuracy_ensemble`); `default`: the scenario's own setting
+    (each ensemble's members table) into `out_dir` (its page: `study_reports`, its figure:
+    `study_figures`); `default`: the scenario's own setting
     (`accuracy.setting_of`). Ctrl-C stops the study and keeps the rows written
     (report.interrupted); every member's run is kept in members/members.jsonl as it ends, and a
     study started again over `out_dir` runs only the members it lacks (`ensemble.ensemble`'s
@@ -342,93 +314,10 @@ def accuracy_ensemble_study(scenario, settings: list, reference, out_dir, n: int
             ref = ref or e
             writer.write(setting_row(setting, role, e, ref, dt))
     report.interrupted = report.interrupted or writer.interrupted
-    md = out / "accuracy_ensemble.md"
-    atomic_write(md, ensemble_markdown(scenario, report))
-    report.files = [writer.path, md]
+    report.files = [writer.path]
     return report
 
 
 def slug(label: str) -> str:
     """A file name for a setting's label: `symplectic_euler h 0.0125 ms` -> `symplectic_euler_h_0.0125_ms`."""
     return re.sub(r"[^A-Za-z0-9.+-]+", "_", label).strip("_")
-
-
-# ----------------------------------------------------------------------------- output
-
-
-def _yes(x) -> str:
-    return "yes" if x else "**no**"
-
-
-def _share(x) -> str:
-    return "–" if math.isnan(x) else f"{100 * x:.0f} %"
-
-
-def _size(x) -> str:
-    return "–" if math.isnan(x) else f"{100 * x:.2g} %"
-
-
-def _signed(x) -> str:
-    return "–" if math.isnan(x) else f"{100 * x:+.2g} %"
-
-
-def _error(x) -> str:
-    return "" if math.isnan(x) else f"± {100 * x:.2g} %"
-
-
-def ensemble_markdown(scenario, report: EnsembleAccuracyReport) -> str:
-    """The study's markdown: its findings, then a table of the targets and one of the values."""
-    n_grasps, dual = len(modules_of(scenario)), scenario.kind == "dual_arm"
-    ref = report.row("reference")
-    head = [f"# Accuracy study over ensembles: {report.scenario}", "",
-            (f"Every setting run from the same {report.members} starts (seed {report.seed}, each module's start "
-             f"moved uniformly within +-{OFFSET_TOL_MM * 1e3:g} um and +-{RPY_TOL_DEG:g} deg; member 0 "
-             f"unperturbed), compared with the reference's ensemble, {report.reference.label(report.dt_s)}. "
-             f"Targets: the peak force and torque norms"
-             f"{' and the robot centroid displacement norm' if dual else ''} within "
-             f"{100 * DETERMINISTIC_REL:g} % of the reference's, member by member (the median of each member's own "
-             f"difference from the reference member that started alike); the residual offset norm's distribution "
-             f"with a two-sample KS p-value above {KS_ALPHA:g} and its median within "
-             f"{100 * RESIDUAL_MEDIAN_REL:g} %. Each difference is followed by its sampling error (bootstrap); "
-             f"the deterministic quantities' difference of medians and the 90th percentile of the members' own "
-             f"differences are shown too. "
-             f"Wall time: the simulation loop's, per member, with the members run in parallel."), "",
-            f"- {report.confirmation_text()}", f"- {report.fastest_text()}"]
-    if report.interrupted:
-        head.append("- **interrupted**: the study was stopped; the rows below are the settings that finished")
-    targets, values = [], []
-    for r in report.rows:
-        targets.append([r["setting"], r["role"], str(r["members"]), r["statuses"], sig(r["wall_per_member_s"]),
-                        percent(r["max_deterministic_rel"]), _yes(r["deterministic_ok"]),
-                        sig(r["min_residual_ks_p"], 2), _yes(r["residual_ks_ok"]),
-                        percent(r["max_residual_median_rel"]), _yes(r["residual_median_ok"]),
-                        _yes(r["meets_targets"])])
-        for g in range(n_grasps):
-            p = grasp_prefix(g, n_grasps)
-            cells = [r["setting"], f"{p[:-1] or 'grasp'}",
-                     f"{sig(r[f'{p}residual_median_mm'], 3)} [{sig(r[f'{p}residual_p10_mm'], 3)}, "
-                     f"{sig(r[f'{p}residual_p90_mm'], 3)}]",
-                     f"{sig(r[f'{p}residual_ks_p'], 2)} / {_signed(r[f'{p}residual_median_rel'])} "
-                     f"{_error(r[f'{p}residual_median_rel_error'])}",
-                     f"{_share(r[f'{p}seated'])} / {_share(r[f'{p}wedged'])} "
-                     f"({_share(ref[f'{p}seated'])} / {_share(ref[f'{p}wedged'])})" if ref else "–",
-                     f"{sig(r[f'{p}roll_median_deg'], 3)} (p {sig(r[f'{p}roll_ks_p'], 2)}), "
-                     f"{sig(r[f'{p}pitch_ks_p'], 2)}, {sig(r[f'{p}yaw_ks_p'], 2)}"]
-            for _, name, unit in deterministic_quantities(dual):
-                cells.append(f"{sig(r[f'{p}{name}_median_{unit}'], 4)} [{sig(r[f'{p}{name}_p10_{unit}'], 4)}, "
-                             f"{sig(r[f'{p}{name}_p90_{unit}'], 4)}] {_signed(r[f'{p}{name}_median_rel'])} "
-                             f"{_error(r[f'{p}{name}_median_rel_error'])}; member by member "
-                             f"{_signed(r[f'{p}{name}_paired_rel'])} {_error(r[f'{p}{name}_paired_rel_error'])}, "
-                             f"p90 {_size(r[f'{p}{name}_paired_p90_abs'])}")
-            values.append(cells)
-    target_table = markdown_table(
-        ["setting", "role", "members", "statuses", "wall per member (s)", "deterministic member by member, worst",
-         f"within {100 * DETERMINISTIC_REL:g} %", "residual KS p, least", f"p > {KS_ALPHA:g}",
-         "residual median, worst", f"within {100 * RESIDUAL_MEDIAN_REL:g} %", "all targets"], targets)
-    det_heads = [f"{name.replace('_', ' ')} ({unit}) median [p10, p90], vs ref; member by member, p90 of |diff|"
-                 for _, name, unit in deterministic_quantities(dual)]
-    value_table = markdown_table(
-        ["setting", "grasp", "residual e (mm) median [p10, p90]", "residual KS p / median vs ref",
-         "seated / wedged (ref)", "roll median deg (KS p); pitch, yaw KS p", *det_heads], values)
-    return ("\n".join(head) + "\n\nTargets (the worst grasp):\n\n" + target_table
-            + "\nValues per grasp:\n\n" + value_table)

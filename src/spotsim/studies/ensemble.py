@@ -97,12 +97,6 @@ def member_scenario(scenario, start: Start):
 # ----------------------------------------------------------------------------- one member
 
 
-def member(index: int, start: Start, status: str, message: str, summary: dict | None = None,
-           key: str | None = None) -> Record:
-    """An ensemble member's record (`runner.Record`): its start in `about`."""
-    return Record(key, index, status, message, summary, about={"start": start.as_dict()})
-
-
 def start_of(m: Record) -> Start:
     """A member's start, from its record."""
     start = m.about["start"]
@@ -242,7 +236,8 @@ def ensemble(scenario, n: int, *, seed: int = 0, offset_tol_mm: float = OFFSET_T
     wall = time.perf_counter() - wall0
     for i, m in enumerate(members):
         if m is None:
-            members[i] = member(i, starts[i], "interrupted", "not run: the ensemble was interrupted")
+            members[i] = Record(None, i, "interrupted", "not run: the ensemble was interrupted",
+                                about={"start": starts[i].as_dict()})
     return EnsembleResult(scenario, seed, offset_tol_mm, rpy_tol_deg, members, interrupted, wall,
                           runner.worker_count(n) if runner.backend != SERIAL else 1, family, reused)
 
@@ -311,6 +306,12 @@ def member_row(m: Record, n_grasps: int, centroid: bool) -> dict:
 def grasp_prefix(g: int, n_grasps: int) -> str:
     """Column prefix of grasp g: none for one grasp, `g1_`, `g2_`... for several."""
     return "" if n_grasps == 1 else f"g{g + 1}_"
+
+
+def grasp_names(scenario) -> list[str]:
+    """The column prefixes of the scenario's grasps (`grasp_prefix`)."""
+    n = len(modules_of(scenario))
+    return [grasp_prefix(g, n) for g in range(n)]
 
 
 #: The headline quantities whose statistics an ensemble reports, per grasp (members table

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import SpotsimError
-from ..scenario import modules_of, replace, to_dict
+from ..scenario import replace, to_dict
 from ..status import (
     COMPARABLE,
     COMPLETED,
@@ -265,12 +265,6 @@ def _caused_by_ctrl_c(e: BaseException) -> bool:
 # ----------------------------------------------------------------------------- comparing
 
 
-def grasp_names(scenario) -> list[str]:
-    """Column prefixes of the grasps: none for one grasp, `g1_`, `g2_`... for several."""
-    n = len(modules_of(scenario))
-    return [""] if n == 1 else [f"g{i + 1}_" for i in range(n)]
-
-
 def free_floating(scenario) -> bool:
     return scenario.kind == "dual_arm"
 
@@ -318,16 +312,21 @@ def fmt(x) -> str:
     return str(x)
 
 
-class RowWriter:
-    """A CSV written and flushed a row at a time."""
+class StudyRows:
+    """A study's loop, as a context: its CSV written and flushed a row at a time (`write`; the
+    rows kept in `rows`), its progress bar (`bar`, of `total` runs), and Ctrl-C, which ends the
+    loop, keeps the rows written and sets `interrupted`."""
 
-    def __init__(self, path: Path, columns: list[str]):
-        self.path, self.columns = path, columns
-        self._file = open(path, "w", newline="")  # noqa: SIM115 - open across rows, closed by close()
+    def __init__(self, path: Path, columns: list[str], total: int | None = None, progress: bool = False,
+                 what: str = "study"):
+        from ..run import progress_bar
+
+        self.path, self.columns, self.rows, self.interrupted = path, columns, [], False
+        self._file = open(path, "w", newline="")  # noqa: SIM115 - open across rows, closed on exit
         self._csv = csv.writer(self._file)
         self._csv.writerow(columns)
         self._file.flush()
-        self.rows: list[dict] = []
+        self.bar = progress_bar(total, progress, what, "run")
 
     def write(self, row: dict) -> None:
         missing = [c for c in self.columns if c not in row]
@@ -337,51 +336,14 @@ class RowWriter:
         self._file.flush()
         self.rows.append(row)
 
-    def close(self) -> None:
-        self._file.close()
-
-
-class StudyRows:
-    """A study's loop, as a context: its CSV written a row at a time (`write`), its progress
-    bar (`bar`, of `total` runs), and Ctrl-C, which ends the loop, keeps the rows written and
-    sets `interrupted`."""
-
-    def __init__(self, path: Path, columns: list[str], total: int | None = None, progress: bool = False,
-                 what: str = "study"):
-        from ..run import progress_bar
-
-        self.writer = RowWriter(path, columns)
-        self.rows, self.path, self.write = self.writer.rows, path, self.writer.write
-        self.bar = progress_bar(total, progress, what, "run")
-        self.interrupted = False
-
     def __enter__(self) -> StudyRows:
         return self
 
     def __exit__(self, kind, value, traceback) -> bool:
         self.bar.close()
-        self.writer.close()
+        self._file.close()
         self.interrupted = kind is not None and issubclass(kind, KeyboardInterrupt)
         return self.interrupted
-
-
-def markdown_table(header: list[str], rows: list[list]) -> str:
-    lines = ["| " + " | ".join(header) + " |", "| " + " | ".join("---" for _ in header) + " |"]
-    lines += ["| " + " | ".join(str(c).replace("|", "\\|") for c in r) + " |" for r in rows]
-    return "\n".join(lines) + "\n"
-
-
-def sig(x, digits=3) -> str:
-    """A markdown cell: `digits` significant digits, a dash for nan."""
-    if isinstance(x, (float, np.floating)) and math.isnan(x):
-        return "–"
-    return f"{x:.{digits}g}"
-
-
-def percent(x) -> str:
-    if isinstance(x, (float, np.floating)) and math.isnan(x):
-        return "–"
-    return f"{100 * x:.3g} %"
 
 
 def warm_up(scenario, methods, duration_s: float = 0.5) -> None:

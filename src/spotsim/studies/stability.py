@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import SpotsimError
-from ..files import atomic_write, prepare
+from ..files import prepare
 from ..scenario import TOLERANCE_DEG, TOLERANCE_OFFSET_MM, modules_of, replace, to_dict
 from ..status import (
     COMPARABLE,
@@ -21,8 +21,6 @@ from ..status import (
     NOT_CAPTURED,
     REJECTED,
     WALL_LIMIT,
-    WEDGED_OFFSET_MM,
-    WEDGED_TILT_DEG,
 )
 from ..tables import ADAPTIVE
 from .runs import (
@@ -31,8 +29,6 @@ from .runs import (
     Runs,
     StudyRows,
     clearing_gap,
-    markdown_table,
-    sig,
     step_scaled,
     warm_up,
     widened,
@@ -222,11 +218,6 @@ STABILITY_COLUMNS = ["case", "group", "change", "dynamics_step_ms", "predicted_s
 FINER = 4
 
 
-def finer(s):
-    """`s` with its dynamics step FINER times smaller (`step_scaled`)."""
-    return step_scaled(s, 1 / FINER)
-
-
 def stability_row(case: Case, o: Outcome, changed=None, fine: Outcome | None = None,
                   gradient: Outcome | None = None) -> dict:
     """A stability CSV row: the case, its prediction, verdict and outcome, and, when it
@@ -274,29 +265,22 @@ class StabilityReport:
         return [r for r in self.rows if r["verdict"].startswith("FAILED")]
 
 
-def check_gradient(o: Outcome, s, runs: Runs) -> Outcome | None:
-    """A case that diverged under the paper's pair law, again with the energy-consistent one
-    (`contact.normal_direction: gradient`): the paper's law gains energy on strongly tilted
-    faces, which the run's energy check stops as diverged; None for any other outcome."""
-    if o.status != "diverged" or s.contact.normal_direction == "gradient":
-        return None
-    return runs(replace(s, contact={"normal_direction": "gradient"}))
-
-
 def checked_row(case: Case, o: Outcome, s, runs: Runs) -> dict:
-    """The row of a case's run, with its diverged checks (`check_finer`, `check_gradient`)."""
-    return stability_row(case, o, s, check_finer(o, s, runs), check_gradient(o, s, runs))
-
-
-def check_finer(o: Outcome, s, runs: Runs) -> Outcome | None:
-    """A diverged run's case again, FINER times finer; None for any other outcome."""
-    return runs(finer(s)) if o.status == "diverged" else None
+    """The row of a case's run. A diverged one runs again FINER times finer (`step_scaled`) and,
+    under the paper's pair law, with the energy-consistent one (`contact.normal_direction:
+    gradient`): the paper's law gains energy on strongly tilted faces, which the run's energy
+    check stops as diverged."""
+    diverged = o.status == "diverged"
+    fine = runs(step_scaled(s, 1 / FINER)) if diverged else None
+    gradient = (runs(replace(s, contact={"normal_direction": "gradient"}))
+                if diverged and s.contact.normal_direction != "gradient" else None)
+    return stability_row(case, o, s, fine, gradient)
 
 
 def stability_study(scenario, cases: list[Case], out_dir, *, source: str = "<study>", progress: bool = False,
                     wall_limit_s: float | None = STABILITY_WALL_LIMIT_S) -> StabilityReport:
-    """Run every case of `scenario`; write stability.csv (a row per case as it ends) and
-    stability.md into `out_dir`. A misaligned start rejected for interpenetrating is run once
+    """Run every case of `scenario`; write stability.csv (a row per case as it ends)
+    into `out_dir` (its page: `study_reports`). A misaligned start rejected for interpenetrating is run once
     more with the start gap that clears it (a second row). A diverged case runs again FINER
     times finer (`finer_verdict`): one that still diverges does not diverge for its step.
     Ctrl-C stops the study and keeps the rows written; every run is kept in runs.jsonl as it
@@ -326,37 +310,5 @@ def stability_study(scenario, cases: list[Case], out_dir, *, source: str = "<stu
                 study.write(checked_row(wide, o, s, runs))
             study.bar.update(1)
     report.interrupted = study.interrupted
-    atomic_write(out / "stability.md", stability_markdown(scenario, report))
-    report.files = [study.path, out / "stability.md"]
+    report.files = [study.path]
     return report
-
-
-def stability_markdown(scenario, report: StabilityReport) -> str:
-    header = ["case", "change", "predicted stable step (ms)", "ω·h", "verdict", "prediction held",
-              "residual offset (mm)", "peak force (N)", "sim / wall (s)", "outcome", f"diverged: at h/{FINER}",
-              "diverged: gradient law"]
-    rows = [[r["case"], r["change"], sig(r["predicted_stable_step_ms"]), sig(r["omega_h"]), r["verdict"],
-             r["prediction_held"],
-             sig(r["residual_offset_mm"]), sig(r["peak_force_N"]), f"{sig(r['sim_time_s'])} / {sig(r['wall_time_s'])}",
-             r["message"], "" if r["finer_verdict"] == "not run" else f"{r['finer_verdict']}: {r['finer_message']}",
-             "" if r["gradient_verdict"] == "not run" else f"{r['gradient_verdict']}: {r['gradient_message']}"]
-            for r in report.rows]
-    counts = {}
-    for r in report.rows:
-        counts[r["verdict"]] = counts.get(r["verdict"], 0) + 1
-    step = next((r["dynamics_step_ms"] for r in report.rows if not math.isnan(r["dynamics_step_ms"])), math.nan)
-    text = [f"# Stability study: {report.scenario}", "",
-            (f"Dynamics step {sig(step)} ms ({scenario.simulation.integrator.method}). The predicted stable step "
-             f"is stability.predict_step's; ω·h is the stiffest contact mode times the step (the integrator's "
-             f"limit on the imaginary axis is 2 for symplectic Euler). A closed grasp is seated or wedged "
-             f"by the ensembles' thresholds ({WEDGED_OFFSET_MM:g} mm, {WEDGED_TILT_DEG:g} deg). A diverged case "
-             f"runs again with a step {FINER} times smaller: if it still diverges, the step is not the "
-             f"cause; and with the energy-consistent pair law (contact.normal_direction: gradient)."), "",
-            "- verdicts: " + ", ".join(f"{n} {v}" for v, n in counts.items())]
-    if report.failures:
-        text.append(f"- **{len(report.failures)} case(s) FAILED** (an exception or a silent NaN): "
-                    + ", ".join(r["case"] for r in report.failures))
-    if report.interrupted:
-        text.append("- **interrupted**: the study was stopped; the rows below are the cases that finished")
-    return "\n".join(text) + "\n\n" + markdown_table(header, rows)
-
