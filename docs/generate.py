@@ -1381,7 +1381,8 @@ def drives_table(r: Results) -> str:
 #: ensemble accuracy studies' targets (`studies.accuracy_ensemble.compare`).
 MOTOR_CHECKS = (("speed loop 0.4 → 0.04 ms", ("motor", "default"), ("motor_loop_tenth", "default"), "period"),
                 ("default against fine (3.125 µs)", ("motor", "default"), ("motor", "fine"), "reference"),
-                ("fine against finer (0.78 µs)", ("motor", "fine"), ("motor", "finer"), "reference"))
+                ("fine against finer (0.78 µs)", ("motor", "fine"), ("motor", "finer"), "reference"),
+                ("default against finer (0.78 µs)", ("motor", "default"), ("motor", "finer"), "reference"))
 PERIOD_MEDIAN_REL = 0.03
 
 
