@@ -8,12 +8,14 @@ study` writes both after the study ends (or is stopped).
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 
 from .files import atomic_write
 from .scenario import modules_of
 from .status import COMPARABLE, WEDGED_OFFSET_MM, WEDGED_TILT_DEG
+from .studies import accuracy, accuracy_ensemble, stability
 from .studies.accuracy import (
     CONFIRM_REL,
     LADDER_REL,
@@ -44,16 +46,16 @@ def markdown_table(header: list[str], rows: list[list]) -> str:
 
 def sig(x, digits=3) -> str:
     """A markdown cell: `digits` significant digits, a dash for nan."""
-    if isinstance(x, (float, np.floating)) and math.isnan(x):
-        return "–"
-    return f"{x:.{digits}g}"
+    return "–" if _nan(x) else f"{x:.{digits}g}"
 
 
 def percent(x, spec: str = ".3g") -> str:
     """A share as a percentage cell, formatted by `spec`; a dash for nan."""
-    if isinstance(x, (float, np.floating)) and math.isnan(x):
-        return "–"
-    return f"{100 * x:{spec}} %"
+    return "–" if _nan(x) else f"{100 * x:{spec}} %"
+
+
+def _nan(x) -> bool:
+    return isinstance(x, (float, np.floating)) and math.isnan(x)
 
 
 # ----------------------------------------------------------------------------- the accuracy study
@@ -310,12 +312,10 @@ def findings(report) -> list[str]:
 def write_markdown(scenario, report, out) -> list:
     """Write the study's .md (accuracy.md, accuracy_ensemble.md or stability.md) into `out`;
     returns its path in a list."""
-    from pathlib import Path
-
-    name, text = (("accuracy_ensemble.md", ensemble_markdown(scenario, report))
+    name, text = ((accuracy_ensemble.PAGE, ensemble_markdown(scenario, report))
                   if isinstance(report, EnsembleAccuracyReport) else
-                  ("accuracy.md", accuracy_markdown(scenario, report)) if isinstance(report, AccuracyReport) else
-                  ("stability.md", stability_markdown(scenario, report)))
+                  (accuracy.PAGE, accuracy_markdown(scenario, report)) if isinstance(report, AccuracyReport) else
+                  (stability.PAGE, stability_markdown(scenario, report)))
     path = Path(out) / name
     atomic_write(path, text)
     return [path]

@@ -47,6 +47,8 @@ PERTURBATION_MM = 1e-6
 #: ~0.1-1 m from the origin and its speeds ~10 mm/s, so atol (m, m/s) must sit well below
 #: rtol x position for the speeds to be controlled at all (the scenario default is 1e-6 / 1e-9).
 ATOL_PER_RTOL = 1e-3
+#: The study's page (`study_reports`), removed as the study starts.
+PAGE = "accuracy.md"
 
 # ----------------------------------------------------------------------------- settings
 
@@ -336,7 +338,7 @@ def accuracy_study(scenario, settings: list[Setting], reference: Setting, out_di
                                        confirmation_members=confirmation_members, source=source,
                                        progress=progress)
     out = Path(out_dir)
-    prepare(out, "accuracy.md")
+    prepare(out, PAGE)
     runs = Runs(source, wall_limit_s, out / RUNS_FILE)
     dt = scenario.simulation.dt_s
     confirmation = reference.refined()

@@ -60,6 +60,8 @@ KS_ALPHA = 0.05
 RESIDUAL_MEDIAN_REL = 0.05
 #: Resamples of the bootstrap that gives a difference of medians its sampling error.
 BOOTSTRAP = 2000
+#: The study's page (`study_reports`), removed as the study starts.
+PAGE = "accuracy_ensemble.md"
 
 #: (members-table column without grasp prefix, CSV name, unit) of the compared quantities.
 DISTRIBUTED = (("residual_norm_mm", "residual", "mm"),)
@@ -287,7 +289,7 @@ def accuracy_ensemble_study(scenario, settings: list, reference, out_dir, n: int
     study started again over `out_dir` runs only the members it lacks (`ensemble.ensemble`'s
     out_dir)."""
     out = Path(out_dir)
-    prepare(out, "accuracy_ensemble.md")
+    prepare(out, PAGE)
     (out / "members").mkdir(exist_ok=True)
     dt = scenario.simulation.dt_s
     confirmation = reference.refined()

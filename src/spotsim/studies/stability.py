@@ -36,6 +36,8 @@ from .runs import (
 
 #: A stability case's wall-time budget, s: a hundred times Case I's run at its default step.
 STABILITY_WALL_LIMIT_S = 300.0
+#: The study's page (`study_reports`), removed as the study starts.
+PAGE = "stability.md"
 
 # ----------------------------------------------------------------------------- stability
 
@@ -286,7 +288,7 @@ def stability_study(scenario, cases: list[Case], out_dir, *, source: str = "<stu
     Ctrl-C stops the study and keeps the rows written; every run is kept in runs.jsonl as it
     ends, and a study started again over `out_dir` runs only what it lacks (`runs.Runs`)."""
     out = Path(out_dir)
-    prepare(out, "stability.md")
+    prepare(out, PAGE)
     runs = Runs(source, wall_limit_s, out / RUNS_FILE)
     with StudyRows(out / "stability.csv", STABILITY_COLUMNS, len(cases), progress,
                    f"{scenario.name}: stability") as study:
