@@ -36,7 +36,9 @@ def bookkeeping(m, d, h):
     """Stage: count the step of h (s), raise the peaks, add the drives' work and the external
     impulse: the contact forces from bodies that do not float (a fixed base and the fingers on
     it; between floating branches every contact force is internal) and gravity, at the poses
-    of the step's last force evaluation."""
+    of the step's last force evaluation, over the span its velocity update gave them (h; with
+    staggered kicks, `integrators.kick_of`)."""
+    kick = d.kick if m.integrator.staggered else h
     if current_speed(m, d) != 0.0:
         d.held = False
     n = d.contacts.key.shape[0]
@@ -49,11 +51,11 @@ def bookkeeping(m, d, h):
         raise_peaks(m, d)
     if m.limits.external_contact:
         for i in range(3):
-            d.impulse_W[i] += h * d.external_force_W[i]
-            d.impulse_moment_O_W[i] += h * d.external_torque_O_W[i]
+            d.impulse_W[i] += kick * d.external_force_W[i]
+            d.impulse_moment_O_W[i] += kick * d.external_torque_O_W[i]
     if m.gravity_W[0] != 0.0 or m.gravity_W[1] != 0.0 or m.gravity_W[2] != 0.0:
         for j in range(1, m.tree.parent.shape[0]):
             if m.tree.free[j]:
                 r_G = d.p_W[j] + mv(d.R_W[j], m.tree.lever[j])
-                d.impulse_W[:] += h * m.tree.mass[j] * m.gravity_W
-                d.impulse_moment_O_W[:] += h * cross(r_G, m.tree.mass[j] * m.gravity_W)
+                d.impulse_W[:] += kick * m.tree.mass[j] * m.gravity_W
+                d.impulse_moment_O_W[:] += kick * cross(r_G, m.tree.mass[j] * m.gravity_W)

@@ -193,31 +193,31 @@ def place_branch(m, d, b, c, u, quat, w, ref):
 
 
 @njit_inline
-def _advance_joints(m, d, b, h, first):
-    """The revolute and prismatic joints of branch b from its `first` member on: v += h a,
+def _advance_joints(m, d, b, h, kick, first):
+    """The revolute and prismatic joints of branch b from its `first` member on: v += kick a,
     then q += h v."""
     t, br = m.tree, m.branches
     for i in range(br.first[b] + first, br.stop[b]):
         j = br.members[i]
         iv = t.idx_v[j]
-        d.v[iv] += h * d.a[iv]
+        d.v[iv] += kick * d.a[iv]
         d.q[t.idx_q[j]] += h * d.v[iv]
 
 
 @njit
-def _euler_update(m, d, h):
+def _euler_update(m, d, h, kick):
     """Every joint's symplectic Euler step of h (s) from (q, v), in place, with the
     accelerations d.a of the last evaluation (made at q, at v before any controller's impulse
-    since): velocities first, then positions with the new velocities. A floating branch's
-    centroid moves on its momentum (v_c += h F / M, x_c += h v_c) and its root turns by
-    exp(h omega)."""
+    since): velocities first, by kick (s) of them, then positions with the new velocities. A
+    floating branch's centroid moves on its momentum (v_c += kick F / M, x_c += h v_c) and its
+    root turns by exp(h omega)."""
     t, br = m.tree, m.branches
     # a free-flying root's offset as the last update placed it, if nothing moved since: the
     # same numbers root_offset gives (its quaternion and spin are stored as they were given)
     placed = d.placed[0] and _unchanged(d.q, d.placed_q) and _unchanged(d.v, d.placed_v)
     for b in range(br.joint.shape[0]):
         if not br.floating[b]:
-            _advance_joints(m, d, b, h, 0)
+            _advance_joints(m, d, b, h, kick, 0)
             continue
         j = br.joint[b]
         R0, p0, vo0, w0 = root_frame(m, d, b)
@@ -227,11 +227,11 @@ def _euler_update(m, d, h):
         else:
             r0, u00 = root_offset(m, d, b, R0, w0)  # before its joints move
         c0, u0 = add3(p0, r0), add3(vo0, u00)
-        _advance_joints(m, d, b, h, 1)
+        _advance_joints(m, d, b, h, kick, 1)
         F, M = branch_force(m, d, b), br.mass[b]
-        u = (u0[0] + h * (F[0] / M), u0[1] + h * (F[1] / M), u0[2] + h * (F[2] / M))
+        u = (u0[0] + kick * (F[0] / M), u0[1] + kick * (F[1] / M), u0[2] + kick * (F[2] / M))
         c = axpy3(h, u, c0)
-        w = axpy3(h, _root_spin(t, j, d.a), w0)
+        w = axpy3(kick, _root_spin(t, j, d.a), w0)
         # a unit quaternion, or the round-off in R compounds from step to step
         quat = quat_times_exp4(joint_quat(t, j, d.q), h * w[0], h * w[1], h * w[2])
         r, u_off = place_branch(m, d, b, c, u, quat, w, (p0, vo0, c0, u0, r0, u00))
@@ -267,7 +267,8 @@ def symplectic_euler(m, d, h):
     motor = m.drives.law[m.grasps.ee[d.active]] == MOTOR
     if not motor:
         sample_controllers(m, d, d.t + h, h)
-    _euler_update(m, d, h)
+    _euler_update(m, d, h, h)
+    d.kick = h
     if motor:
         sample_controllers(m, d, d.t + h, h)
     d.external_force_W[:] = d.loads.external_force_W
@@ -391,6 +392,20 @@ def switch_fraction(m, before, after, h):
     return theta
 
 
+@njit_inline
+def kick_of(m, d, h, here):
+    """How long adaptive Euler's step of h (s) applies its start's forces to the velocities, s:
+    h; with staggered kicks, from a start that is the last accepted step's end (`here`), the
+    mean of that step and h. Symplectic Euler's velocities lie half a step behind its positions
+    (it is the leapfrog scheme), so the velocity update between the half steps around the
+    start spans (h_last + h) / 2: spanning h instead, each change of step leaves a velocity
+    error of (h - h_last) a / 2, which the error estimate does not see and which does not
+    shrink with the tolerance as the step's own error does."""
+    if m.integrator.staggered and here and d.h_last > 0.0:
+        return 0.5 * (d.h_last + h)
+    return h
+
+
 @njit
 def adaptive_euler(m, d, h):
     """One accepted symplectic Euler step with its error controlled, of at most min(h, the
@@ -457,7 +472,7 @@ def adaptive_euler(m, d, h):
         if fresh or not rejected:
             external[:3] = d.loads.external_force_W
             external[3:] = d.loads.external_torque_O_W
-        _euler_update(m, d, h)
+        _euler_update(m, d, h, kick_of(m, d, h, here))
         forces(m, d, h, np.bool_(False))
         accelerations(m, d)
         d.evaluations += 1
@@ -490,6 +505,8 @@ def adaptive_euler(m, d, h):
             return 0.0
     commit_memory(d)
     d.accepted += 1
+    d.kick = kick_of(m, d, h, here)
+    d.h_last = h
     d.fsal, d.fsal_t = True, d.t + h
     d.jumped = False
     # the step's impulse is that of the start's forces (the velocity update's)
@@ -675,6 +692,7 @@ def runge_kutta(m, d, h):
     d.fsal, d.fsal_t = True, d.t + h
     d.jumped = False
     d.fsal_external[:] = end
+    d.kick = h
     d.external_force_W[:] = mean[:3]
     d.external_torque_O_W[:] = mean[3:]
     return h
