@@ -1897,6 +1897,7 @@ RENDER = {
     "bristle-switches": lambda r: benchmark_table("bristle_switches"),
     "drive-period": lambda r: benchmark_table("drive_period"),
     "onset-guard": lambda r: benchmark_table("onset_guard"),
+    "kick": lambda r: benchmark_table("kick"),
 }
 PAGES = [ROOT / "README.md", DOCS / "usage.md", DOCS / "validation.md", DOCS / "performance.md"]
 
