@@ -73,7 +73,7 @@ def symplectic(model, m, d, h, steps):
         drive(model, d, k * h)
         kinematics(m, d)
         accelerations(m, d)
-        _euler_update(m, d, h)
+        _euler_update(m, d, h, h)
 
 
 def rk4(model, m, d, h, steps):
@@ -134,7 +134,7 @@ def test_each_joint_kind_moves_as_pin_integrate_moves_it(root):
         q0, v0 = d.q.copy(), d.v.copy()
         kinematics(m, d)
         d.a[:] = 0.0  # force-free: velocities stay, positions move by them
-        _euler_update(m, d, h)
+        _euler_update(m, d, h, h)
         expected = pin.integrate(model, q0, h * v0)
         n_root = model.nqs[1] if joint is not None else 0
         np.testing.assert_allclose(d.q[n_root:], expected[n_root:], rtol=0, atol=ROUND_OFF)
@@ -172,6 +172,6 @@ def test_a_speed_set_between_a_steps_accelerations_and_its_update_keeps_momentum
         kinematics(m, d)
         accelerations(m, d)
         velocity_jump(m, d, np.array([finger]), np.array([0.05 * np.sin(0.1 * k)]))
-        _euler_update(m, d, h)
+        _euler_update(m, d, h, h)
     P, _ = momentum(m0, d.q, d.v)
     assert np.linalg.norm(P - P0) <= ROUND_OFF * np.linalg.norm(P0)

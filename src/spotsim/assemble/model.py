@@ -570,7 +570,7 @@ def model_fields(p: _Parts) -> ModelFields:
         method=METHODS.index(i.method), adaptive=i.method in ADAPTIVE, A=A, b=b, c=c_nodes, e=e, rtol=i.rtol,
         atol=i.atol, h_min=i.h_min_s, h_max=i.h_max_s, velocity_tol=i.velocity_tol_m_s, onset_depth=i.onset_depth_m,
         onset_clearance=i.onset_guard == "clearance", locate_switches=i.bristle_switches == "located",
-        staggered=i.kick == "staggered",
+        staggered=i.method == "adaptive_euler" and i.kick == "staggered",
         lever=np.concatenate([branches.lever, tree.reach[tree.internal]]),
         lightest=float(floating.min()) if len(floating) else float(tree.mass[1:].max()))
     return ModelFields(

@@ -143,10 +143,10 @@ class DataFields(NamedTuple):
     held: bool  # the active drive held the fingers through all of it so far
     # the integrator
     h_next: float  # the step an adaptive integrator tries next, s (0: none yet)
-    fsal: bool  # the last committed evaluation can be the next step's first stage
-    fsal_t: float  # ... at this time,
     h_last: float  # adaptive Euler's last accepted step, s (0.0: none yet)
     kick: float  # how long the last step's velocity update applied its forces, s (its impulse's span)
+    fsal: bool  # the last committed evaluation can be the next step's first stage
+    fsal_t: float  # ... at this time,
     fsal_dy: np.ndarray  # (`integrators.state_size`,) its state derivative
     # the last symplectic Euler update's (q, v), and each floating branch's offset from its root
     # then (`integrators.root_offset`: r, u), to start the next from if nothing moved since
