@@ -883,9 +883,9 @@ def fingerprint(s) -> str:
     """The scene a scenario runs, as a short hash of every value but its name and description,
     of the motor block unless its drive is the motor (no other drive reads it), and of the arms'
     compliance block unless their joints are compliant (rigid joints read nothing of it), of the
-    dynamometer and the suspension unless they are there, and of `completion.record_after_s` at
-    zero: equal
-    for two scenarios that run the same physics at the same settings."""
+    dynamometer and the suspension unless they are there, of `completion.record_after_s` at
+    zero and of `simulation.integrator.kick` at `step` (as before those keys): equal for two
+    scenarios that run the same physics at the same settings."""
     raw = {k: v for k, v in to_dict(s).items() if k not in ("name", "description")}
     if s.end_effector.drive != "motor":
         raw["end_effector"] = {k: v for k, v in raw["end_effector"].items() if k != "motor"}
@@ -899,6 +899,8 @@ def fingerprint(s) -> str:
         raw["completion"] = {k: v for k, v in raw["completion"].items() if k != "record_after_s"}
     if raw.get("suspension", {}).get("kind") == "none":
         raw.pop("suspension")
+    if raw["simulation"]["integrator"]["kick"] == "step":  # as before the key
+        raw["simulation"]["integrator"] = {k: v for k, v in raw["simulation"]["integrator"].items() if k != "kick"}
     return hashlib.sha256(json.dumps(raw, sort_keys=True).encode()).hexdigest()[:16]
 
 
