@@ -16,17 +16,14 @@ the residual's KS p-value, and per member the wall time, force evaluations and s
 from __future__ import annotations
 
 import argparse
-import csv
 
 import numpy as np
+from against import CASES, against
 from speed import ROOT, measured_at, pct
 
 import spotsim
-from spotsim.studies.accuracy_ensemble import compare
-from spotsim.studies.ensemble import grasp_prefix, member_row
+from spotsim.studies.estimate import read_members
 
-CASES = (("Case I", "single_arm_case_I"), ("Case II", "single_arm_case_II"), ("Case III", "single_arm_case_III"),
-         ("dual arm", "dual_arm_sequential"))
 REFERENCE = "symplectic_euler_h_0.00078125_ms.csv"
 
 
@@ -38,19 +35,8 @@ def settings(tol: float):
 
 
 def reference_rows(name: str) -> list[dict]:
-    """The reference ensemble's members table, its numbers as numbers and blanks as None."""
-    def value(x: str):
-        try:
-            return float(x) if x else None
-        except ValueError:
-            return x
-
-    path = ROOT / "docs" / "results" / "accuracy_ensemble" / name / "members" / REFERENCE
-    with open(path, newline="") as f:
-        rows = [{k: value(v) for k, v in r.items()} for r in csv.DictReader(f)]
-    for r in rows:
-        r["member"] = int(r["member"])
-    return rows
+    """The reference ensemble's members table."""
+    return read_members(ROOT / "docs" / "results" / "accuracy_ensemble" / name / "members" / REFERENCE)
 
 
 def main() -> None:
@@ -70,23 +56,16 @@ def main() -> None:
         tol = base.simulation.integrator.velocity_tol_m_s
         for label, changes in settings(tol):
             s = spotsim.replace(base, simulation={"integrator": changes}) if changes else base
-            e = spotsim.ensemble(s, args.members, workers=2)
-            n_grasps = len(e.members[0].grasps())
-            dual = n_grasps > 1
-            rows = [member_row(m, n_grasps, dual) for m in e.members]
-            c = compare(rows, ref, n_grasps, dual)
-            ran = [m.summary for m in e.members if m.summary]
+            ran, prefixes, c = against(s, ref, args.members)
             wall = np.median([x["wall_time_s"] for x in ran])
             evaluations = np.mean([x["integrator"]["force_evaluations"] for x in ran])
             cuts = np.mean([x["integrator"]["switch_cuts"] for x in ran])
-            for g in range(n_grasps):
-                p = grasp_prefix(g, n_grasps)
+            for g, p in enumerate(prefixes):
                 force = pct(c[p + "peak_force_median_rel"], c[p + "peak_force_median_rel_error"])
                 paired = pct(c[p + "peak_force_paired_rel"], c[p + "peak_force_paired_rel_error"])
                 residual = pct(c[p + "residual_median_rel"], c[p + "residual_median_rel_error"])
                 print(f"| {title} | {label} | {g + 1} | {force} | {paired} | {residual} "
                       f"| {c[p + 'residual_ks_p']:.2g} | {wall:.3f} | {evaluations:.3g} | {cuts:.3g} |", flush=True)
-
 
 if __name__ == "__main__":
     main()

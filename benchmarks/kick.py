@@ -20,12 +20,11 @@ from __future__ import annotations
 import argparse
 
 import numpy as np
-from onset_guard import CASES, rows_of
+from against import CASES, against
 from speed import ROOT, measured_at, pct
 
 import spotsim
-from spotsim.studies.accuracy_ensemble import compare
-from spotsim.studies.ensemble import ALL_AXES, ONE_AXIS, grasp_prefix
+from spotsim.studies.ensemble import ALL_AXES, ONE_AXIS
 from spotsim.studies.estimate import read_members
 
 KICKS = ("step", "staggered")
@@ -55,20 +54,15 @@ def main() -> None:
             ref = reference(name, family)
             for kick in KICKS:
                 s = spotsim.replace(base, simulation={"integrator": {"kick": kick}})
-                e = spotsim.ensemble(s, args.members, family=family, workers=2)
-                n_grasps = len(e.members[0].grasps())
-                c = compare(rows_of(e), ref, n_grasps, n_grasps > 1)
-                ran = [m.summary for m in e.members if m.summary]
+                ran, prefixes, c = against(s, ref, args.members, family)
                 steps = np.mean([x["steps"] for x in ran])
                 wall = np.median([x["wall_time_s"] for x in ran])
-                for g in range(n_grasps):
-                    p = grasp_prefix(g, n_grasps)
+                for g, p in enumerate(prefixes):
                     force = pct(c[p + "peak_force_paired_rel"], c[p + "peak_force_paired_rel_error"])
                     torque = pct(c[p + "peak_torque_paired_rel"], c[p + "peak_torque_paired_rel_error"])
                     residual = pct(c[p + "residual_median_rel"], c[p + "residual_median_rel_error"])
                     print(f"| {title} | {family.replace('_', ' ')} | {kick} | {g + 1} | {steps:.0f} | {wall:.3f} "
                           f"| {force} | {torque} | {residual} | {c[p + 'residual_ks_p']:.2g} |", flush=True)
-
 
 if __name__ == "__main__":
     main()

@@ -19,22 +19,15 @@ from __future__ import annotations
 import argparse
 
 import numpy as np
+from against import CASES, against, member_rows
 from speed import ROOT, measured_at, pct
 
 import spotsim
-from spotsim.studies.accuracy_ensemble import compare
-from spotsim.studies.ensemble import ALL_AXES, ONE_AXIS, grasp_prefix, member_row
+from spotsim.studies.ensemble import ALL_AXES, ONE_AXIS
 
-CASES = (("Case I", "single_arm_case_I"), ("Case II", "single_arm_case_II"), ("Case III", "single_arm_case_III"),
-         ("dual arm", "dual_arm_sequential"))
 GUARDS = ("travel", "clearance")
 #: The fine step: symplectic Euler at the record interval over this many substeps (3.125 us at 1 ms).
 FINE_SUBSTEPS = 320
-
-
-def rows_of(e) -> list[dict]:
-    n_grasps = len(e.members[0].grasps())
-    return [member_row(m, n_grasps, n_grasps > 1) for m in e.members]
 
 
 def main() -> None:
@@ -51,23 +44,17 @@ def main() -> None:
         for family in (ALL_AXES, ONE_AXIS):
             fine = spotsim.replace(base, simulation={"substeps": FINE_SUBSTEPS,
                                                      "integrator": {"method": "symplectic_euler"}})
-            ref = rows_of(spotsim.ensemble(fine, args.members, family=family, workers=2))
+            ref = member_rows(spotsim.ensemble(fine, args.members, family=family, workers=2))
             for guard in GUARDS:
                 s = spotsim.replace(base, simulation={"integrator": {"onset_guard": guard}})
-                e = spotsim.ensemble(s, args.members, family=family, workers=2)
-                rows = rows_of(e)
-                n_grasps = len(e.members[0].grasps())
-                c = compare(rows, ref, n_grasps, n_grasps > 1)
-                ran = [m.summary for m in e.members if m.summary]
+                ran, prefixes, c = against(s, ref, args.members, family)
                 steps = np.mean([x["steps"] for x in ran])
                 wall = np.median([x["wall_time_s"] for x in ran])
-                for g in range(n_grasps):
-                    p = grasp_prefix(g, n_grasps)
+                for g, p in enumerate(prefixes):
                     paired = pct(c[p + "peak_force_paired_rel"], c[p + "peak_force_paired_rel_error"])
                     residual = pct(c[p + "residual_median_rel"], c[p + "residual_median_rel_error"])
                     print(f"| {title} | {family.replace('_', ' ')} | {guard} | {g + 1} | {steps:.0f} | {wall:.3f} "
                           f"| {paired} | {residual} | {c[p + 'residual_ks_p']:.2g} |", flush=True)
-
 
 if __name__ == "__main__":
     main()
