@@ -7,7 +7,7 @@ Cases I-III and the dual-arm run, each on both families of perturbed starts (`sp
 --perturb`: all axes and angles, and one axis at a time), as ensembles of MEMBERS starts (seed
 0) with each velocity update spanning its own step (`simulation.integrator.kick: step`, the
 default) and the mean of the last step and its own (`staggered`), each at the default velocity
-tolerance and at a quarter of it. Each is compared, by the
+tolerance and at a quarter and an eighth of it. Each is compared, by the
 ensemble accuracy study's own comparison (`studies.accuracy_ensemble.compare`), with the drive
 comparison's ensemble at symplectic Euler's 0.78 us from the same starts
 (docs/results/drives/CASE/motor_finer*/members.csv, which `docs/generate.py drives` computes).
@@ -29,8 +29,8 @@ from spotsim.studies.ensemble import ALL_AXES, ONE_AXIS
 from spotsim.studies.estimate import read_members
 
 KICKS = ("step", "staggered")
-#: The velocity tolerance's divisors: the default's, and a quarter of it.
-TOLERANCES = (1, 4)
+#: The velocity tolerance's divisors: the default's, a quarter and an eighth of it.
+TOLERANCES = (1, 4, 8)
 
 
 def reference(name: str, family: str) -> list[dict]:
