@@ -67,5 +67,6 @@ def main() -> None:
                 print(f"| {title} | {label} | {g + 1} | {force} | {paired} | {residual} "
                       f"| {c[p + 'residual_ks_p']:.2g} | {wall:.3f} | {evaluations:.3g} | {cuts:.3g} |", flush=True)
 
+
 if __name__ == "__main__":
     main()

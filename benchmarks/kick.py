@@ -69,5 +69,6 @@ def main() -> None:
                     print(f"| {title} | {family.replace('_', ' ')} | {kick} | {tol:g} | {g + 1} | {steps:.0f} "
                           f"| {wall:.3f} | {force} | {torque} | {residual} | {ks:.2g} |", flush=True)
 
+
 if __name__ == "__main__":
     main()

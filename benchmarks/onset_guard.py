@@ -56,5 +56,6 @@ def main() -> None:
                     print(f"| {title} | {family.replace('_', ' ')} | {guard} | {g + 1} | {steps:.0f} | {wall:.3f} "
                           f"| {paired} | {residual} | {c[p + 'residual_ks_p']:.2g} |", flush=True)
 
+
 if __name__ == "__main__":
     main()

@@ -144,7 +144,7 @@ class DataFields(NamedTuple):
     # the integrator
     h_next: float  # the step an adaptive integrator tries next, s (0: none yet)
     h_last: float  # adaptive Euler's last accepted step, s (0.0: none yet)
-    kick: float  # how long the last step's velocity update applied its forces, s (its impulse's span)
+    kick: float  # how long adaptive Euler's last velocity update applied its forces, s (`kick_of`: its impulse's span)
     fsal: bool  # the last committed evaluation can be the next step's first stage
     fsal_t: float  # ... at this time,
     fsal_dy: np.ndarray  # (`integrators.state_size`,) its state derivative

@@ -268,7 +268,6 @@ def symplectic_euler(m, d, h):
     if not motor:
         sample_controllers(m, d, d.t + h, h)
     _euler_update(m, d, h, h)
-    d.kick = h
     if motor:
         sample_controllers(m, d, d.t + h, h)
     d.external_force_W[:] = d.loads.external_force_W
@@ -694,7 +693,6 @@ def runge_kutta(m, d, h):
     d.fsal, d.fsal_t = True, d.t + h
     d.jumped = False
     d.fsal_external[:] = end
-    d.kick = h
     d.external_force_W[:] = mean[:3]
     d.external_torque_O_W[:] = mean[3:]
     return h
