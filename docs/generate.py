@@ -5,9 +5,10 @@
                                       # `spotsim study spreads ...` (SPREADS_COMMAND) writes their
                                       # spreads (package data: src/spotsim/studies/typical_spread.json)
     python docs/generate.py unseen    # rerun only the error bound's check on unseen scenarios (~30 min)
-    python docs/generate.py drives [DRIVE ...] [--settings default]  # rerun only the drive
-                                      # comparison's ensembles (~40 min; only the named drives
-                                      # and settings, if any: `default` takes ~5 min)
+    python docs/generate.py drives [DRIVE ...] [--settings default] [--cases CASE,...]  # rerun
+                                      # only the drive comparison's ensembles (~3.5 h, of which the
+                                      # motor's `finest` step takes 2.5; only the named drives,
+                                      # settings and cases, if any: `default` takes ~5 min)
     python docs/generate.py envelope  # rerun only Case I's capture envelopes (about a minute)
     python docs/generate.py sensitivity  # rerun only the motor-driven grasp's sensitivity study (~5 min)
     python docs/generate.py rig       # rerun the single-arm experiment's replica and the compliant
@@ -121,18 +122,20 @@ class Drive(typing.NamedTuple):
 #: The drives. The relay and the kinematic drive read at every step (a controller period below
 #: any step: their continuous limits) run at the fine fixed step only: an adaptive step ends at
 #: each reading, so it could not grow. The motor runs on both start families, at its default
-#: speed-loop period and at a tenth of it, and at a step four times finer than `fine` (`finer`,
-#: the ensemble studies' reference step) to confirm its fine reference.
+#: speed-loop period and at a tenth of it, at a step four times finer than `fine` (`finer`,
+#: the ensemble studies' reference step) to confirm its fine reference, and four times finer
+#: again (`finest`) to confirm `finer`.
 DRIVES = {"kinematic": Drive(["end_effector.drive=kinematic"], ("default", "fine")),
           "kinematic_every_step": Drive(["end_effector.drive=kinematic", "end_effector.control_period_s=1.0e-9"],
                                         ("fine",)),
           "relay": Drive(["end_effector.drive=relay"], ("default", "fine")),
           "relay_every_step": Drive(["end_effector.drive=relay", "end_effector.control_period_s=1.0e-9"], ("fine",)),
-          "motor": Drive(["end_effector.drive=motor"], ("default", "fine", "finer"), ("all", "one_axis")),
+          "motor": Drive(["end_effector.drive=motor"], ("default", "fine", "finer", "finest"), ("all", "one_axis")),
           "motor_loop_tenth": Drive(["end_effector.drive=motor", "end_effector.motor.speed_loop_period_s=4.0e-5"],
                                     ("default",), ("all", "one_axis"))}
 DRIVE_SETTINGS = {"default": [], "fine": ["simulation.integrator.method=symplectic_euler", "simulation.substeps=320"],
-                  "finer": ["simulation.integrator.method=symplectic_euler", "simulation.substeps=1280"]}
+                  "finer": ["simulation.integrator.method=symplectic_euler", "simulation.substeps=1280"],
+                  "finest": ["simulation.integrator.method=symplectic_euler", "simulation.substeps=5120"]}
 
 
 def drive_dir(drive: str, setting: str, family: str = "all") -> str:
@@ -436,25 +439,27 @@ def timed_run(cmd: list[str], shown: str, out: Path, ok: tuple[int, ...] = (0,))
             "out": str(out.relative_to(ROOT)), "commit": git("rev-parse", "--short", "HEAD")}
 
 
-def record_studies(done: list[dict]) -> None:
+def record_studies(done: list[dict], quiet: bool = False) -> None:
     """Replace the entries of docs/results/meta.json's studies that `done` reran."""
     meta = json.loads((RESULTS / "meta.json").read_text())
     outs = {d["out"] for d in done}
     meta["studies"] = [s for s in meta["studies"] if s.get("out") not in outs] + done
     write_json(RESULTS / "meta.json", meta)
-    print(f"results in {RESULTS.relative_to(ROOT)}; now run `{GENERATE} pages`")
+    if not quiet:
+        print(f"results in {RESULTS.relative_to(ROOT)}; now run `{GENERATE} pages`")
 
 
-def drives_command(only: tuple[str, ...] = (), settings: tuple[str, ...] = ()) -> None:
-    """Rerun the drive comparison (about 40 min on 2 cores; `only` these drives and these
-    `settings` of DRIVE_SETTINGS, if given): every case's ensemble with each drive at each
-    setting and start family, into docs/results/drives/CASE/`drive_dir`/ (ensemble.json and
-    members.csv), stamped in docs/results/meta.json."""
+def drives_command(only: tuple[str, ...] = (), settings: tuple[str, ...] = (), cases: tuple[str, ...] = ()) -> None:
+    """Rerun the drive comparison (about 3.5 h on 2 cores; `only` these drives, these `settings`
+    of DRIVE_SETTINGS and these `cases` of DRIVE_CASES, if given): every case's ensemble with
+    each drive at each setting and start family, into docs/results/drives/CASE/`drive_dir`/
+    (ensemble.json and members.csv), each stamped in docs/results/meta.json as it ends."""
     unknown = set(only) - set(DRIVES)
     if unknown:
         raise SystemExit(f"unknown drives {', '.join(sorted(unknown))}: choose from {', '.join(DRIVES)}")
-    done = []
     for case in DRIVE_CASES:
+        if cases and case not in cases:
+            continue
         for drive, d in DRIVES.items():
             if only and drive not in only:
                 continue
@@ -469,10 +474,11 @@ def drives_command(only: tuple[str, ...] = (), settings: tuple[str, ...] = ()) -
                             *(["--perturb", family] if family != "all" else []), "--no-error-estimate"]
                     cmd = [sys.executable, "-m", "spotsim.cli", "run", *args, "--out", str(out.relative_to(ROOT)),
                            "--quiet"]
-                    done.append(timed_run(cmd, "spotsim run " + " ".join(args), out, ok=(0, 1)))
+                    done = timed_run(cmd, "spotsim run " + " ".join(args), out, ok=(0, 1))
                     (out / "scenario.yaml").unlink(missing_ok=True)
-                    print(f"  drives {case} {out.name}: {done[-1]['wall_time_s']:.0f} s", flush=True)
-    record_studies(done)
+                    record_studies([done], quiet=True)
+                    print(f"  drives {case} {out.name}: {done['wall_time_s']:.0f} s", flush=True)
+    print(f"results in {RESULTS.relative_to(ROOT)}; now run `{GENERATE} pages`")
 
 
 #: The capture envelope of the default geometry, Case I's scenario, every axis and plane: with
@@ -1368,8 +1374,9 @@ def drives_table(r: Results) -> str:
     return ("Each cell: median [10th, 90th percentile] over 32 members (seed 0). Resumes: the drive closing "
             "again at more than half its closing speed after it had stopped (the motor's fingers never stop and "
             "resume by a reading: it has none). Default: adaptive Euler at its default tolerance; fine: "
-            "symplectic Euler at 3.125 µs; finer: at 0.78 µs. Kinematic and relay every step: the drive reading "
-            "the load at every integration step instead of every `control_period_s` (its continuous limit). "
+            "symplectic Euler at 3.125 µs; finer: at 0.78 µs; finest: at 0.195 µs. Kinematic and relay every step: "
+            "the drive reading the load at every integration step instead of every `control_period_s` (its "
+            "continuous limit). "
             "Motor loop tenth: the motor's speed loop read every 0.04 ms instead of 0.4 ms.\n\n"
             + table(header, rows))
 
@@ -1382,7 +1389,8 @@ def drives_table(r: Results) -> str:
 MOTOR_CHECKS = (("speed loop 0.4 → 0.04 ms", ("motor", "default"), ("motor_loop_tenth", "default"), "period"),
                 ("default against fine (3.125 µs)", ("motor", "default"), ("motor", "fine"), "reference"),
                 ("fine against finer (0.78 µs)", ("motor", "fine"), ("motor", "finer"), "reference"),
-                ("default against finer (0.78 µs)", ("motor", "default"), ("motor", "finer"), "reference"))
+                ("default against finer (0.78 µs)", ("motor", "default"), ("motor", "finer"), "reference"),
+                ("finer against finest (0.195 µs)", ("motor", "finer"), ("motor", "finest"), "reference"))
 PERIOD_MEDIAN_REL = 0.03
 
 
@@ -1997,17 +2005,22 @@ def main(argv=None) -> None:
     parser.add_argument("command", choices=["results", "runs", "ensembles", "unseen", "drives", "envelope",
                                             "sensitivity", "rig", "pages"])
     parser.add_argument("drives", nargs="*", metavar="DRIVE", help=f"drives: only these ({', '.join(DRIVES)})")
+    parser.add_argument("--cases", default="", metavar="CASE[,CASE]",
+                        help=f"drives: only these cases ({', '.join(DRIVE_CASES)})")
     parser.add_argument("--settings", default="", metavar="SETTING[,SETTING]",
                         help=f"drives: only at these settings ({', '.join(DRIVE_SETTINGS)}; `default`: what the "
                              "default integrator computes)")
     args = parser.parse_args(argv)
     settings = tuple(s for s in args.settings.split(",") if s)
-    if (args.drives or settings) and args.command != "drives":
-        parser.error("DRIVE names and --settings: only with `drives`")
+    cases = tuple(s for s in args.cases.split(",") if s)
+    if (args.drives or settings or cases) and args.command != "drives":
+        parser.error("DRIVE names, --settings and --cases: only with `drives`")
     if set(settings) - set(DRIVE_SETTINGS):
         parser.error(f"--settings {args.settings}: choose from {', '.join(DRIVE_SETTINGS)}")
+    if set(cases) - set(DRIVE_CASES):
+        parser.error(f"--cases {args.cases}: choose from {', '.join(DRIVE_CASES)}")
     if args.command == "drives":
-        drives_command(tuple(args.drives), settings)
+        drives_command(tuple(args.drives), settings, cases)
         return
     {"results": results_command, "runs": runs_command, "ensembles": ensembles_command, "unseen": unseen_command,
      "envelope": envelope_command, "sensitivity": sensitivity_command, "rig": rig_command,
