@@ -59,6 +59,8 @@ RESULTS = DOCS / "results"
 IMAGES = DOCS / "images"
 CONFIG = ROOT / "config"
 GENERATE = "python docs/generate.py"
+#: What a command that wrote results says as it ends.
+PAGES_NEXT = f"results in {RESULTS.relative_to(ROOT)}; now run `{GENERATE} pages`"
 
 #: The studies the tables need: (kind, scenario, arguments of `spotsim study VERB[kind]`). The accuracy
 #: studies sweep the reduced grid against symplectic Euler at 12.5 us (substeps 80), confirmed by
@@ -393,7 +395,7 @@ def runs_command(keep_ensembles: bool = True) -> None:
         meta["studies"].append(run_study(kind, name, args))
     meta["studies"] += kept
     write_json(RESULTS / "meta.json", meta)
-    print(f"results in {RESULTS.relative_to(ROOT)}; now run `{GENERATE} pages`")
+    print(PAGES_NEXT)
 
 
 def rerun_studies(studies: list) -> None:
@@ -416,7 +418,7 @@ def unseen_command() -> None:
     """Rerun only the error bound's studies on unseen scenarios (UNSEEN_STUDIES; about 30 min on 2
     cores, most of it the dual arm's converged references)."""
     rerun_studies(UNSEEN_STUDIES)
-    print(f"results in {RESULTS.relative_to(ROOT)}; now run `{GENERATE} pages`")
+    print(PAGES_NEXT)
 
 
 #: The command that writes the studied configs' typical spreads over starts (package data that a
@@ -446,7 +448,7 @@ def record_studies(done: list[dict], quiet: bool = False) -> None:
     meta["studies"] = [s for s in meta["studies"] if s.get("out") not in outs] + done
     write_json(RESULTS / "meta.json", meta)
     if not quiet:
-        print(f"results in {RESULTS.relative_to(ROOT)}; now run `{GENERATE} pages`")
+        print(PAGES_NEXT)
 
 
 def drives_command(only: tuple[str, ...] = (), settings: tuple[str, ...] = (), cases: tuple[str, ...] = ()) -> None:
@@ -474,11 +476,11 @@ def drives_command(only: tuple[str, ...] = (), settings: tuple[str, ...] = (), c
                             *(["--perturb", family] if family != "all" else []), "--no-error-estimate"]
                     cmd = [sys.executable, "-m", "spotsim.cli", "run", *args, "--out", str(out.relative_to(ROOT)),
                            "--quiet"]
-                    done = timed_run(cmd, "spotsim run " + " ".join(args), out, ok=(0, 1))
+                    entry = timed_run(cmd, "spotsim run " + " ".join(args), out, ok=(0, 1))
                     (out / "scenario.yaml").unlink(missing_ok=True)
-                    record_studies([done], quiet=True)
-                    print(f"  drives {case} {out.name}: {done['wall_time_s']:.0f} s", flush=True)
-    print(f"results in {RESULTS.relative_to(ROOT)}; now run `{GENERATE} pages`")
+                    record_studies([entry], quiet=True)
+                    print(f"  drives {case} {out.name}: {entry['wall_time_s']:.0f} s", flush=True)
+    print(PAGES_NEXT)
 
 
 #: The capture envelope of the default geometry, Case I's scenario, every axis and plane: with
