@@ -11,12 +11,14 @@ from conftest import CASE_I, ROOT
 import spotsim
 from spotsim.assemble.model import motor_drive, screw_efficiencies
 from spotsim.run import Stepper
-from spotsim.sim.actuation import motor_closing, motor_opening, transmission_events
+from spotsim.sim.actuation import motor_closing, motor_opening, speed_loop, transmission_events
 from spotsim.sim.dynamics import accelerations, joint_response
 from spotsim.sim.tree import kinematics
 from spotsim.tables import BACKWARD, FORWARD, STUCK
 
 LEAD, DIAMETER, FLANK = 0.7e-3, 3.545e-3, math.radians(30.0)
+#: Relative round-off of the speed loop's arithmetic, with room for a few operations.
+ROUND_OFF = 1e-12
 
 
 def motor_model(*sets):
@@ -87,6 +89,64 @@ def test_the_speed_loops_integral_is_the_fingers_lag_behind_their_set_travel_wha
         assert d.integral[0] == pytest.approx(p.gain[0] / p.integral_time[0] * lag, rel=1e-9, abs=1e-15)
         largest = max(largest, lag)
     assert largest > 0.1 * vc * period  # the fingers did lag: the identity was not 0 = 0
+
+
+def fingers_at_rest(*sets):
+    """Case I's motor drive with `sets`, its fingers at rest, its speed loop's encoder read at
+    t = 0 and its integral zero: the model, its Data, and the drive's set speed (m/s)."""
+    model = motor_model(*sets)
+    m = model.sim
+    d = Stepper(model).data
+    for k in finger_dofs(model):
+        d.v[k] = 0.0
+    d.encoder_t[0], d.encoder_opening[0], d.integral[0] = 0.0, motor_opening(m, d, 0), 0.0
+    return model, d, model.scenario.end_effector.closing_speed_m_s
+
+
+@pytest.mark.parametrize("period", [4e-4, 4e-5])
+def test_back_calculation_relaxes_the_integral_to_the_clamp_by_its_closed_form_at_any_period(period):
+    """Fingers held at rest ask for more current than the limit c at every reading: under
+    back-calculation the integral, from zero, is c (1 - (T_i / (T_i + h))^k) after k readings
+    h apart (the clamp itself in the limit, whatever the period), where conditional
+    integration keeps it at zero."""
+    model, d, _ = fingers_at_rest(f"end_effector.motor.speed_loop_period_s={period}",
+                                  "end_effector.motor.anti_windup=back_calculation")
+    m, p = model.sim, model.sim.drives
+    c, keep = p.current_limit[0], p.integral_time[0] / (p.integral_time[0] + period)
+    for k in range(1, 201):
+        speed_loop(m, d, 0, k * period)
+        assert d.saturated[0] and d.current[0] == c
+        assert d.integral[0] == pytest.approx(c * (1.0 - keep**k), rel=1e-9)
+    assert d.integral[0] > 0.1 * c  # it did move towards the clamp
+
+
+@pytest.mark.parametrize("anti_windup", ["conditional", "back_calculation"])
+def test_the_integral_after_a_reading_is_continuous_in_the_speed_read_under_back_calculation_only(anti_windup):
+    """One reading from the same state, its encoder's speed swept 1 nm per period at a time
+    across the speed at which the clamp starts to hold: under back-calculation the integral
+    never moves by more than the gain over the integral time times the travel read (its rate
+    unclamped; clamped it does not depend on the reading at all); conditional integration
+    jumps there by the whole reading's increment K e h / T_i."""
+    model, d, vc = fingers_at_rest(f"end_effector.motor.anti_windup={anti_windup}")
+    m, p = model.sim, model.sim.drives
+    h, K, T_i, c = p.period[0], p.gain[0], p.integral_time[0], p.current_limit[0]
+    start = 0.1 * c
+    edge = (c - start) / (K * (1.0 + h / T_i))  # the error at which K e + start + K e h / T_i reaches c
+    step = 1e-9 / h
+    opening = motor_opening(m, d, 0)
+    integrals, clamped = [], []
+    for j in range(-50, 51):
+        read = vc - edge + j * step
+        d.integral[0], d.encoder_t[0], d.encoder_opening[0] = start, 0.0, opening + read * h
+        speed_loop(m, d, 0, h)
+        integrals.append(d.integral[0])
+        clamped.append(bool(d.saturated[0]))
+    assert True in clamped and False in clamped  # the sweep crossed the clamp
+    moves = np.abs(np.diff(integrals))
+    if anti_windup == "back_calculation":
+        assert moves.max() <= K * h / T_i * step * (1.0 + ROUND_OFF) + ROUND_OFF * c
+    else:
+        assert moves.max() > 0.5 * K * edge * h / T_i
 
 
 def stuck_under(model, load):
@@ -206,6 +266,9 @@ def test_the_motor_block_counts_in_a_scenarios_fingerprint_only_under_the_motor_
     kinematic = "end_effector.drive=kinematic"
     assert key(kinematic) == key(kinematic, "end_effector.motor.gear_ratio=5")
     assert key() != key("end_effector.motor.gear_ratio=5")  # the default drive is the motor
+    # the anti-windup at its default is the scene before the key (the shipped spreads find it)
+    assert key() == key("end_effector.motor.anti_windup=conditional") != key("end_effector.motor.anti_windup="
+                                                                             "back_calculation")
 
 
 @pytest.mark.parametrize("config", ["single_arm_case_I.yaml", "dual_arm_sequential.yaml"])

@@ -231,6 +231,10 @@ class Motor:
                                      "sets the current this often; the current loop is ideal")
     speed_loop_bandwidth_Hz: float = key(50.0, _positive, "the speed loop's design bandwidth, Hz: its gains follow "
                                          "from it and the drive's inertia")
+    anti_windup: str = key("conditional", _choice("conditional", "back_calculation"),
+                           "how the speed loop's integral keeps from winding up while the current is clamped: it "
+                           "stops (conditional), or it tracks the clamp with the integral time (back_calculation: "
+                           "continuous in the speed read, where a stop jumps by a whole reading's increment)")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -884,11 +888,14 @@ def fingerprint(s) -> str:
     of the motor block unless its drive is the motor (no other drive reads it), and of the arms'
     compliance block unless their joints are compliant (rigid joints read nothing of it), of the
     dynamometer and the suspension unless they are there, of `completion.record_after_s` at
-    zero and of `simulation.integrator.kick` at `step` (as before those keys): equal for two
-    scenarios that run the same physics at the same settings."""
+    zero, of `simulation.integrator.kick` at `step` and of the motor's `anti_windup` at
+    `conditional` (as before those keys): equal for two scenarios that run the same physics at
+    the same settings."""
     raw = {k: v for k, v in to_dict(s).items() if k not in ("name", "description")}
     if s.end_effector.drive != "motor":
         raw["end_effector"] = {k: v for k, v in raw["end_effector"].items() if k != "motor"}
+    elif s.end_effector.motor.anti_windup == "conditional":  # as before the key
+        raw["end_effector"]["motor"] = {k: v for k, v in raw["end_effector"]["motor"].items() if k != "anti_windup"}
     arms = "arm" if "arm" in raw else "robot"
     if raw[arms]["compliance"]["joints"] == "rigid":
         raw[arms] = {k: v for k, v in raw[arms].items() if k != "compliance"}

@@ -646,7 +646,8 @@ def drives(ee, n: int, finger_mass: float) -> Drives:
                   torque_constant=row(md.torque_constant), resistance=row(mo.terminal_resistance_ohm),
                   voltage=row(mo.supply_voltage_V), current_limit=row(mo.current_limit_A),
                   gain=row(gain),
-                  integral_time=row(4.0 / omega))
+                  integral_time=row(4.0 / omega),
+                  back_calculation=row(mo.anti_windup == "back_calculation", np.bool_))
 
 
 def _record_frames(p: _Parts, tree, branches) -> RecordFrames:

@@ -75,6 +75,7 @@ class Drives(NamedTuple):
     current_limit: np.ndarray  # (n_ee,) the current loop's clamp, A
     gain: np.ndarray  # (n_ee,) the speed loop's proportional gain, A per m/s of closing speed
     integral_time: np.ndarray  # (n_ee,) its integral time, s
+    back_calculation: np.ndarray  # (n_ee,) bool: its anti-windup tracks the clamp, else stops the integral
 
 
 @njit
@@ -334,8 +335,15 @@ def speed_loop(m, d, ee, t):
     """The motor drive's digital speed loop at time t (s): a PI on the closing speed's error
     from its set speed, the current it asks for clamped by the current limit and by what the
     supply voltage drives through the winding against the back-EMF at this speed, held until
-    the next reading; the integral stops while the clamp holds (anti-windup). The current
-    loop is ideal: the motor's current is the one asked for.
+    the next reading. The current loop is ideal: the motor's current is the one asked for.
+
+    Anti-windup: by conditional integration, the integral stops while the clamp holds; by
+    back-calculation (Astrom and Hagglund), it tracks the clamp, dI/dt = (K e + c - u) / T_i
+    with its tracking time the integral time (u the current asked for, c the one got), taken
+    by backward Euler over the time h since the last reading: the integral gains K e h / T_i,
+    then h / (T_i + h) of the clamp's excess c - u. Under a held clamp it relaxes to the clamp
+    by T_i / (T_i + h) a reading; it is continuous in the speed read, where a stop jumps by a
+    whole reading's increment as a reading crosses the clamp.
 
     The speed it reads is an encoder's: the travel since its last reading over the time
     between (at its first reading, the speed itself), and the integral takes each reading's
@@ -358,7 +366,9 @@ def speed_loop(m, d, ee, t):
     hi = min(p.current_limit[ee], (p.voltage[ee] - emf) / p.resistance[ee])
     lo = max(-p.current_limit[ee], (-p.voltage[ee] - emf) / p.resistance[ee])
     current = min(hi, max(lo, wanted))
-    if current == wanted:
+    if p.back_calculation[ee]:
+        d.integral[ee] = integral + (current - wanted) * elapsed / (p.integral_time[ee] + elapsed)
+    elif current == wanted:
         d.integral[ee] = integral
     d.current[ee] = current
     d.saturated[ee] = wanted >= hi  # pressing as hard as the current limit and the supply let it

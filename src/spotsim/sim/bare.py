@@ -88,7 +88,7 @@ def bare(model: pin.Model, prescribed=(), springs=None) -> tuple[BareModel, Bare
     drives = Drives(law=np.zeros(0, dtype=np.int64), closing_speed=none, grasp_load=none, no_load_speed=none,
                     resume_fraction=none, period=none, ratio=none, forward=none, backward=none, rotor=none,
                     torque_constant=none, resistance=none, voltage=none, current_limit=none, gain=none,
-                    integral_time=none)
+                    integral_time=none, back_calculation=np.zeros(0, dtype=np.bool_))
     actuators = Actuators(joint=np.zeros(0, dtype=np.int64), drive=np.zeros(0, dtype=np.int64))
     return BareModel(tree=tree, branches=branches, table_normal=np.zeros(3), actuators=actuators,
                      drives=drives), data
