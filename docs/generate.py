@@ -1908,6 +1908,7 @@ RENDER = {
     "drive-period": lambda r: benchmark_table("drive_period"),
     "onset-guard": lambda r: benchmark_table("onset_guard"),
     "kick": lambda r: benchmark_table("kick"),
+    "anti-windup": lambda r: benchmark_table("anti_windup"),
 }
 PAGES = [ROOT / "README.md", DOCS / "usage.md", DOCS / "validation.md", DOCS / "performance.md"]
 
