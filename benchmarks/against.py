@@ -3,6 +3,8 @@ ensemble's comparison with its reference's members."""
 
 from __future__ import annotations
 
+import numpy as np
+
 import spotsim
 from spotsim.studies.accuracy_ensemble import compare
 from spotsim.studies.ensemble import ALL_AXES, grasp_prefix, member_row
@@ -26,3 +28,19 @@ def against(scenario, ref_rows: list[dict], members: int, family: str = ALL_AXES
     n_grasps = len(e.members[0].grasps())
     c = compare(member_rows(e), ref_rows, n_grasps, n_grasps > 1)
     return [m.summary for m in e.members if m.summary], [grasp_prefix(g, n_grasps) for g in range(n_grasps)], c
+
+
+def ensemble_rows(scenario, members: int, family: str = ALL_AXES) -> tuple[list[dict], float, int]:
+    """An ensemble of `members` starts of `scenario` (seed 0, `family`, 2 workers): its member rows,
+    its median wall time per member (s) and its grasp count."""
+    e = spotsim.ensemble(scenario, members, family=family, workers=2)
+    wall = float(np.median([m.summary["wall_time_s"] for m in e.members if m.summary]))
+    return member_rows(e), wall, len(e.members[0].grasps())
+
+
+def medians(rows: list[dict], p: str) -> tuple[float, float]:
+    """The median peak force (N) and residual offset (mm) of the grasp with column prefix p over
+    member rows."""
+    force = np.median([r[p + "peak_force_norm_N"] for r in rows if r.get(p + "peak_force_norm_N")])
+    residual = np.nanmedian([r[p + "residual_norm_mm"] for r in rows if r.get(p + "residual_norm_mm") is not None])
+    return float(force), float(residual)

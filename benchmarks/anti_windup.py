@@ -19,9 +19,8 @@ from __future__ import annotations
 
 import argparse
 
-import numpy as np
-from against import member_rows
-from speed import ROOT, measured_at
+from against import ensemble_rows, medians
+from speed import ROOT, measured_at, pct
 
 import spotsim
 from spotsim.studies.accuracy_ensemble import compare
@@ -31,10 +30,6 @@ from spotsim.studies.ensemble import ALL_AXES, ONE_AXIS, grasp_prefix
 CASES = (("dual arm", "dual_arm_sequential", ONE_AXIS), ("Case III", "single_arm_case_III", ONE_AXIS),
          ("Case I", "single_arm_case_I", ALL_AXES))
 ANTI_WINDUPS = ("conditional", "back_calculation")
-
-
-def pct(x: float, err: float | None = None) -> str:
-    return f"{100 * x:+.1f} %" + (f" ± {100 * err:.1f} %" if err is not None else "")
 
 
 def main() -> None:
@@ -56,17 +51,13 @@ def main() -> None:
             for period in periods:
                 s = spotsim.load_scenario(ROOT / "config" / f"{name}.yaml", [
                     f"end_effector.motor.anti_windup={aw}", f"end_effector.motor.speed_loop_period_s={period}"])
-                e = spotsim.ensemble(s, args.members, family=family, workers=2)
-                wall = float(np.median([m.summary["wall_time_s"] for m in e.members if m.summary]))
-                runs.append((member_rows(e), wall, len(e.members[0].grasps())))
+                runs.append(ensemble_rows(s, args.members, family))
             last, last_wall, n_grasps = runs[-1]
             for period, (rows, wall, _) in zip(periods[:-1], runs[:-1], strict=True):
                 c = compare(rows, last, n_grasps, n_grasps > 1)
                 for g in range(n_grasps):
                     p = grasp_prefix(g, n_grasps)
-                    force = np.median([r[p + "peak_force_norm_N"] for r in rows if r.get(p + "peak_force_norm_N")])
-                    residual = np.nanmedian([r[p + "residual_norm_mm"] for r in rows
-                                             if r.get(p + "residual_norm_mm") is not None])
+                    force, residual = medians(rows, p)
                     print(f"| {title}, {family.replace('_', ' ')} | {aw.replace('_', '-')} | {period * 1e3:g} against "
                           f"{periods[-1] * 1e3:g} | {g + 1} | {force:.1f} | {residual:.3g} "
                           f"| {pct(c[p + 'peak_force_median_rel'], c[p + 'peak_force_median_rel_error'])} "

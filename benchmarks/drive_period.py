@@ -17,26 +17,17 @@ from __future__ import annotations
 
 import argparse
 
-import numpy as np
+from against import ensemble_rows, medians
 from bristle_switches import CASES, pct
 from speed import ROOT, measured_at
 
 import spotsim
 from spotsim.studies.accuracy_ensemble import compare
-from spotsim.studies.ensemble import grasp_prefix, member_row
+from spotsim.studies.ensemble import grasp_prefix
 
 #: The reference's step: the accuracy study's, symplectic Euler at 1/1280 of the 1 ms record step.
 FINE = {"method": "symplectic_euler"}
 FINE_SUBSTEPS = 1280
-
-
-def rows_of(scenario, members: int) -> tuple[list[dict], float, int]:
-    """An ensemble's member rows, its median wall time per member (s) and its grasp count."""
-    e = spotsim.ensemble(scenario, members, workers=2)
-    n_grasps = len(e.members[0].grasps())
-    rows = [member_row(m, n_grasps, n_grasps > 1) for m in e.members]
-    wall = float(np.median([m.summary["wall_time_s"] for m in e.members if m.summary]))
-    return rows, wall, n_grasps
 
 
 def main() -> None:
@@ -57,15 +48,13 @@ def main() -> None:
         base = spotsim.load_scenario(ROOT / "config" / f"{name}.yaml", ["end_effector.drive=kinematic"])
         for period in periods:
             s = spotsim.replace(base, end_effector={"control_period_s": period})
-            ref, ref_wall, _ = rows_of(spotsim.replace(s, simulation={"substeps": FINE_SUBSTEPS, "integrator": FINE}),
-                                       args.members)
-            rows, wall, n_grasps = rows_of(s, args.members)
+            ref, ref_wall, _ = ensemble_rows(
+                spotsim.replace(s, simulation={"substeps": FINE_SUBSTEPS, "integrator": FINE}), args.members)
+            rows, wall, n_grasps = ensemble_rows(s, args.members)
             c = compare(rows, ref, n_grasps, n_grasps > 1)
             for g in range(n_grasps):
                 p = grasp_prefix(g, n_grasps)
-                force = np.median([r[p + "peak_force_norm_N"] for r in ref if r.get(p + "peak_force_norm_N")])
-                residual = np.nanmedian([r[p + "residual_norm_mm"] for r in ref
-                                         if r.get(p + "residual_norm_mm") is not None])
+                force, residual = medians(ref, p)
                 print(f"| {title} | {period * 1e3:g} | {g + 1} | {force:.1f} | {residual:.3g} "
                       f"| {pct(c[p + 'peak_force_median_rel'], c[p + 'peak_force_median_rel_error'])} "
                       f"| {pct(c[p + 'peak_force_paired_rel'])} "
