@@ -1909,6 +1909,7 @@ RENDER = {
     "onset-guard": lambda r: benchmark_table("onset_guard"),
     "kick": lambda r: benchmark_table("kick"),
     "anti-windup": lambda r: benchmark_table("anti_windup"),
+    "drive-readings": lambda r: benchmark_table("drive_readings"),
 }
 PAGES = [ROOT / "README.md", DOCS / "usage.md", DOCS / "validation.md", DOCS / "performance.md"]
 

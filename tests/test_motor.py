@@ -11,7 +11,15 @@ from conftest import CASE_I, ROOT
 import spotsim
 from spotsim.assemble.model import motor_drive, screw_efficiencies
 from spotsim.run import Stepper
-from spotsim.sim.actuation import motor_closing, motor_opening, speed_loop, transmission_events
+from spotsim.sim.actuation import (
+    motor_closing,
+    motor_opening,
+    next_event,
+    quiet_readings,
+    sample_controllers,
+    speed_loop,
+    transmission_events,
+)
 from spotsim.sim.dynamics import accelerations, joint_response
 from spotsim.sim.tree import kinematics
 from spotsim.tables import BACKWARD, FORWARD, STUCK
@@ -152,6 +160,70 @@ def test_the_integral_after_a_reading_is_continuous_in_the_speed_read_under_back
         assert moves.max() > 0.5 * K * edge * h / T_i
 
 
+def pressing_stuck(*sets):
+    """Case I's motor drive with `sets`, its fingers at rest and its transmission stuck, its
+    speed loop pressing at the current limit after a reading at t = 0, the next due one
+    period later: the model, its Data, and the speed loop's period (s)."""
+    model, d, _ = fingers_at_rest(*sets)
+    m = model.sim
+    period = m.drives.period[0]
+    speed_loop(m, d, 0, 0.0)
+    d.transmission[0] = STUCK
+    kinematics(m, d)
+    accelerations(m, d)
+    assert d.saturated[0] and d.current[0] == m.drives.current_limit[0] and d.sample_t == period
+    return model, d, period
+
+
+@pytest.mark.parametrize("anti_windup", ["conditional", "back_calculation"])
+def test_a_step_may_pass_the_readings_of_a_stuck_drive_pressing_at_its_clamp_and_takes_them_at_their_times(
+        anti_windup):
+    """Stuck and pressing at the clamp, the drive's readings are quiet: with `pass_quiet` no
+    event ends a step there (with `each`, the next reading does), and each of 1000 readings
+    one by one keeps the current. A step passing 7 of them leaves the loop as those 7 taken
+    one by one at their times do."""
+    model, d, period = pressing_stuck(f"end_effector.motor.anti_windup={anti_windup}",
+                                      "end_effector.motor.speed_loop_period_s=1e-4")
+    assert quiet_readings(model.sim, d, 0) and next_event(model.sim, d) == d.sample_t == period
+    model, d, period = pressing_stuck(f"end_effector.motor.anti_windup={anti_windup}",
+                                      "end_effector.motor.speed_loop_period_s=1e-4",
+                                      "simulation.integrator.drive_readings=pass_quiet")
+    m = model.sim
+    assert quiet_readings(m, d, 0) and next_event(m, d) == math.inf
+    start = d.integral[0]
+    for k in range(1, 1001):
+        speed_loop(m, d, 0, k * period)
+        assert d.saturated[0] and d.current[0] == m.drives.current_limit[0]
+    d.integral[0], d.encoder_t[0], d.sample_t = start, 0.0, period
+    for k in range(1, 8):
+        speed_loop(m, d, 0, k * period)
+    one_by_one = d.integral[0], d.encoder_t[0], d.sample_t
+    d.integral[0], d.encoder_t[0], d.sample_t = start, 0.0, period
+    sample_controllers(m, d, 7.5 * period, 7.5 * period)
+    assert d.integral[0] == pytest.approx(one_by_one[0], rel=ROUND_OFF)
+    assert d.encoder_t[0] == pytest.approx(one_by_one[1], rel=ROUND_OFF)
+    assert d.sample_t == pytest.approx(one_by_one[2], rel=ROUND_OFF)
+    assert 7.5 * period < d.sample_t < 8.5 * period  # every reading due taken, the next on their grid
+
+
+@pytest.mark.parametrize("anti_windup", ["conditional", "back_calculation"])
+def test_readings_are_not_quiet_unless_stuck_and_kept_at_the_clamp(anti_windup):
+    """Sliding, below the clamp, or with a next reading that leaves it (the fingers read
+    closing far faster than the set speed since the last), a reading ends the step."""
+    model, d, period = pressing_stuck(f"end_effector.motor.anti_windup={anti_windup}",
+                                      "simulation.integrator.drive_readings=pass_quiet")
+    m = model.sim
+    vc = model.scenario.end_effector.closing_speed_m_s
+    d.transmission[0] = FORWARD
+    assert not quiet_readings(m, d, 0) and next_event(m, d) == d.sample_t
+    d.transmission[0] = STUCK
+    d.saturated[0] = False
+    assert not quiet_readings(m, d, 0)
+    d.saturated[0] = True
+    d.encoder_opening[0] = motor_opening(m, d, 0) + 100.0 * vc * period  # it closed at 100 v_c since
+    assert not quiet_readings(m, d, 0) and next_event(m, d) == d.sample_t
+
+
 def stuck_under(model, load):
     """Case I's motor drive at rest, its transmission stuck at its current limit, its fingers
     pushed open by `load` (N, in all, half on each): the transmission's state its events give,
@@ -272,6 +344,9 @@ def test_the_motor_block_counts_in_a_scenarios_fingerprint_only_under_the_motor_
     # the anti-windup at its default is the scene before the key (the shipped spreads find it)
     assert key() == key("end_effector.motor.anti_windup=conditional") != key("end_effector.motor.anti_windup="
                                                                              "back_calculation")
+    # so is whether steps end at each of its speed loop's readings
+    assert key() == key("simulation.integrator.drive_readings=each") != key("simulation.integrator.drive_readings="
+                                                                           "pass_quiet")
 
 
 @pytest.mark.parametrize("config", ["single_arm_case_I.yaml", "dual_arm_sequential.yaml"])

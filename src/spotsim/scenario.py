@@ -130,6 +130,10 @@ class Integrator:
                     "adaptive_euler: how long a step's velocity update applies the forces at its start: its own "
                     "step (step), or the mean of the last step and its own (staggered: symplectic Euler's velocities "
                     "lie half a step behind its positions, so a change of step leaves no velocity error)")
+    drive_readings: str = key("each", _choice("each", "pass_quiet"),
+                              "adaptive methods: whether each reading of a motor drive's speed loop ends a step "
+                              "(each), or a step may pass the readings that leave its current as it is: its "
+                              "transmission stuck, the loop pressing at its clamp and kept there (pass_quiet)")
     h_min_s: float = key(1e-9, _positive, "adaptive methods: smallest step; below it the run is diverged")
     h_max_s: float = key(1e-3, _positive, "adaptive methods: largest step")
 
@@ -888,8 +892,8 @@ def fingerprint(s) -> str:
     of the motor block unless its drive is the motor (no other drive reads it), and of the arms'
     compliance block unless their joints are compliant (rigid joints read nothing of it), of the
     dynamometer and the suspension unless they are there, of `completion.record_after_s` at
-    zero, of `simulation.integrator.kick` at `step` and of the motor's `anti_windup` at
-    `conditional` (as before those keys): equal for two scenarios that run the same physics at
+    zero, of `simulation.integrator.kick` at `step`, of its `drive_readings` at `each` and of the
+    motor's `anti_windup` at `conditional` (as before those keys): equal for two scenarios that run the same physics at
     the same settings."""
     raw = {k: v for k, v in to_dict(s).items() if k not in ("name", "description")}
     if s.end_effector.drive != "motor":
@@ -906,8 +910,9 @@ def fingerprint(s) -> str:
         raw["completion"] = {k: v for k, v in raw["completion"].items() if k != "record_after_s"}
     if raw.get("suspension", {}).get("kind") == "none":
         raw.pop("suspension")
-    if raw["simulation"]["integrator"]["kick"] == "step":  # as before the key
-        raw["simulation"]["integrator"] = {k: v for k, v in raw["simulation"]["integrator"].items() if k != "kick"}
+    defaults = {"kick": "step", "drive_readings": "each"}  # as before the keys
+    raw["simulation"]["integrator"] = {k: v for k, v in raw["simulation"]["integrator"].items()
+                                       if defaults.get(k) != v}
     return hashlib.sha256(json.dumps(raw, sort_keys=True).encode()).hexdigest()[:16]
 
 

@@ -571,6 +571,7 @@ def model_fields(p: _Parts) -> ModelFields:
         atol=i.atol, h_min=i.h_min_s, h_max=i.h_max_s, velocity_tol=i.velocity_tol_m_s, onset_depth=i.onset_depth_m,
         onset_clearance=i.onset_guard == "clearance", locate_switches=i.bristle_switches == "located",
         staggered=i.method == "adaptive_euler" and i.kick == "staggered",
+        pass_quiet=i.method in ADAPTIVE and i.drive_readings == "pass_quiet",
         lever=np.concatenate([branches.lever, tree.reach[tree.internal]]),
         lightest=float(floating.min()) if len(floating) else float(tree.mass[1:].max()))
     return ModelFields(

@@ -25,8 +25,9 @@ which keeps its momentum.
 - `motor` (the default) prescribes nothing: a motor's torque pushes the fingers through a
   gearhead and a self-locking lead screw (`dynamics.transmissions`); its digital speed loop
   reads their speed by an encoder every `speed_loop_period_s` and sets the current
-  (`speed_loop`), and its
-  transmission sticks and slides at the steps' boundaries (`transmission_events`).
+  (`speed_loop`), and its transmission sticks and slides at the steps' boundaries
+  (`transmission_events`). Its readings end an adaptive integrator's steps too, unless they
+  are quiet and the integrator may pass them (`quiet_readings`).
 
 Only the active grasp's drive moves; the others hold.
 """
@@ -196,7 +197,12 @@ def _decide(m, d, t, horizon):
 
 @njit
 def next_event(m, d):
-    """The time of the Model's next periodic event (s): the active drive's next reading."""
+    """The time of the Model's next periodic event (s): the active drive's next reading, or
+    none (inf) while its readings are quiet (`quiet_readings`) and the integrator may pass them
+    (`simulation.integrator.drive_readings: pass_quiet`)."""
+    ee = m.grasps.ee[d.active]
+    if m.integrator.pass_quiet and m.drives.law[ee] == MOTOR and quiet_readings(m, d, ee):
+        return np.inf
     return d.sample_t
 
 
@@ -221,7 +227,9 @@ def drive_power(m, d):
 def sample_controllers(m, d, t, h):
     """The controllers' events at time t (s), the end of a step of h (s): if the active drive
     is due (t at or past d.sample_t), its reading (`_decide`) for a controller period, or the
-    step if longer.
+    step if longer. A motor drive's speed loop reads at t; a step that passed its quiet
+    readings (`quiet_readings`, still so at its end: what they read has not moved) takes each
+    at its own time.
 
     The grasp counts the drive's resumes (closing again at more than half its closing speed
     after it had stopped) and its largest speed change from one reading to the next."""
@@ -229,7 +237,10 @@ def sample_controllers(m, d, t, h):
     period = m.drives.period[ee]
     due = t >= d.sample_t - DUE_ROUND_OFF * period
     if m.drives.law[ee] == MOTOR:
-        if due:
+        if due and m.integrator.pass_quiet and t > d.sample_t + DUE_ROUND_OFF * period and quiet_readings(m, d, ee):
+            while d.sample_t <= t:
+                speed_loop(m, d, ee, d.sample_t)
+        elif due:
             speed_loop(m, d, ee, t)
         transmission_events(m, d, ee)
         return
@@ -359,19 +370,64 @@ def speed_loop(m, d, ee, t):
         elapsed = t - d.encoder_t[ee]
         read = (d.encoder_opening[ee] - opening) / elapsed
     d.encoder_opening[ee], d.encoder_t[ee] = opening, t
+    r = _reading(p, ee, d.integral[ee], read, speed, elapsed)
+    d.integral[ee], d.current[ee], d.saturated[ee] = r.integral, r.current, r.saturated
+
+
+class Reading(NamedTuple):
+    """What one reading of a speed loop leaves (`_reading`)."""
+
+    integral: float  # the loop's integral after it, A
+    current: float  # the current it sets, A
+    saturated: bool  # it asked for its upper clamp or more: pressing as hard as the current limit and the supply let it
+
+
+@njit
+def _reading(p, ee, integral, read, speed, elapsed):
+    """The speed loop's law (`speed_loop`) at one reading of drive ee (p: the Drives): its
+    integral before it (A), the closing speed the encoder read and the one the motor turns
+    at for its back-EMF (m/s), and the time since the last reading (s)."""
     error = p.closing_speed[ee] - read
-    integral = d.integral[ee] + p.gain[ee] * elapsed / p.integral_time[ee] * error
-    wanted = p.gain[ee] * error + integral
+    candidate = integral + p.gain[ee] * elapsed / p.integral_time[ee] * error
+    wanted = p.gain[ee] * error + candidate
     emf = p.torque_constant[ee] * p.ratio[ee] * speed
     hi = min(p.current_limit[ee], (p.voltage[ee] - emf) / p.resistance[ee])
     lo = max(-p.current_limit[ee], (-p.voltage[ee] - emf) / p.resistance[ee])
     current = min(hi, max(lo, wanted))
     if p.back_calculation[ee]:
-        d.integral[ee] = integral + (current - wanted) * elapsed / (p.integral_time[ee] + elapsed)
+        integral = candidate + (current - wanted) * elapsed / (p.integral_time[ee] + elapsed)
     elif current == wanted:
-        d.integral[ee] = integral
-    d.current[ee] = current
-    d.saturated[ee] = wanted >= hi  # pressing as hard as the current limit and the supply let it
+        integral = candidate
+    return Reading(integral, current, wanted >= hi)
+
+
+@njit
+def quiet_readings(m, d, ee):
+    """Whether motor drive ee's coming speed-loop readings leave its current as it is, for as
+    long as its transmission stays stuck, so that a step may pass them (`next_event`; they
+    are taken at their times at its end, `sample_controllers`): the transmission is stuck
+    (it holds the fingers: their opening stays, and a state changes only at a step's end) and
+    the loop presses at its upper clamp, at which the next reading (of the travel since the
+    last) keeps it, and so does one reading less than half the set speed after it.
+
+    Then every later reading keeps it too: each reads no travel, an error near the set speed,
+    above the one assumed; by back-calculation the excess of the current asked for over the
+    clamp decays by T_i / (T_i + h) a reading and gains K e h / T_i > 0, so it stays positive;
+    by conditional integration the integral stays while clamped, and what is asked grows with
+    the error."""
+    p = m.drives
+    if d.transmission[ee] != STUCK or not d.saturated[ee] or p.closing_speed[ee] <= 0.0:
+        return False
+    elapsed = d.sample_t - d.encoder_t[ee]
+    if not elapsed > 0.0:  # (nan: no reading yet)
+        return False
+    speed = motor_closing(m, d, ee)
+    first = _reading(p, ee, d.integral[ee], (d.encoder_opening[ee] - motor_opening(m, d, ee)) / elapsed, speed,
+                     elapsed)
+    if not first.saturated or first.current != d.current[ee]:
+        return False
+    then = _reading(p, ee, first.integral, 0.5 * p.closing_speed[ee], speed, p.period[ee])
+    return then.saturated and then.current == d.current[ee]
 
 
 @njit

@@ -102,6 +102,7 @@ class IntegratorParams(NamedTuple):
     onset_clearance: bool  # adaptive_euler: ... beyond the clearance of the pairs not in contact (`onset_step`)
     locate_switches: bool  # adaptive_euler: a step ends where a bristle saturates or lets go
     staggered: bool  # adaptive_euler: a velocity update spans the mean of the last step and its own (`kick_of`)
+    pass_quiet: bool  # adaptive methods: a step may pass a motor drive's quiet readings (`actuation.quiet_readings`)
     # (n_branches + n_internal,) adaptive_euler's lever of each error row (`integrators.error_rates`):
     # a floating branch's farthest contact sphere from its centroid, m; a joint's motion of the
     # spheres it carries per unit of its coordinate (`tree.Tree.reach`)

@@ -1,0 +1,136 @@
+"""Steps that pass a motor drive's quiet speed-loop readings: what they save and what they move.
+
+    python benchmarks/drive_readings.py [--members 32] [--rounds 7] [--cases dual_arm_sequential ...]
+                                        [--drives default,back_calculation_0.1ms] [--no-ensembles]
+
+With `simulation.integrator.drive_readings: pass_quiet` an adaptive step may pass the readings
+of the speed loop that leave its current as it is (the transmission stuck, the loop pressing
+at its clamp and kept there, `sim.actuation.quiet_readings`); with `each` (the default) every
+reading ends a step. For each drive setting of DRIVES:
+
+1. speed: the whole run of each case under `each` and `pass_quiet`, alternating, ROUNDS pairs
+   in one process: the median wall time of each, the ratio each / pass_quiet of the medians,
+   the real-time factors and the accepted steps;
+2. accuracy (unless --no-ensembles): for each case and start family (all axes and angles; one
+   axis at a time), an ensemble of MEMBERS starts (seed 0) under `each` and under `pass_quiet`,
+   each compared with the converged reference from the same starts with the same drive
+   (symplectic Euler at 3.125 us), by the ensemble accuracy study's own comparison
+   (`studies.accuracy_ensemble.compare`), with the completion time's median and the median of
+   the members' own differences from the reference's; and `pass_quiet` with `each` member by
+   member.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+
+import numpy as np
+from against import ensemble_rows, medians
+from speed import ROOT, measured_at, pct
+
+import spotsim
+from spotsim.studies.accuracy_ensemble import compare
+from spotsim.studies.ensemble import ALL_AXES, ONE_AXIS, grasp_prefix
+
+#: (name, its --sets) of the drive settings compared: the default motor drive, and the motor
+#: drive with back-calculation at a 0.1 ms speed loop.
+DRIVES = {"default": [],
+          "back_calculation_0.1ms": ["end_effector.motor.anti_windup=back_calculation",
+                                     "end_effector.motor.speed_loop_period_s=1e-4"]}
+CASES = ("dual_arm_sequential", "single_arm_case_I", "single_arm_case_II", "single_arm_case_III")
+#: The converged reference: symplectic Euler at dt_s / 320 (3.125 us at the shipped 1 ms).
+REFERENCE = {"substeps": 320, "integrator": {"method": "symplectic_euler"}}
+READINGS = ("each", "pass_quiet")
+
+
+def scenario(name: str, drive: str, readings: str):
+    return spotsim.load_scenario(ROOT / "config" / f"{name}.yaml",
+                                 [*DRIVES[drive], f"simulation.integrator.drive_readings={readings}"])
+
+
+def speed(names, drives, rounds: int) -> None:
+    print("| drive | case | wall, each (s) | wall, pass_quiet (s) | each / pass_quiet | real time, each "
+          "| real time, pass_quiet | steps, each | steps, pass_quiet |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+    for drive in drives:
+        for name in names:
+            models = {r: spotsim.build_model(scenario(name, drive, r)) for r in READINGS}
+            for r in READINGS:  # compiled and warm
+                spotsim.simulate(models[r].scenario, model=models[r])
+            walls = {r: [] for r in READINGS}
+            last = {}
+            for _ in range(rounds):
+                for r in READINGS:
+                    last[r] = spotsim.simulate(models[r].scenario, model=models[r]).summary
+                    walls[r].append(last[r]["wall_time_s"])
+            wall = {r: statistics.median(walls[r]) for r in READINGS}
+            rt = {r: last[r]["sim_time_s"] / wall[r] for r in READINGS}
+            steps = {r: last[r]["integrator"]["accepted_steps"] for r in READINGS}
+            print(f"| {drive} | {name} | {wall['each']:.3f} | {wall['pass_quiet']:.3f} "
+                  f"| {wall['each'] / wall['pass_quiet']:.2f} | {rt['each']:.1f} | {rt['pass_quiet']:.1f} "
+                  f"| {steps['each']} | {steps['pass_quiet']} |", flush=True)
+
+
+def completion_shift(rows: list[dict], ref: list[dict], p: str) -> tuple[float, float]:
+    """The median completion time (s) of the grasp with column prefix p over member rows, and
+    the median of the members' own differences from the reference's (ms), over the members
+    that completed in both."""
+    done = {r["member"]: r[p + "completed_s"] for r in ref if r.get(p + "completed_s") is not None}
+    own = [r[p + "completed_s"] for r in rows if r.get(p + "completed_s") is not None]
+    shift = [1e3 * (r[p + "completed_s"] - done[r["member"]]) for r in rows
+             if r.get(p + "completed_s") is not None and r["member"] in done]
+    return float(np.median(own)), float(np.median(shift))
+
+
+def accuracy(names, drives, members: int) -> None:
+    print(f"\n{members} starts per ensemble (seed 0), each against the reference (symplectic Euler at 3.125 µs, "
+          "the same drive) from the same starts; last column: pass_quiet against each\n")
+    print("| drive | case, starts | grasp | readings | peak force, median (N) | residual, median (mm) "
+          "| peak force, member by member | peak torque, member by member | residual median's difference "
+          "| residual KS p | meets the targets | completion, median (s) | completion's difference, median (ms) "
+          "| peak force against each, member by member |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+    for drive in drives:
+        for name in names:
+            for family in (ALL_AXES, ONE_AXIS):
+                ref, _, n = ensemble_rows(spotsim.replace(scenario(name, drive, "each"), simulation=REFERENCE),
+                                          members, family)
+                rows = {r: ensemble_rows(scenario(name, drive, r), members, family)[0] for r in READINGS}
+                against_each = compare(rows["pass_quiet"], rows["each"], n, n > 1)
+                for r in READINGS:
+                    c = compare(rows[r], ref, n, n > 1)
+                    for g in range(n):
+                        p = grasp_prefix(g, n)
+                        force, residual = medians(rows[r], p)
+                        completion, shift = completion_shift(rows[r], ref, p)
+                        own = (pct(against_each[p + "peak_force_paired_rel"],
+                                   against_each[p + "peak_force_paired_rel_error"]) if r == "pass_quiet" else "")
+                        print(f"| {drive} | {name}, {family.replace('_', ' ')} | {g + 1} | {r} | {force:.1f} "
+                              f"| {residual:.3g} "
+                              f"| {pct(c[p + 'peak_force_paired_rel'], c[p + 'peak_force_paired_rel_error'])} "
+                              f"| {pct(c[p + 'peak_torque_paired_rel'], c[p + 'peak_torque_paired_rel_error'])} "
+                              f"| {pct(c[p + 'residual_median_rel'], c[p + 'residual_median_rel_error'])} "
+                              f"| {c[p + 'residual_ks_p']:.2g} | {c['meets_targets']} | {completion:.3f} "
+                              f"| {shift:+.1f} | {own} |", flush=True)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--members", type=int, default=32)
+    ap.add_argument("--rounds", type=int, default=7)
+    ap.add_argument("--cases", nargs="+", default=list(CASES), choices=CASES)
+    ap.add_argument("--drives", default=",".join(DRIVES), help=f"comma-separated, of {', '.join(DRIVES)}")
+    ap.add_argument("--no-ensembles", action="store_true", help="the speed table only")
+    args = ap.parse_args()
+    drives = args.drives.split(",")
+    if set(drives) - set(DRIVES):
+        ap.error(f"--drives {args.drives}: choose from {', '.join(DRIVES)}")
+    print(f"Measured by `python benchmarks/drive_readings.py` at {measured_at()}\n")
+    speed(args.cases, drives, args.rounds)
+    if not args.no_ensembles:
+        accuracy(args.cases, drives, args.members)
+
+
+if __name__ == "__main__":
+    main()
