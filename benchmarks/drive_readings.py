@@ -6,18 +6,18 @@
 With `simulation.integrator.drive_readings: pass_quiet` an adaptive step may pass the readings
 of the speed loop that leave its current as it is (the transmission stuck, the loop pressing
 at its clamp and kept there, `sim.actuation.quiet_readings`); with `each` (the default) every
-reading ends a step. For each drive setting of DRIVES:
+reading ends a step. For each drive setting of DRIVES, under each setting of READINGS (`each`;
+`pass_quiet` up to the default largest step; `pass_quiet` with steps of at most 0.4 ms):
 
-1. speed: the whole run of each case under `each` and `pass_quiet`, alternating, ROUNDS pairs
-   in one process: the median wall time of each, the ratio each / pass_quiet of the medians,
-   the real-time factors and the accepted steps;
+1. speed: the whole run of each case under each, alternating, ROUNDS rounds in one process:
+   the median wall time, the ratio of `each`'s median to it, the real-time factor, the
+   accepted and rejected steps;
 2. accuracy (unless --no-ensembles): for each case and start family (all axes and angles; one
-   axis at a time), an ensemble of MEMBERS starts (seed 0) under `each` and under `pass_quiet`,
-   each compared with the converged reference from the same starts with the same drive
-   (symplectic Euler at 3.125 us), by the ensemble accuracy study's own comparison
+   axis at a time), an ensemble of MEMBERS starts (seed 0) under each, compared with the
+   converged reference from the same starts with the same drive (symplectic Euler at
+   3.125 us) by the ensemble accuracy study's own comparison
    (`studies.accuracy_ensemble.compare`), with the completion time's median and the median of
-   the members' own differences from the reference's; and `pass_quiet` with `each` member by
-   member.
+   the members' own differences from the reference's; and with `each`, member by member.
 """
 
 from __future__ import annotations
@@ -41,18 +41,22 @@ DRIVES = {"default": [],
 CASES = ("dual_arm_sequential", "single_arm_case_I", "single_arm_case_II", "single_arm_case_III")
 #: The converged reference: symplectic Euler at dt_s / 320 (3.125 us at the shipped 1 ms).
 REFERENCE = {"substeps": 320, "integrator": {"method": "symplectic_euler"}}
-READINGS = ("each", "pass_quiet")
+#: (name, its --sets) of the settings of the steps compared: every reading ends a step; a step
+#: may pass the quiet ones, up to the default largest step (1 ms) or up to 0.4 ms, the default
+#: speed loop's period (the longest step its readings allowed in a clamp).
+READINGS = {"each": ["simulation.integrator.drive_readings=each"],
+            "pass_quiet": ["simulation.integrator.drive_readings=pass_quiet"],
+            "pass_quiet, h_max 0.4 ms": ["simulation.integrator.drive_readings=pass_quiet",
+                                         "simulation.integrator.h_max_s=4e-4"]}
 
 
 def scenario(name: str, drive: str, readings: str):
-    return spotsim.load_scenario(ROOT / "config" / f"{name}.yaml",
-                                 [*DRIVES[drive], f"simulation.integrator.drive_readings={readings}"])
+    return spotsim.load_scenario(ROOT / "config" / f"{name}.yaml", [*DRIVES[drive], *READINGS[readings]])
 
 
 def speed(names, drives, rounds: int) -> None:
-    print("| drive | case | wall, each (s) | wall, pass_quiet (s) | each / pass_quiet | real time, each "
-          "| real time, pass_quiet | steps, each | steps, pass_quiet |")
-    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+    print("| drive | case | steps | wall, median (s) | each / this | real time | accepted steps | rejected steps |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- |")
     for drive in drives:
         for name in names:
             models = {r: spotsim.build_model(scenario(name, drive, r)) for r in READINGS}
@@ -65,11 +69,11 @@ def speed(names, drives, rounds: int) -> None:
                     last[r] = spotsim.simulate(models[r].scenario, model=models[r]).summary
                     walls[r].append(last[r]["wall_time_s"])
             wall = {r: statistics.median(walls[r]) for r in READINGS}
-            rt = {r: last[r]["sim_time_s"] / wall[r] for r in READINGS}
-            steps = {r: last[r]["integrator"]["accepted_steps"] for r in READINGS}
-            print(f"| {drive} | {name} | {wall['each']:.3f} | {wall['pass_quiet']:.3f} "
-                  f"| {wall['each'] / wall['pass_quiet']:.2f} | {rt['each']:.1f} | {rt['pass_quiet']:.1f} "
-                  f"| {steps['each']} | {steps['pass_quiet']} |", flush=True)
+            for r in READINGS:
+                i = last[r]["integrator"]
+                print(f"| {drive} | {name} | {r} | {wall[r]:.3f} | {wall['each'] / wall[r]:.2f} "
+                      f"| {last[r]['sim_time_s'] / wall[r]:.1f} | {i['accepted_steps']} | {i['rejected_steps']} |",
+                      flush=True)
 
 
 def completion_shift(rows: list[dict], ref: list[dict], p: str) -> tuple[float, float]:
@@ -85,7 +89,7 @@ def completion_shift(rows: list[dict], ref: list[dict], p: str) -> tuple[float, 
 
 def accuracy(names, drives, members: int) -> None:
     print(f"\n{members} starts per ensemble (seed 0), each against the reference (symplectic Euler at 3.125 µs, "
-          "the same drive) from the same starts; last column: pass_quiet against each\n")
+          "the same drive) from the same starts; last column: against each\n")
     print("| drive | case, starts | grasp | readings | peak force, median (N) | residual, median (mm) "
           "| peak force, member by member | peak torque, member by member | residual median's difference "
           "| residual KS p | meets the targets | completion, median (s) | completion's difference, median (ms) "
@@ -97,15 +101,15 @@ def accuracy(names, drives, members: int) -> None:
                 ref, _, n = ensemble_rows(spotsim.replace(scenario(name, drive, "each"), simulation=REFERENCE),
                                           members, family)
                 rows = {r: ensemble_rows(scenario(name, drive, r), members, family)[0] for r in READINGS}
-                against_each = compare(rows["pass_quiet"], rows["each"], n, n > 1)
+                against_each = {r: compare(rows[r], rows["each"], n, n > 1) for r in READINGS}
                 for r in READINGS:
                     c = compare(rows[r], ref, n, n > 1)
                     for g in range(n):
                         p = grasp_prefix(g, n)
                         force, residual = medians(rows[r], p)
                         completion, shift = completion_shift(rows[r], ref, p)
-                        own = (pct(against_each[p + "peak_force_paired_rel"],
-                                   against_each[p + "peak_force_paired_rel_error"]) if r == "pass_quiet" else "")
+                        own = (pct(against_each[r][p + "peak_force_paired_rel"],
+                                   against_each[r][p + "peak_force_paired_rel_error"]) if r != "each" else "")
                         print(f"| {drive} | {name}, {family.replace('_', ' ')} | {g + 1} | {r} | {force:.1f} "
                               f"| {residual:.3g} "
                               f"| {pct(c[p + 'peak_force_paired_rel'], c[p + 'peak_force_paired_rel_error'])} "
