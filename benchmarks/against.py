@@ -4,6 +4,7 @@ ensemble's comparison with its reference's members."""
 from __future__ import annotations
 
 import numpy as np
+from speed import pct
 
 import spotsim
 from spotsim.studies.accuracy_ensemble import compare
@@ -44,3 +45,8 @@ def medians(rows: list[dict], p: str) -> tuple[float, float]:
     force = np.median([r[p + "peak_force_norm_N"] for r in rows if r.get(p + "peak_force_norm_N")])
     residual = np.nanmedian([r[p + "residual_norm_mm"] for r in rows if r.get(p + "residual_norm_mm") is not None])
     return float(force), float(residual)
+
+
+def rel(c: dict, key: str) -> str:
+    """A comparison's relative difference `key` (`compare`'s `*_rel`) with its sampling error, in per cent."""
+    return pct(c[key], c[key + "_error"])

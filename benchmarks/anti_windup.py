@@ -19,8 +19,8 @@ from __future__ import annotations
 
 import argparse
 
-from against import ensemble_rows, medians
-from speed import ROOT, measured_at, pct
+from against import ensemble_rows, medians, rel
+from speed import ROOT, measured_at
 
 import spotsim
 from spotsim.studies.accuracy_ensemble import compare
@@ -60,9 +60,8 @@ def main() -> None:
                     force, residual = medians(rows, p)
                     print(f"| {title}, {family.replace('_', ' ')} | {aw.replace('_', '-')} | {period * 1e3:g} against "
                           f"{periods[-1] * 1e3:g} | {g + 1} | {force:.1f} | {residual:.3g} "
-                          f"| {pct(c[p + 'peak_force_median_rel'], c[p + 'peak_force_median_rel_error'])} "
-                          f"| {pct(c[p + 'peak_force_paired_rel'], c[p + 'peak_force_paired_rel_error'])} "
-                          f"| {pct(c[p + 'residual_median_rel'], c[p + 'residual_median_rel_error'])} "
+                          f"| {rel(c, p + 'peak_force_median_rel')} | {rel(c, p + 'peak_force_paired_rel')} "
+                          f"| {rel(c, p + 'residual_median_rel')} "
                           f"| {c[p + 'residual_ks_p']:.2g} | {wall:.3f} / {last_wall:.3f} |", flush=True)
 
 

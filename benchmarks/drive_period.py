@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import argparse
 
-from against import ensemble_rows, medians
+from against import ensemble_rows, medians, rel
 from bristle_switches import CASES, pct
 from speed import ROOT, measured_at
 
@@ -56,9 +56,9 @@ def main() -> None:
                 p = grasp_prefix(g, n_grasps)
                 force, residual = medians(ref, p)
                 print(f"| {title} | {period * 1e3:g} | {g + 1} | {force:.1f} | {residual:.3g} "
-                      f"| {pct(c[p + 'peak_force_median_rel'], c[p + 'peak_force_median_rel_error'])} "
+                      f"| {rel(c, p + 'peak_force_median_rel')} "
                       f"| {pct(c[p + 'peak_force_paired_rel'])} "
-                      f"| {pct(c[p + 'residual_median_rel'], c[p + 'residual_median_rel_error'])} "
+                      f"| {rel(c, p + 'residual_median_rel')} "
                       f"| {c[p + 'residual_ks_p']:.2g} | {wall:.3f} / {ref_wall:.2f} |", flush=True)
 
 

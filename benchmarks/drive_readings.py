@@ -26,8 +26,8 @@ import argparse
 import statistics
 
 import numpy as np
-from against import ensemble_rows, medians
-from speed import ROOT, measured_at, pct
+from against import ensemble_rows, medians, rel
+from speed import ROOT, measured_at
 
 import spotsim
 from spotsim.studies.accuracy_ensemble import compare
@@ -101,20 +101,18 @@ def accuracy(names, drives, members: int) -> None:
                 ref, _, n = ensemble_rows(spotsim.replace(scenario(name, drive, "each"), simulation=REFERENCE),
                                           members, family)
                 rows = {r: ensemble_rows(scenario(name, drive, r), members, family)[0] for r in READINGS}
-                against_each = {r: compare(rows[r], rows["each"], n, n > 1) for r in READINGS}
+                against_each = {r: compare(rows[r], rows["each"], n, n > 1) for r in READINGS if r != "each"}
                 for r in READINGS:
                     c = compare(rows[r], ref, n, n > 1)
                     for g in range(n):
                         p = grasp_prefix(g, n)
                         force, residual = medians(rows[r], p)
                         completion, shift = completion_shift(rows[r], ref, p)
-                        own = (pct(against_each[r][p + "peak_force_paired_rel"],
-                                   against_each[r][p + "peak_force_paired_rel_error"]) if r != "each" else "")
+                        own = rel(against_each[r], p + "peak_force_paired_rel") if r != "each" else ""
                         print(f"| {drive} | {name}, {family.replace('_', ' ')} | {g + 1} | {r} | {force:.1f} "
                               f"| {residual:.3g} "
-                              f"| {pct(c[p + 'peak_force_paired_rel'], c[p + 'peak_force_paired_rel_error'])} "
-                              f"| {pct(c[p + 'peak_torque_paired_rel'], c[p + 'peak_torque_paired_rel_error'])} "
-                              f"| {pct(c[p + 'residual_median_rel'], c[p + 'residual_median_rel_error'])} "
+                              f"| {rel(c, p + 'peak_force_paired_rel')} | {rel(c, p + 'peak_torque_paired_rel')} "
+                              f"| {rel(c, p + 'residual_median_rel')} "
                               f"| {c[p + 'residual_ks_p']:.2g} | {c['meets_targets']} | {completion:.3f} "
                               f"| {shift:+.1f} | {own} |", flush=True)
 

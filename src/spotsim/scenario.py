@@ -887,32 +887,36 @@ def to_yaml(s: Scenario) -> str:
     return yaml.safe_dump(to_dict(s), sort_keys=False)
 
 
+#: Keys added to a block after scenarios were first fingerprinted, by the block's path, at the
+#: value that runs the scene as before the key: there they stay out of the fingerprint.
+AS_BEFORE = {("completion",): {"record_after_s": 0.0},  # the grasp ends the run
+             ("simulation", "integrator"): {"kick": "step", "drive_readings": "each"},
+             ("end_effector", "motor"): {"anti_windup": "conditional"}}
+
+
 def fingerprint(s) -> str:
     """The scene a scenario runs, as a short hash of every value but its name and description,
     of the motor block unless its drive is the motor (no other drive reads it), and of the arms'
     compliance block unless their joints are compliant (rigid joints read nothing of it), of the
-    dynamometer and the suspension unless they are there, of `completion.record_after_s` at
-    zero, of `simulation.integrator.kick` at `step`, of its `drive_readings` at `each` and of the
-    motor's `anti_windup` at `conditional` (as before those keys): equal for two scenarios that run the same physics at
-    the same settings."""
+    dynamometer and the suspension unless they are there, and of the keys of AS_BEFORE at their
+    values there: equal for two scenarios that run the same physics at the same settings."""
     raw = {k: v for k, v in to_dict(s).items() if k not in ("name", "description")}
     if s.end_effector.drive != "motor":
         raw["end_effector"] = {k: v for k, v in raw["end_effector"].items() if k != "motor"}
-    elif s.end_effector.motor.anti_windup == "conditional":  # as before the key
-        raw["end_effector"]["motor"] = {k: v for k, v in raw["end_effector"]["motor"].items() if k != "anti_windup"}
     arms = "arm" if "arm" in raw else "robot"
     if raw[arms]["compliance"]["joints"] == "rigid":
         raw[arms] = {k: v for k, v in raw[arms].items() if k != "compliance"}
     if raw.get("arm", {}).get("base") == "fixed":  # the lab rig's blocks, unless it is there
         raw["arm"] = {k: v for k, v in raw["arm"].items() if k != "base"}
         raw.pop("dynamometer")
-    if raw["completion"]["record_after_s"] == 0.0:  # the grasp ends the run, as before the key
-        raw["completion"] = {k: v for k, v in raw["completion"].items() if k != "record_after_s"}
     if raw.get("suspension", {}).get("kind") == "none":
         raw.pop("suspension")
-    defaults = {"kick": "step", "drive_readings": "each"}  # as before the keys
-    raw["simulation"]["integrator"] = {k: v for k, v in raw["simulation"]["integrator"].items()
-                                       if defaults.get(k) != v}
+    for path, before in AS_BEFORE.items():
+        parent = raw
+        for k in path[:-1]:
+            parent = parent[k]
+        if path[-1] in parent:
+            parent[path[-1]] = {k: v for k, v in parent[path[-1]].items() if k not in before or before[k] != v}
     return hashlib.sha256(json.dumps(raw, sort_keys=True).encode()).hexdigest()[:16]
 
 

@@ -408,15 +408,15 @@ def quiet_readings(m, d, ee):
     are taken at their times at its end, `sample_controllers`): the transmission is stuck
     (it holds the fingers: their opening stays, and a state changes only at a step's end) and
     the loop presses at its upper clamp, at which the next reading (of the travel since the
-    last) keeps it, and so does one reading less than half the set speed after it.
+    last) keeps it, and so does a reading after it of less than half the set speed.
 
-    Then every later reading keeps it too: each reads no travel, an error near the set speed,
-    above the one assumed; by back-calculation the excess of the current asked for over the
+    Then every later reading keeps it too: each reads no travel, an error near the set speed
+    (positive: a scenario rule), above the one assumed; by back-calculation the excess of the current asked for over the
     clamp decays by T_i / (T_i + h) a reading and gains K e h / T_i > 0, so it stays positive;
     by conditional integration the integral stays while clamped, and what is asked grows with
     the error."""
     p = m.drives
-    if d.transmission[ee] != STUCK or not d.saturated[ee] or p.closing_speed[ee] <= 0.0:
+    if d.transmission[ee] != STUCK or not d.saturated[ee]:
         return False
     elapsed = d.sample_t - d.encoder_t[ee]
     if not elapsed > 0.0:  # (nan: no reading yet)
