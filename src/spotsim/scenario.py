@@ -921,11 +921,17 @@ def fingerprint(s) -> str:
 
 
 def replace(s: Scenario, **changes) -> Scenario:
-    """A copy of `s` with `section={'key': value}` or `key=value` changes, validated again."""
-    raw = to_dict(s)
+    """A copy of `s` with `section={'key': value}` or `key=value` changes, validated again. A
+    change to a section changes only the keys it names, at any depth: `simulation={'integrator':
+    {'kick': 'staggered'}}` keeps the scenario's other integrator keys."""
+    return from_dict(_merged(to_dict(s), changes), f"<{s.name}>")
+
+
+def _merged(raw: dict, changes: dict) -> dict:
+    """raw (a scenario's dict) with changes merged in, section by section."""
     for name, value in changes.items():
-        if isinstance(value, dict):
-            raw.setdefault(name, {}).update(value)
+        if isinstance(value, dict) and isinstance(raw.get(name), dict):
+            _merged(raw[name], value)
         else:
             raw[name] = value
-    return from_dict(raw, f"<{s.name}>")
+    return raw

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ..files import prepare
-from ..scenario import Integrator, modules_of, replace, to_dict
+from ..scenario import Integrator, modules_of, replace
 from ..tables import ADAPTIVE, METHODS
 from .ensemble import grasp_names
 from .runs import (
@@ -106,7 +106,7 @@ class Setting:
 
     def apply(self, s):
         """The scenario `s` run at this setting (validated again)."""
-        integrator = {**to_dict(s.simulation.integrator), "method": self.method}
+        integrator = {"method": self.method}
         simulation = {"integrator": integrator}
         if self.method == "dopri5":
             integrator.update(rtol=self.rtol, atol=self.atol)

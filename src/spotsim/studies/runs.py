@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import SpotsimError
-from ..scenario import replace, to_dict
+from ..scenario import replace
 from ..status import (
     COMPARABLE,
     COMPLETED,
@@ -40,9 +40,9 @@ def step_scaled(s, factor: float):
     onset_depth x factor. dopri5: rtol and atol x factor."""
     i = s.simulation.integrator
     if i.method == "dopri5":
-        return replace(s, simulation={"integrator": {**to_dict(i), "rtol": i.rtol * factor, "atol": i.atol * factor}})
+        return replace(s, simulation={"integrator": {"rtol": i.rtol * factor, "atol": i.atol * factor}})
     if i.method == "adaptive_euler":
-        return replace(s, simulation={"integrator": {**to_dict(i), "velocity_tol_m_s": i.velocity_tol_m_s * factor**2,
+        return replace(s, simulation={"integrator": {"velocity_tol_m_s": i.velocity_tol_m_s * factor**2,
                                                      "onset_depth_m": i.onset_depth_m * factor}})
     substeps = s.simulation.substeps / factor
     if substeps < 1 or not math.isclose(substeps, round(substeps)):
@@ -350,7 +350,7 @@ def warm_up(scenario, methods, duration_s: float = 0.5) -> None:
     """Run each method briefly here (dopri5 at a loose tolerance), so that no timed run pays for
     loading its compiled kernels: the processes `Runs` forks inherit them loaded."""
     for method in methods:
-        integrator = {**to_dict(scenario.simulation.integrator), "method": method}
+        integrator = {"method": method}
         if method == "dopri5":
             integrator.update(rtol=1e-3, atol=1e-6)
         run_task(Task(replace(scenario, simulation={"duration_s": min(duration_s, scenario.simulation.duration_s),
