@@ -323,3 +323,84 @@ def accuracy_ensemble_study(scenario, settings: list, reference, out_dir, n: int
 def slug(label: str) -> str:
     """A file name for a setting's label: `symplectic_euler h 0.0125 ms` -> `symplectic_euler_h_0.0125_ms`."""
     return re.sub(r"[^A-Za-z0-9.+-]+", "_", label).strip("_")
+
+
+# ----------------------------------------------------------------------------- convergence checks
+
+#: A numerical parameter refined (a controller's period divided by ten) moves no median by more
+#: than this (peak force, residual, completion time, the robot's centroid displacement), nor a
+#: seated share out of the other's 90 % interval (`check_rows`, `period_verdict`).
+PERIOD_MEDIAN_REL = 0.03
+
+
+def share_interval(k: int, n: int, level: float = 0.9) -> tuple[float, float]:
+    """The Clopper-Pearson interval of a share k/n at `level`."""
+    from scipy.stats import beta
+
+    a = (1.0 - level) / 2
+    return (0.0 if k == 0 else float(beta.ppf(a, k, n - k + 1)),
+            1.0 if k == n else float(beta.ppf(1.0 - a, k + 1, n - k)))
+
+
+def check_rows(rows: list[dict], ref_rows: list[dict], dual: bool) -> list[dict]:
+    """Per grasp, a tested ensemble (member rows) against a reference ensemble from the same
+    starts: `compare` with the completion time's median difference, the
+    peak force's KS p-value and the seated share's 90 % interval of the reference, and the
+    period check's verdicts."""
+    n_grasps = 2 if dual else 1
+    c = compare(rows, ref_rows, n_grasps, dual)
+    members = {row["member"] for row in rows}
+    ref = [row for row in ref_rows if row["member"] in members]  # the same starts, as `compare` takes them
+    out = []
+    for g in range(n_grasps):
+        p = grasp_prefix(g, n_grasps)
+        x = {k[len(p):]: v for k, v in c.items() if k.startswith(p)} if p else dict(c)
+        x["completion_median_rel"] = median_rel([row[f"{p}completed_s"] for row in rows],
+                                                [row[f"{p}completed_s"] for row in ref])
+        x["completion_median_rel_error"] = median_rel_error([row[f"{p}completed_s"] for row in rows],
+                                                            [row[f"{p}completed_s"] for row in ref])
+        x["peak_force_ks_p"] = ks_pvalue([row[f"{p}peak_force_norm_N"] for row in rows],
+                                         [row[f"{p}peak_force_norm_N"] for row in ref])
+        ran = [row for row in ref if row["status"] != "interrupted"]
+        k = sum(row[f"{p}class"] == "seated" for row in ran)
+        x["seated_interval"] = share_interval(k, len(ran)) if ran else (math.nan, math.nan)
+        # the period check: each median moved by more than PERIOD_MEDIAN_REL, and whether by more
+        # than two of its sampling errors (resolved by the members)
+        medians = [("peak force", "peak_force_median_rel"), ("residual", "residual_median_rel"),
+                   ("completion", "completion_median_rel")] + ([("centroid", "centroid_median_rel")] if dual else [])
+        x["medians_beyond"] = [(name, abs(x[key]) > 2 * x[f"{key}_error"]) for name, key in medians
+                               if not abs(x[key]) <= PERIOD_MEDIAN_REL]
+        lo, hi = x["seated_interval"]
+        x["seated_within"] = lo <= x["seated"] <= hi
+        x["grasp"] = g + 1
+        out.append(x)
+    return out
+
+
+def _resolved(flag: bool) -> str:
+    return "resolved" if flag else "within 2 sampling errors"
+
+
+def period_verdict(x: dict) -> str:
+    """The period check's verdict on one grasp (`check_rows`)."""
+    beyond = "; ".join(f"{name} ({_resolved(flag)})" for name, flag in x["medians_beyond"])
+    medians = f"medians beyond {PERIOD_MEDIAN_REL * 100:.0f} %: {beyond}" if beyond else \
+        f"medians within {PERIOD_MEDIAN_REL * 100:.0f} %"
+    return f"{medians}; seated share {'within' if x['seated_within'] else 'NOT within'} the other's 90 % interval"
+
+
+def reference_verdict(x: dict) -> str:
+    """A check against a finer step's verdict on one grasp (`check_rows`): the ensemble
+    accuracy studies' targets it misses, and whether the members resolve each miss."""
+    missed = []
+    for q in ("peak_force", "peak_torque", "centroid"):
+        d = x.get(f"{q}_paired_rel")
+        if d is not None and not abs(d) <= DETERMINISTIC_REL:
+            flag = abs(d) > 2 * x[f"{q}_paired_rel_error"]
+            missed.append(f"{q.replace('_', ' ')} member by member ({_resolved(flag)})")
+    if not abs(x["residual_median_rel"]) <= RESIDUAL_MEDIAN_REL:
+        flag = abs(x["residual_median_rel"]) > 2 * x["residual_median_rel_error"]
+        missed.append(f"residual median ({_resolved(flag)})")
+    if not x["residual_ks_p"] > KS_ALPHA:
+        missed.append("residual KS")
+    return "meets the targets" if not missed else "misses: " + "; ".join(missed)
