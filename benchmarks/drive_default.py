@@ -1,0 +1,104 @@
+"""The motor drive's next default, checked over many starts: back-calculation at a 0.1 ms speed
+loop, steps that pass its quiet readings (at most 0.4 ms), at each velocity tolerance.
+
+    python benchmarks/drive_default.py [--members 128] [--tols 1e-5,3e-6] [--cases NAME ...]
+                                       [--cache DIR]
+
+For each case and start family (all axes and angles; one axis at a time) and each velocity
+tolerance of TOLS, ensembles of MEMBERS starts (seed 0) of the drive DRIVE with the steps STEPS,
+checked as the drive comparison checks the default (`studies.accuracy_ensemble.check_rows`):
+
+1. against the converged reference from the same starts with the same drive (symplectic Euler
+   at 3.125 us): the ensemble accuracy studies' targets (`reference_verdict`);
+2. against the same ensemble with the speed loop's period divided by ten (0.01 ms), at the same
+   tolerance: no median moved by more than 3 %, the seated share within the other's 90 %
+   interval (`period_verdict`).
+
+The 32 members of the drive comparison resolve a peak force's median of member-by-member
+differences to about ±1 % and a residual median to ±3-7 %, about the targets themselves; this
+benchmark takes four times as many. With --cache, each ensemble's member rows are kept in DIR
+(one pickle per case, family, member count and setting) and reused when run again.
+"""
+
+from __future__ import annotations
+
+import argparse
+import pickle
+from pathlib import Path
+
+from against import CASES, ensemble_rows
+from speed import ROOT, measured_at
+
+import spotsim
+from spotsim.studies.accuracy_ensemble import check_rows, period_verdict, reference_verdict
+from spotsim.studies.ensemble import ALL_AXES, ONE_AXIS
+
+#: The drive: the motor with back-calculation, its speed loop read every 0.1 ms.
+DRIVE = ["end_effector.motor.anti_windup=back_calculation", "end_effector.motor.speed_loop_period_s=1e-4"]
+#: The period check's speed loop: a tenth of DRIVE's.
+LOOP_TENTH = ["end_effector.motor.speed_loop_period_s=1e-5"]
+#: The steps: passing the loop's quiet readings, at most 0.4 ms.
+STEPS = ["simulation.integrator.drive_readings=pass_quiet", "simulation.integrator.h_max_s=4e-4"]
+#: The converged reference: symplectic Euler at dt_s / 320 (3.125 us at the shipped 1 ms).
+REFERENCE = ["simulation.integrator.method=symplectic_euler", "simulation.substeps=320"]
+
+
+def rows_of(name: str, family: str, members: int, tag: str, sets: list[str], cache: Path | None):
+    """An ensemble's (member rows, wall per member (s), grasps), from the cache if it is there."""
+    path = cache / f"rows_{name}_{family}_{members}_{tag}.pkl" if cache else None
+    if path and path.exists():
+        return pickle.loads(path.read_bytes())
+    out = ensemble_rows(spotsim.load_scenario(ROOT / "config" / f"{name}.yaml", sets), members, family)
+    if path:
+        path.write_bytes(pickle.dumps(out))
+    return out
+
+
+def pct(x: dict, key: str) -> str:
+    return f"{x[key] * 100:+.1f} % ± {x[key + '_error'] * 100:.1f} %"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--members", type=int, default=128)
+    ap.add_argument("--tols", default="1e-5,3e-6", help="velocity tolerances, m/s, comma-separated")
+    ap.add_argument("--cases", nargs="+", default=[name for _, name in CASES], choices=[name for _, name in CASES])
+    ap.add_argument("--cache", type=Path, help="keep and reuse each ensemble's member rows here")
+    args = ap.parse_args()
+    if args.cache:
+        args.cache.mkdir(parents=True, exist_ok=True)
+    tols = args.tols.split(",")
+    titles = {name: title for title, name in CASES}
+    print(f"Measured by `python benchmarks/drive_default.py --members {args.members} --tols {args.tols}` at "
+          f"{measured_at()}: {args.members} starts (seed 0) per ensemble; the drive "
+          f"{', '.join(s.split('.')[-1] for s in DRIVE)}; the steps {', '.join(s.split('.')[-1] for s in STEPS)}\n")
+    print("| case | starts | velocity tolerance (m/s) | compared | grasp | peak force (N): median, its difference "
+          "| member by member | residual e (mm): median, its difference | residual KS p | completion time "
+          "| robot centroid displacement | seated [the other's 90 % interval] | verdict | wall per member (s) |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+    for name in args.cases:
+        dual = name.startswith("dual")
+        for family in (ALL_AXES, ONE_AXIS):
+            ref = rows_of(name, family, args.members, "fine", DRIVE + REFERENCE, args.cache)[0]
+            for tol in tols:
+                step = [*STEPS, f"simulation.integrator.velocity_tol_m_s={tol}"]
+                rows, wall, _ = rows_of(name, family, args.members, f"tol{tol}", DRIVE + step, args.cache)
+                tenth, tenth_wall, _ = rows_of(name, family, args.members, f"tol{tol},loop1e-5",
+                                               DRIVE + step + LOOP_TENTH, args.cache)
+                checks = (("against fine (3.125 µs)", check_rows(rows, ref, dual), reference_verdict, wall),
+                          ("speed loop 0.1 → 0.01 ms", check_rows(tenth, rows, dual), period_verdict, tenth_wall))
+                for label, xs, verdict, w in checks:
+                    for x in xs:
+                        print(f"| {titles[name]} | {family.replace('_', ' ')} | {tol} | {label} "
+                              f"| {x['grasp'] if dual else '–'} "
+                              f"| {x['peak_force_median_N']:.1f}: {pct(x, 'peak_force_median_rel')} "
+                              f"| {pct(x, 'peak_force_paired_rel')} "
+                              f"| {x['residual_median_mm']:.3g}: {pct(x, 'residual_median_rel')} "
+                              f"| {x['residual_ks_p']:.2g} | {pct(x, 'completion_median_rel')} "
+                              f"| {pct(x, 'centroid_median_rel') if dual else '–'} "
+                              f"| {x['seated'] * 100:.0f} % [{x['seated_interval'][0] * 100:.0f}, "
+                              f"{x['seated_interval'][1] * 100:.0f}] | {verdict(x)} | {w:.3f} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
