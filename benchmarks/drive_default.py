@@ -2,7 +2,7 @@
 loop, steps that pass its quiet readings (at most 0.4 ms), at each velocity tolerance.
 
     python benchmarks/drive_default.py [--members 128] [--tols 1e-5,3e-6] [--cases NAME ...]
-                                       [--cache DIR]
+                                       [--finer NAME:FAMILY ...] [--cache DIR]
 
 For each case and start family (all axes and angles; one axis at a time) and each velocity
 tolerance of TOLS, ensembles of MEMBERS starts (seed 0) of the drive DRIVE with the steps STEPS,
@@ -12,7 +12,9 @@ checked as the drive comparison checks the default (`studies.accuracy_ensemble.c
    at 3.125 us): the ensemble accuracy studies' targets (`reference_verdict`);
 2. against the same ensemble with the speed loop's period divided by ten (0.01 ms), at the same
    tolerance: no median moved by more than 3 %, the seated share within the other's 90 %
-   interval (`period_verdict`).
+   interval (`period_verdict`);
+3. for the case and family pairs given by --finer, against the reference's step divided by four
+   (0.78 us), and the reference against it: where the reference is itself not converged.
 
 The 32 members of the drive comparison resolve a peak force's median of member-by-member
 differences to about ±1 % and a residual median to ±3-7 %, about the targets themselves; this
@@ -39,8 +41,10 @@ DRIVE = ["end_effector.motor.anti_windup=back_calculation", "end_effector.motor.
 LOOP_TENTH = ["end_effector.motor.speed_loop_period_s=1e-5"]
 #: The steps: passing the loop's quiet readings, at most 0.4 ms.
 STEPS = ["simulation.integrator.drive_readings=pass_quiet", "simulation.integrator.h_max_s=4e-4"]
-#: The converged reference: symplectic Euler at dt_s / 320 (3.125 us at the shipped 1 ms).
+#: The converged reference: symplectic Euler at dt_s / 320 (3.125 us at the shipped 1 ms), and its
+#: step divided by four.
 REFERENCE = ["simulation.integrator.method=symplectic_euler", "simulation.substeps=320"]
+FINER = ["simulation.integrator.method=symplectic_euler", "simulation.substeps=1280"]
 
 
 def rows_of(name: str, family: str, members: int, tag: str, sets: list[str], cache: Path | None):
@@ -63,6 +67,8 @@ def main() -> None:
     ap.add_argument("--members", type=int, default=128)
     ap.add_argument("--tols", default="1e-5,3e-6", help="velocity tolerances, m/s, comma-separated")
     ap.add_argument("--cases", nargs="+", default=[name for _, name in CASES], choices=[name for _, name in CASES])
+    ap.add_argument("--finer", nargs="+", default=[], metavar="NAME:FAMILY",
+                    help="also check these against the step four times finer than the reference's")
     ap.add_argument("--cache", type=Path, help="keep and reuse each ensemble's member rows here")
     args = ap.parse_args()
     if args.cache:
@@ -80,13 +86,19 @@ def main() -> None:
         dual = name.startswith("dual")
         for family in (ALL_AXES, ONE_AXIS):
             ref = rows_of(name, family, args.members, "fine", DRIVE + REFERENCE, args.cache)[0]
+            finer = (rows_of(name, family, args.members, "finer", DRIVE + FINER, args.cache)[0]
+                     if f"{name}:{family}" in args.finer else None)
             for tol in tols:
                 step = [*STEPS, f"simulation.integrator.velocity_tol_m_s={tol}"]
                 rows, wall, _ = rows_of(name, family, args.members, f"tol{tol}", DRIVE + step, args.cache)
                 tenth, tenth_wall, _ = rows_of(name, family, args.members, f"tol{tol},loop1e-5",
                                                DRIVE + step + LOOP_TENTH, args.cache)
-                checks = (("against fine (3.125 µs)", check_rows(rows, ref, dual), reference_verdict, wall),
-                          ("speed loop 0.1 → 0.01 ms", check_rows(tenth, rows, dual), period_verdict, tenth_wall))
+                checks = [("against fine (3.125 µs)", check_rows(rows, ref, dual), reference_verdict, wall),
+                          ("speed loop 0.1 → 0.01 ms", check_rows(tenth, rows, dual), period_verdict, tenth_wall)]
+                if finer is not None:
+                    checks.append(("against finer (0.78 µs)", check_rows(rows, finer, dual), reference_verdict, wall))
+                    if tol == tols[-1]:
+                        checks.append(("fine against finer", check_rows(ref, finer, dual), reference_verdict, ""))
                 for label, xs, verdict, w in checks:
                     for x in xs:
                         print(f"| {titles[name]} | {family.replace('_', ' ')} | {tol} | {label} "
@@ -97,7 +109,8 @@ def main() -> None:
                               f"| {x['residual_ks_p']:.2g} | {pct(x, 'completion_median_rel')} "
                               f"| {pct(x, 'centroid_median_rel') if dual else '–'} "
                               f"| {x['seated'] * 100:.0f} % [{x['seated_interval'][0] * 100:.0f}, "
-                              f"{x['seated_interval'][1] * 100:.0f}] | {verdict(x)} | {w:.3f} |", flush=True)
+                              f"{x['seated_interval'][1] * 100:.0f}] | {verdict(x)} | {w and f'{w:.3f}'} |",
+                              flush=True)
 
 
 if __name__ == "__main__":
