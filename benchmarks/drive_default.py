@@ -66,7 +66,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--members", type=int, default=128)
     ap.add_argument("--tols", default="1e-5,3e-6", help="velocity tolerances, m/s, comma-separated")
-    ap.add_argument("--cases", nargs="+", default=[name for _, name in CASES], choices=[name for _, name in CASES])
+    default_cases = [name for _, name in CASES]
+    ap.add_argument("--cases", nargs="+", default=default_cases, choices=default_cases)
     ap.add_argument("--finer", nargs="+", default=[], metavar="NAME:FAMILY",
                     help="also check these against the step four times finer than the reference's")
     ap.add_argument("--cache", type=Path, help="keep and reuse each ensemble's member rows here")
@@ -75,7 +76,12 @@ def main() -> None:
         args.cache.mkdir(parents=True, exist_ok=True)
     tols = args.tols.split(",")
     titles = {name: title for title, name in CASES}
-    print(f"Measured by `python benchmarks/drive_default.py --members {args.members} --tols {args.tols}` at "
+    shown = [f"--members {args.members}", f"--tols {args.tols}"]
+    if args.cases != default_cases:
+        shown.append("--cases " + " ".join(args.cases))
+    if args.finer:
+        shown.append("--finer " + " ".join(args.finer))
+    print(f"Measured by `python benchmarks/drive_default.py {' '.join(shown)}` at "
           f"{measured_at()}: {args.members} starts (seed 0) per ensemble; the drive "
           f"{', '.join(s.split('.')[-1] for s in DRIVE)}; the steps {', '.join(s.split('.')[-1] for s in STEPS)}\n")
     print("| case | starts | velocity tolerance (m/s) | compared | grasp | peak force (N): median, its difference "
