@@ -19,7 +19,8 @@ checked as the drive comparison checks the default (`studies.accuracy_ensemble.c
 The 32 members of the drive comparison resolve a peak force's median of member-by-member
 differences to about ±1 % and a residual median to ±3-7 %, about the targets themselves; this
 benchmark takes four times as many. With --cache, each ensemble's member rows are kept in DIR
-(one pickle per case, family, member count and setting) and reused when run again.
+(one pickle per case, family, member count and setting) and reused when run again. Its speed is
+benchmarks/drive_readings.py's to measure (with the machine to itself), not this one's.
 """
 
 from __future__ import annotations
@@ -86,8 +87,8 @@ def main() -> None:
           f"{', '.join(s.split('.')[-1] for s in DRIVE)}; the steps {', '.join(s.split('.')[-1] for s in STEPS)}\n")
     print("| case | starts | velocity tolerance (m/s) | compared | grasp | peak force (N): median, its difference "
           "| member by member | residual e (mm): median, its difference | residual KS p | completion time "
-          "| robot centroid displacement | seated [the other's 90 % interval] | verdict | wall per member (s) |")
-    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+          "| robot centroid displacement | seated [the other's 90 % interval] | verdict |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
     for name in args.cases:
         dual = name.startswith("dual")
         for family in (ALL_AXES, ONE_AXIS):
@@ -96,16 +97,16 @@ def main() -> None:
                      if f"{name}:{family}" in args.finer else None)
             for tol in tols:
                 step = [*STEPS, f"simulation.integrator.velocity_tol_m_s={tol}"]
-                rows, wall, _ = rows_of(name, family, args.members, f"tol{tol}", DRIVE + step, args.cache)
-                tenth, tenth_wall, _ = rows_of(name, family, args.members, f"tol{tol},loop1e-5",
-                                               DRIVE + step + LOOP_TENTH, args.cache)
-                checks = [("against fine (3.125 µs)", check_rows(rows, ref, dual), reference_verdict, wall),
-                          ("speed loop 0.1 → 0.01 ms", check_rows(tenth, rows, dual), period_verdict, tenth_wall)]
+                rows = rows_of(name, family, args.members, f"tol{tol}", DRIVE + step, args.cache)[0]
+                tenth = rows_of(name, family, args.members, f"tol{tol},loop1e-5", DRIVE + step + LOOP_TENTH,
+                                args.cache)[0]
+                checks = [("against fine (3.125 µs)", check_rows(rows, ref, dual), reference_verdict),
+                          ("speed loop 0.1 → 0.01 ms", check_rows(tenth, rows, dual), period_verdict)]
                 if finer is not None:
-                    checks.append(("against finer (0.78 µs)", check_rows(rows, finer, dual), reference_verdict, wall))
+                    checks.append(("against finer (0.78 µs)", check_rows(rows, finer, dual), reference_verdict))
                     if tol == tols[-1]:
-                        checks.append(("fine against finer", check_rows(ref, finer, dual), reference_verdict, ""))
-                for label, xs, verdict, w in checks:
+                        checks.append(("fine against finer", check_rows(ref, finer, dual), reference_verdict))
+                for label, xs, verdict in checks:
                     for x in xs:
                         print(f"| {titles[name]} | {family.replace('_', ' ')} | {tol} | {label} "
                               f"| {x['grasp'] if dual else '–'} "
@@ -115,8 +116,7 @@ def main() -> None:
                               f"| {x['residual_ks_p']:.2g} | {pct(x, 'completion_median_rel')} "
                               f"| {pct(x, 'centroid_median_rel') if dual else '–'} "
                               f"| {x['seated'] * 100:.0f} % [{x['seated_interval'][0] * 100:.0f}, "
-                              f"{x['seated_interval'][1] * 100:.0f}] | {verdict(x)} | {w and f'{w:.3f}'} |",
-                              flush=True)
+                              f"{x['seated_interval'][1] * 100:.0f}] | {verdict(x)} |", flush=True)
 
 
 if __name__ == "__main__":
