@@ -1832,6 +1832,7 @@ RENDER = {
     "kick": lambda r: benchmark_table("kick"),
     "anti-windup": lambda r: benchmark_table("anti_windup"),
     "drive-readings": lambda r: benchmark_table("drive_readings"),
+    "drive-default": lambda r: benchmark_table("drive_default"),
 }
 PAGES = [ROOT / "README.md", DOCS / "usage.md", DOCS / "validation.md", DOCS / "performance.md"]
 
