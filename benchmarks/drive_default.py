@@ -29,7 +29,7 @@ import argparse
 import pickle
 from pathlib import Path
 
-from against import CASES, ensemble_rows
+from against import CASES, ensemble_rows, rel
 from speed import ROOT, measured_at
 
 import spotsim
@@ -42,8 +42,8 @@ DRIVE = ["end_effector.motor.anti_windup=back_calculation", "end_effector.motor.
 LOOP_TENTH = ["end_effector.motor.speed_loop_period_s=1e-5"]
 #: The steps: passing the loop's quiet readings, at most 0.4 ms.
 STEPS = ["simulation.integrator.drive_readings=pass_quiet", "simulation.integrator.h_max_s=4e-4"]
-#: The converged reference: symplectic Euler at dt_s / 320 (3.125 us at the shipped 1 ms), and its
-#: step divided by four.
+#: The reference: symplectic Euler at dt_s / 320 (3.125 us at the shipped 1 ms), and its step
+#: divided by four (`--finer`: where the reference is itself not converged).
 REFERENCE = ["simulation.integrator.method=symplectic_euler", "simulation.substeps=320"]
 FINER = ["simulation.integrator.method=symplectic_euler", "simulation.substeps=1280"]
 
@@ -57,10 +57,6 @@ def rows_of(name: str, family: str, members: int, tag: str, sets: list[str], cac
     if path:
         path.write_bytes(pickle.dumps(out))
     return out
-
-
-def pct(x: dict, key: str) -> str:
-    return f"{x[key] * 100:+.1f} % ± {x[key + '_error'] * 100:.1f} %"
 
 
 def main() -> None:
@@ -110,11 +106,11 @@ def main() -> None:
                     for x in xs:
                         print(f"| {titles[name]} | {family.replace('_', ' ')} | {tol} | {label} "
                               f"| {x['grasp'] if dual else '–'} "
-                              f"| {x['peak_force_median_N']:.1f}: {pct(x, 'peak_force_median_rel')} "
-                              f"| {pct(x, 'peak_force_paired_rel')} "
-                              f"| {x['residual_median_mm']:.3g}: {pct(x, 'residual_median_rel')} "
-                              f"| {x['residual_ks_p']:.2g} | {pct(x, 'completion_median_rel')} "
-                              f"| {pct(x, 'centroid_median_rel') if dual else '–'} "
+                              f"| {x['peak_force_median_N']:.1f}: {rel(x, 'peak_force_median_rel')} "
+                              f"| {rel(x, 'peak_force_paired_rel')} "
+                              f"| {x['residual_median_mm']:.3g}: {rel(x, 'residual_median_rel')} "
+                              f"| {x['residual_ks_p']:.2g} | {rel(x, 'completion_median_rel')} "
+                              f"| {rel(x, 'centroid_median_rel') if dual else '–'} "
                               f"| {x['seated'] * 100:.0f} % [{x['seated_interval'][0] * 100:.0f}, "
                               f"{x['seated_interval'][1] * 100:.0f}] | {verdict(x)} |", flush=True)
 
