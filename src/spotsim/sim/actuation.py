@@ -411,10 +411,10 @@ def quiet_readings(m, d, ee):
     last) keeps it, and so does a reading after it of less than half the set speed.
 
     Then every later reading keeps it too: each reads no travel, an error near the set speed
-    (positive: a scenario rule), above the one assumed; by back-calculation the excess of the current asked for over the
-    clamp decays by T_i / (T_i + h) a reading and gains K e h / T_i > 0, so it stays positive;
-    by conditional integration the integral stays while clamped, and what is asked grows with
-    the error."""
+    (positive: a scenario rule), above the one assumed; by back-calculation the excess of the
+    current asked for over the clamp decays by T_i / (T_i + h) a reading and gains K e h / T_i
+    > 0, so it stays positive; by conditional integration the integral stays while clamped, and
+    what is asked grows with the error."""
     p = m.drives
     if d.transmission[ee] != STUCK or not d.saturated[ee]:
         return False
