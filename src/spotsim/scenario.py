@@ -130,12 +130,12 @@ class Integrator:
                     "adaptive_euler: how long a step's velocity update applies the forces at its start: its own "
                     "step (step), or the mean of the last step and its own (staggered: symplectic Euler's velocities "
                     "lie half a step behind its positions, so a change of step leaves no velocity error)")
-    drive_readings: str = key("each", _choice("each", "pass_quiet"),
+    drive_readings: str = key("pass_quiet", _choice("pass_quiet", "each"),
                               "adaptive methods: whether each reading of a motor drive's speed loop ends a step "
                               "(each), or a step may pass the readings that leave its current as it is: its "
                               "transmission stuck, the loop pressing at its clamp and kept there (pass_quiet)")
     h_min_s: float = key(1e-9, _positive, "adaptive methods: smallest step; below it the run is diverged")
-    h_max_s: float = key(1e-3, _positive, "adaptive methods: largest step")
+    h_max_s: float = key(4e-4, _positive, "adaptive methods: largest step")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -230,12 +230,12 @@ class Motor:
     thread_half_angle_deg: float = key(30.0, _flank, "the thread's flank (half) angle, deg: 30 for ISO metric, "
                                        "15 for trapezoidal")
     screw_friction: float = key(0.13, _non_negative, "the friction coefficient of the screw's thread in its nut")
-    speed_loop_period_s: float = key(4e-4, _positive, "the digital speed loop (PI, anti-windup) reads the fingers' "
+    speed_loop_period_s: float = key(1e-4, _positive, "the digital speed loop (PI, anti-windup) reads the fingers' "
                                      "speed (an encoder's: the travel since its last reading over the period) and "
                                      "sets the current this often; the current loop is ideal")
     speed_loop_bandwidth_Hz: float = key(50.0, _positive, "the speed loop's design bandwidth, Hz: its gains follow "
                                          "from it and the drive's inertia")
-    anti_windup: str = key("conditional", _choice("conditional", "back_calculation"),
+    anti_windup: str = key("back_calculation", _choice("back_calculation", "conditional"),
                            "how the speed loop's integral keeps from winding up while the current is clamped: it "
                            "stops (conditional), or it tracks the clamp with the integral time (back_calculation: "
                            "continuous in the speed read, where a stop jumps by a whole reading's increment)")
