@@ -133,7 +133,7 @@ DRIVES = {"kinematic": Drive(["end_effector.drive=kinematic"], ("default", "fine
           "relay": Drive(["end_effector.drive=relay"], ("default", "fine")),
           "relay_every_step": Drive(["end_effector.drive=relay", "end_effector.control_period_s=1.0e-9"], ("fine",)),
           "motor": Drive(["end_effector.drive=motor"], ("default", "fine", "finer", "finest"), ("all", "one_axis")),
-          "motor_loop_tenth": Drive(["end_effector.drive=motor", "end_effector.motor.speed_loop_period_s=4.0e-5"],
+          "motor_loop_tenth": Drive(["end_effector.drive=motor", "end_effector.motor.speed_loop_period_s=1.0e-5"],
                                     ("default",), ("all", "one_axis"))}
 DRIVE_SETTINGS = {"default": [], "fine": ["simulation.integrator.method=symplectic_euler", "simulation.substeps=320"],
                   "finer": ["simulation.integrator.method=symplectic_euler", "simulation.substeps=1280"],
@@ -1379,7 +1379,7 @@ def drives_table(r: Results) -> str:
             "symplectic Euler at 3.125 µs; finer: at 0.78 µs; finest: at 0.195 µs. Kinematic and relay every step: "
             "the drive reading the load at every integration step instead of every `control_period_s` (its "
             "continuous limit). "
-            "Motor loop tenth: the motor's speed loop read every 0.04 ms instead of 0.4 ms.\n\n"
+            "Motor loop tenth: the motor's speed loop read every 0.01 ms instead of 0.1 ms.\n\n"
             + table(header, rows))
 
 
@@ -1388,7 +1388,7 @@ def drives_table(r: Results) -> str:
 #: median by more than `PERIOD_MEDIAN_REL` (peak force, residual, completion time, the robot's
 #: centroid displacement) and no seated share out of the other's 90 % interval; `reference`: the
 #: ensemble accuracy studies' targets (`studies.accuracy_ensemble.compare`).
-MOTOR_CHECKS = (("speed loop 0.4 → 0.04 ms", ("motor", "default"), ("motor_loop_tenth", "default"), "period"),
+MOTOR_CHECKS = (("speed loop 0.1 → 0.01 ms", ("motor", "default"), ("motor_loop_tenth", "default"), "period"),
                 ("default against fine (3.125 µs)", ("motor", "default"), ("motor", "fine"), "reference"),
                 ("fine against finer (0.78 µs)", ("motor", "fine"), ("motor", "finer"), "reference"),
                 ("default against finer (0.78 µs)", ("motor", "default"), ("motor", "finer"), "reference"),

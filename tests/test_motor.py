@@ -341,12 +341,11 @@ def test_the_motor_block_counts_in_a_scenarios_fingerprint_only_under_the_motor_
     kinematic = "end_effector.drive=kinematic"
     assert key(kinematic) == key(kinematic, "end_effector.motor.gear_ratio=5")
     assert key() != key("end_effector.motor.gear_ratio=5")  # the default drive is the motor
-    # the anti-windup at its default is the scene before the key (the shipped spreads find it)
-    assert key() == key("end_effector.motor.anti_windup=conditional") != key("end_effector.motor.anti_windup="
-                                                                             "back_calculation")
-    # so is whether steps end at each of its speed loop's readings
-    assert key() == key("simulation.integrator.drive_readings=each") != key("simulation.integrator.drive_readings="
-                                                                           "pass_quiet")
+    # the defaults: back-calculation, steps that pass the speed loop's quiet readings
+    assert key() == key("end_effector.motor.anti_windup=back_calculation") != key("end_effector.motor.anti_windup="
+                                                                                  "conditional")
+    assert key() == key("simulation.integrator.drive_readings=pass_quiet") != key("simulation.integrator."
+                                                                                 "drive_readings=each")
 
 
 @pytest.mark.parametrize("config", ["single_arm_case_I.yaml", "dual_arm_sequential.yaml"])
