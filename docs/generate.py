@@ -99,7 +99,7 @@ UNSEEN_LABELS = {"speed17": "closing at 17 mm/s", "bevel40": "bevels 40 deg", "c
 #: 98.4, 99.5 N at 25, 12.5, 6.25 us); at 37891eb, from 12.5 to 6.25 us Case III's wedged share
 #: went from 6 % to 31 %.
 ENSEMBLE_ARGS = ["--ensemble", "32", "--seed", "0", "--workers", "2", "--methods", "symplectic_euler,adaptive_euler",
-                 "--tols", "4e-5,1e-5,2.5e-6,6.25e-7,1.5625e-7", "--reference", "symplectic_euler:1280", "--no-plot"]
+                 "--tols", "4.8e-5,1.2e-5,3e-6,7.5e-7,1.875e-7", "--reference", "symplectic_euler:1280", "--no-plot"]
 ENSEMBLE_STUDIES = [
     ("accuracy_ensemble", f"single_arm_case_{case}", [f"config/single_arm_case_{case}.yaml", *ENSEMBLE_ARGS,
                                                       "--substeps", "10,40,80,160,320"])

@@ -114,7 +114,7 @@ class Integrator:
                       "error controlled), rk4 (fixed step), dopri5 (adaptive)")
     rtol: float = key(1e-6, _positive, "dopri5: relative tolerance per state component")
     atol: float = key(1e-9, _positive, "dopri5: absolute tolerance (m, rad, m/s, rad/s)")
-    velocity_tol_m_s: float = key(1e-5, _positive, "adaptive_euler: a step's error in any contact sphere's velocity")
+    velocity_tol_m_s: float = key(3e-6, _positive, "adaptive_euler: a step's error in any contact sphere's velocity")
     onset_depth_m: float = key(1e-6, _positive, "adaptive_euler: while pairs may start, the most a step moves two "
                                "spheres closer (a new pair's first penetration)")
     onset_guard: str = key("clearance", _choice("clearance", "travel"),
