@@ -183,7 +183,8 @@ def test_a_step_may_pass_the_readings_of_a_stuck_drive_pressing_at_its_clamp_and
     one by one keeps the current. A step passing 7 of them leaves the loop as those 7 taken
     one by one at their times do."""
     model, d, period = pressing_stuck(f"end_effector.motor.anti_windup={anti_windup}",
-                                      "end_effector.motor.speed_loop_period_s=1e-4")
+                                      "end_effector.motor.speed_loop_period_s=1e-4",
+                                      "simulation.integrator.drive_readings=each")
     assert quiet_readings(model.sim, d, 0) and next_event(model.sim, d) == d.sample_t == period
     model, d, period = pressing_stuck(f"end_effector.motor.anti_windup={anti_windup}",
                                       "end_effector.motor.speed_loop_period_s=1e-4",
