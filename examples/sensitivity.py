@@ -36,13 +36,23 @@ from spotsim.studies.ensemble import ensemble, finite
 CONFIG = Path(__file__).resolve().parents[1] / "config" / "single_arm_case_I.yaml"
 BASE = ["end_effector.drive=motor"]
 
+
+
+def _scaled(key: str, low: float, high: float) -> tuple[str, float, float]:
+    """(key, low, high): the key's value in the scenario (CONFIG with BASE) times low and high."""
+    value = spotsim.load_scenario(CONFIG, BASE)
+    for part in key.split("."):
+        value = getattr(value, part)
+    return key, float(f"{value * low:.6g}"), float(f"{value * high:.6g}")
+
+
 #: (label, [(key, low, high), ...]): each parameter's low and high setting; keys moved together
 #: keep their ratio (the kinetic friction stays 0.26 / 0.30 of the static one).
 PARAMETERS = [
-    ("reflected inertia ×0.1, ×10", [("end_effector.motor.rotor_inertia_g_cm2", 0.056, 5.6)]),
-    ("current limit ±50 %", [("end_effector.motor.current_limit_A", 0.1675, 0.5025)]),
+    ("reflected inertia ×0.1, ×10", [_scaled("end_effector.motor.rotor_inertia_g_cm2", 0.1, 10)]),
+    ("current limit ±50 %", [_scaled("end_effector.motor.current_limit_A", 0.5, 1.5)]),
     ("screw friction 0.03 (back-drivable), 0.26", [("end_effector.motor.screw_friction", 0.03, 0.26)]),
-    ("speed-loop period ×0.1, ×10", [("end_effector.motor.speed_loop_period_s", 4e-5, 4e-3)]),
+    ("speed-loop period ×0.1, ×10", [_scaled("end_effector.motor.speed_loop_period_s", 0.1, 10)]),
     ("closing speed 10, 22 mm/s", [("end_effector.closing_speed_m_s", 0.010, 0.022)]),
     ("finger–groove friction μs 0.1, 1", [("friction.mu_s", 0.1, 1.0), ("friction.mu_k", 0.26 / 3, 2.6 / 3)]),
     ("restitution 0.5, 0.95", [("contact.restitution", 0.5, 0.95)]),
