@@ -184,7 +184,7 @@ CORPUS = {
         "sum of the other two)",
     )),
     "smallest step above the largest": Bad(config({"simulation": {"dt_s": 1e-3, "duration_s": 2.0,
-                                                                 "integrator": {"h_min_s": 1e-2}}}), (
+                                                                 "integrator": {"h_min_s": 1e-2, "h_max_s": 1e-3}}}), (
         "{tmp}/bad.yaml: simulation.integrator.h_min_s = 0.01: must not exceed simulation.integrator.h_max_s = "
         "0.001",
     )),
