@@ -87,9 +87,9 @@ def test_the_first_grasp_moves_ee2_against_tm2_before_the_second_starts(run):
 @pytest.mark.slow
 def test_second_grasp_disturbs_the_robot_less(run):
     """The heavier composite (the robot with TM-1 welded to it) moves less in the second grasp.
-    Its peaks are not ordered: over 32 perturbed starts the second grasp's peak force spans
-    259-312 N and the first's 248-430 N (docs/validation.md), so one start may order them
-    either way."""
+    Its peaks are not asserted: nothing in the physics orders them (at the default the second
+    grasp's peak force is the higher over 32 perturbed starts, 287-309 N against 256-266 N,
+    10th-90th percentiles, docs/validation.md)."""
     first, second = run.summary["grasps"]
     d1, d2 = (np.linalg.norm(g["robot_centroid_displacement_mm"]) for g in (first, second))
     assert d2 < d1
