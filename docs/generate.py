@@ -1,10 +1,10 @@
 """The generated parts of spotsim's documentation.
 
     python docs/generate.py results   # rerun what the tables need: writes docs/results/
-    python docs/generate.py ensembles # rerun only the ensemble accuracy studies (~25 min); then
+    python docs/generate.py ensembles # rerun only the ensemble accuracy studies (~65 min); then
                                       # `spotsim study spreads ...` (SPREADS_COMMAND) writes their
                                       # spreads (package data: src/spotsim/studies/typical_spread.json)
-    python docs/generate.py unseen    # rerun only the error bound's check on unseen scenarios (~30 min)
+    python docs/generate.py unseen    # rerun only the error bound's check on unseen scenarios (~25 min)
     python docs/generate.py drives [DRIVE ...] [--settings default] [--cases CASE,...]  # rerun
                                       # only the drive comparison's ensembles (~3.5 h, of which the
                                       # motor's `finest` step takes 2.5; only the named drives,
@@ -409,13 +409,13 @@ def rerun_studies(studies: list) -> None:
 
 
 def ensembles_command() -> None:
-    """Rerun only the ensemble accuracy studies (about 75 min on 2 cores, 55 of them the dual arm's)."""
+    """Rerun only the ensemble accuracy studies (about 65 min on 2 cores, 38 of them the dual arm's)."""
     rerun_studies(ENSEMBLE_STUDIES)
     print(f"results in {RESULTS.relative_to(ROOT)}; now run `{SPREADS_COMMAND}`, then `{GENERATE} pages`")
 
 
 def unseen_command() -> None:
-    """Rerun only the error bound's studies on unseen scenarios (UNSEEN_STUDIES; about 30 min on 2
+    """Rerun only the error bound's studies on unseen scenarios (UNSEEN_STUDIES; about 25 min on 2
     cores, most of it the dual arm's converged references)."""
     rerun_studies(UNSEEN_STUDIES)
     print(PAGES_NEXT)
