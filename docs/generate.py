@@ -53,6 +53,9 @@ from pathlib import Path
 
 import yaml
 
+from spotsim.scenario import Motor
+from spotsim.studies.accuracy import TOLS
+
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
 RESULTS = DOCS / "results"
@@ -99,13 +102,16 @@ UNSEEN_LABELS = {"speed17": "closing at 17 mm/s", "bevel40": "bevels 40 deg", "c
 #: 98.4, 99.5 N at 25, 12.5, 6.25 us); at 37891eb, from 12.5 to 6.25 us Case III's wedged share
 #: went from 6 % to 31 %.
 ENSEMBLE_ARGS = ["--ensemble", "32", "--seed", "0", "--workers", "2", "--methods", "symplectic_euler,adaptive_euler",
-                 "--tols", "4.8e-5,1.2e-5,3e-6,7.5e-7,1.875e-7", "--reference", "symplectic_euler:1280", "--no-plot"]
+                 "--tols", ",".join(f"{t:g}" for t in TOLS), "--reference", "symplectic_euler:1280", "--no-plot"]
 ENSEMBLE_STUDIES = [
     ("accuracy_ensemble", f"single_arm_case_{case}", [f"config/single_arm_case_{case}.yaml", *ENSEMBLE_ARGS,
                                                       "--substeps", "10,40,80,160,320"])
     for case in ("I", "II", "III")
 ] + [("accuracy_ensemble", "dual_arm_sequential", ["config/dual_arm_sequential.yaml", *ENSEMBLE_ARGS,
                                                    "--substeps", "10,80,160,320", "--confirmation-members", "16"])]
+#: The motor's default speed-loop period (s), and the drive comparison's check at a tenth of it.
+LOOP_S = Motor().speed_loop_period_s
+LOOP_TENTH_S = LOOP_S / 10
 #: The drive comparison: each case's 32-member ensemble (seed 0) with each finger drive, at the
 #: default integrator and at a fine fixed step (symplectic Euler at 3.125 us; the ensemble
 #: studies' reference is four times finer): `spotsim run CONFIG --ensemble 32 --set end_effector.drive=DRIVE ...`.
@@ -133,7 +139,8 @@ DRIVES = {"kinematic": Drive(["end_effector.drive=kinematic"], ("default", "fine
           "relay": Drive(["end_effector.drive=relay"], ("default", "fine")),
           "relay_every_step": Drive(["end_effector.drive=relay", "end_effector.control_period_s=1.0e-9"], ("fine",)),
           "motor": Drive(["end_effector.drive=motor"], ("default", "fine", "finer", "finest"), ("all", "one_axis")),
-          "motor_loop_tenth": Drive(["end_effector.drive=motor", "end_effector.motor.speed_loop_period_s=1.0e-5"],
+          "motor_loop_tenth": Drive(["end_effector.drive=motor",
+                                     f"end_effector.motor.speed_loop_period_s={LOOP_TENTH_S:g}"],
                                     ("default",), ("all", "one_axis"))}
 DRIVE_SETTINGS = {"default": [], "fine": ["simulation.integrator.method=symplectic_euler", "simulation.substeps=320"],
                   "finer": ["simulation.integrator.method=symplectic_euler", "simulation.substeps=1280"],
@@ -1379,7 +1386,8 @@ def drives_table(r: Results) -> str:
             "symplectic Euler at 3.125 µs; finer: at 0.78 µs; finest: at 0.195 µs. Kinematic and relay every step: "
             "the drive reading the load at every integration step instead of every `control_period_s` (its "
             "continuous limit). "
-            "Motor loop tenth: the motor's speed loop read every 0.01 ms instead of 0.1 ms.\n\n"
+            f"Motor loop tenth: the motor's speed loop read every {LOOP_TENTH_S * 1e3:g} ms instead of "
+            f"{LOOP_S * 1e3:g} ms.\n\n"
             + table(header, rows))
 
 
@@ -1388,7 +1396,8 @@ def drives_table(r: Results) -> str:
 #: median by more than `PERIOD_MEDIAN_REL` (peak force, residual, completion time, the robot's
 #: centroid displacement) and no seated share out of the other's 90 % interval; `reference`: the
 #: ensemble accuracy studies' targets (`studies.accuracy_ensemble.compare`).
-MOTOR_CHECKS = (("speed loop 0.1 → 0.01 ms", ("motor", "default"), ("motor_loop_tenth", "default"), "period"),
+MOTOR_CHECKS = ((f"speed loop {LOOP_S * 1e3:g} → {LOOP_TENTH_S * 1e3:g} ms", ("motor", "default"),
+                 ("motor_loop_tenth", "default"), "period"),
                 ("default against fine (3.125 µs)", ("motor", "default"), ("motor", "fine"), "reference"),
                 ("fine against finer (0.78 µs)", ("motor", "fine"), ("motor", "finer"), "reference"),
                 ("default against finer (0.78 µs)", ("motor", "default"), ("motor", "finer"), "reference"),

@@ -35,12 +35,13 @@ from spotsim.studies.ensemble import ensemble, finite
 
 CONFIG = Path(__file__).resolve().parents[1] / "config" / "single_arm_case_I.yaml"
 BASE = ["end_effector.drive=motor"]
-
+#: The scenario every setting moves one parameter of.
+SCENARIO = spotsim.load_scenario(CONFIG, BASE)
 
 
 def _scaled(key: str, low: float, high: float) -> tuple[str, float, float]:
-    """(key, low, high): the key's value in the scenario (CONFIG with BASE) times low and high."""
-    value = spotsim.load_scenario(CONFIG, BASE)
+    """(key, low, high): the key's value in SCENARIO times low and high."""
+    value = SCENARIO
     for part in key.split("."):
         value = getattr(value, part)
     return key, float(f"{value * low:.6g}"), float(f"{value * high:.6g}")
