@@ -1,8 +1,8 @@
-"""The motor drive's next default, checked over many starts: back-calculation at a 0.1 ms speed
-loop, steps that pass its quiet readings (at most 0.4 ms), at each velocity tolerance.
+"""The motor drive's default, checked over many starts: back-calculation at a 0.1 ms speed loop,
+steps that pass its quiet readings (at most 0.4 ms), at each velocity tolerance.
 
     python benchmarks/drive_default.py [--members 128] [--tols 1e-5,3e-6] [--cases NAME ...]
-                                       [--finer NAME:FAMILY ...] [--cache DIR]
+                                       [--families all one_axis] [--finer NAME:FAMILY ...] [--cache DIR]
 
 For each case and start family (all axes and angles; one axis at a time) and each velocity
 tolerance of TOLS, ensembles of MEMBERS starts (seed 0) of the drive DRIVE with the steps STEPS,
@@ -14,7 +14,8 @@ checked as the drive comparison checks the default (`studies.accuracy_ensemble.c
    tolerance: no median moved by more than 3 %, the seated share within the other's 90 %
    interval (`period_verdict`);
 3. for the case and family pairs given by --finer, against the reference's step divided by four
-   (0.78 us), and the reference against it: where the reference is itself not converged.
+   (0.78 us, the drive comparison's converged reference), and the reference against it: where
+   3.125 us is itself not converged, and where a difference needs a reference converged beyond it.
 
 The 32 members of the drive comparison resolve a peak force's median of member-by-member
 differences to about ±1 % and a residual median to ±3-7 %, about the targets themselves; this
@@ -65,6 +66,7 @@ def main() -> None:
     ap.add_argument("--tols", default="1e-5,3e-6", help="velocity tolerances, m/s, comma-separated")
     default_cases = [name for _, name in CASES]
     ap.add_argument("--cases", nargs="+", default=default_cases, choices=default_cases)
+    ap.add_argument("--families", nargs="+", default=[ALL_AXES, ONE_AXIS], choices=[ALL_AXES, ONE_AXIS])
     ap.add_argument("--finer", nargs="+", default=[], metavar="NAME:FAMILY",
                     help="also check these against the step four times finer than the reference's")
     ap.add_argument("--cache", type=Path, help="keep and reuse each ensemble's member rows here")
@@ -76,6 +78,8 @@ def main() -> None:
     shown = [f"--members {args.members}", f"--tols {args.tols}"]
     if args.cases != default_cases:
         shown.append("--cases " + " ".join(args.cases))
+    if args.families != [ALL_AXES, ONE_AXIS]:
+        shown.append("--families " + " ".join(args.families))
     if args.finer:
         shown.append("--finer " + " ".join(args.finer))
     print(f"Measured by `python benchmarks/drive_default.py {' '.join(shown)}` at "
@@ -87,7 +91,7 @@ def main() -> None:
     print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
     for name in args.cases:
         dual = name.startswith("dual")
-        for family in (ALL_AXES, ONE_AXIS):
+        for family in args.families:
             ref = rows_of(name, family, args.members, "fine", DRIVE + REFERENCE, args.cache)[0]
             finer = (rows_of(name, family, args.members, "finer", DRIVE + FINER, args.cache)[0]
                      if f"{name}:{family}" in args.finer else None)
