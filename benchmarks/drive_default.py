@@ -35,7 +35,7 @@ from speed import ROOT, measured_at
 
 import spotsim
 from spotsim.studies.accuracy_ensemble import check_rows, period_verdict, reference_verdict
-from spotsim.studies.ensemble import ALL_AXES, ONE_AXIS
+from spotsim.studies.ensemble import FAMILIES
 
 #: The drive: the motor with back-calculation, its speed loop read every 0.1 ms.
 DRIVE = ["end_effector.motor.anti_windup=back_calculation", "end_effector.motor.speed_loop_period_s=1e-4"]
@@ -66,7 +66,7 @@ def main() -> None:
     ap.add_argument("--tols", default="1e-5,3e-6", help="velocity tolerances, m/s, comma-separated")
     default_cases = [name for _, name in CASES]
     ap.add_argument("--cases", nargs="+", default=default_cases, choices=default_cases)
-    ap.add_argument("--families", nargs="+", default=[ALL_AXES, ONE_AXIS], choices=[ALL_AXES, ONE_AXIS])
+    ap.add_argument("--families", nargs="+", default=list(FAMILIES), choices=list(FAMILIES))
     ap.add_argument("--finer", nargs="+", default=[], metavar="NAME:FAMILY",
                     help="also check these against the step four times finer than the reference's")
     ap.add_argument("--cache", type=Path, help="keep and reuse each ensemble's member rows here")
@@ -78,7 +78,7 @@ def main() -> None:
     shown = [f"--members {args.members}", f"--tols {args.tols}"]
     if args.cases != default_cases:
         shown.append("--cases " + " ".join(args.cases))
-    if args.families != [ALL_AXES, ONE_AXIS]:
+    if args.families != list(FAMILIES):
         shown.append("--families " + " ".join(args.families))
     if args.finer:
         shown.append("--finer " + " ".join(args.finer))
