@@ -144,6 +144,9 @@ class DataFields(NamedTuple):
     # the integrator
     h_next: float  # the step an adaptive integrator tries next, s (0: none yet)
     h_last: float  # adaptive Euler's last accepted step, s (0.0: none yet)
+    # s: how far the velocities the forces are being evaluated at lead the state's own (staggered kicks'
+    # `integrators.end_forces`; d.now then holds the state's kinematics), 0.0 otherwise
+    lead: float
     kick: float  # how long adaptive Euler's last velocity update applied its forces, s (`kick_of`: its impulse's span)
     fsal: bool  # the last committed evaluation can be the next step's first stage
     fsal_t: float  # ... at this time,
@@ -235,7 +238,7 @@ def make_data(model, rows: int = ROWS_PER_CALL, start: bool = True) -> Data:
         angular_momentum_start=np.zeros(3), momentum_max=0.0, angular_momentum_max=0.0, momentum_drift=0.0,
         angular_momentum_drift=0.0,
         left=0, h=sim.h, t_end=0.0, flight=False, held=False,
-        h_next=0.0, fsal=False, fsal_t=0.0, h_last=0.0, kick=0.0,
+        h_next=0.0, fsal=False, fsal_t=0.0, h_last=0.0, lead=0.0, kick=0.0,
         fsal_dy=np.zeros(state_size(sim.tree, sim.branches)), fsal_external=np.zeros(6),
         placed=np.zeros(1, dtype=np.bool_), placed_q=np.zeros(model.pin_model.nq), placed_v=np.zeros(nv),
         placed_offset=np.zeros((len(sim.branches.joint), 6)),

@@ -39,6 +39,7 @@ from .dynamics import accelerations
 from .forces import contact_forces, forces
 from .tree import (
     branch_centroid,
+    current_frames,
     frame_of,
     joint_motion,
     joint_quat,
@@ -408,12 +409,37 @@ def kick_of(m, d, h, here):
 
 
 @njit
+def end_forces(m, d, h):
+    """The forces and accelerations at the end of adaptive Euler's try of h (s), its bristles
+    bent over h from the memory (`forces`). With staggered kicks the state's velocities are
+    the try's own, which lie h/2 behind its end (`kick_of`): read there, the contacts' damping
+    lags the motion by h/2, an error of the step's order that the error estimate does not
+    see, and which raises an impact's peak. The forces are evaluated at the velocities
+    brought level with the positions, v + h/2 a (the start's accelerations: to the step's
+    order), for every rate they read; the bristles bend by the try's own motion, v h, as
+    the positions moved (`friction.bristle`, d.lead). The state's velocities are left as
+    they were."""
+    if not m.integrator.staggered:
+        forces(m, d, h, np.bool_(False))
+        accelerations(m, d)
+        return
+    v = d.v.copy()
+    current_frames(m, d)  # the kinematics of the try's own velocities, for the bristles
+    d.lead = 0.5 * h
+    d.v[:] = v + d.lead * d.a
+    forces(m, d, h, np.bool_(False))
+    accelerations(m, d)
+    d.v[:] = v
+    d.lead = 0.0
+
+
+@njit
 def adaptive_euler(m, d, h):
     """One accepted symplectic Euler step with its error controlled, of at most min(h, the
     onset guard): returns the step taken, or 0.0 if it fell below h_min.
 
     A try of h updates velocities then positions with the accelerations at the start, then
-    evaluates the forces at its end, bending the bristles over h from the memory; h/2 |a_end
+    evaluates the forces at its end (`end_forces`), bending the bristles over h from the memory; h/2 |a_end
     - a_start| (`euler_error`) estimates its error. A kept try commits the memory, and its end
     evaluation is the next step's start: one evaluation a try. A rejected one goes back to
     the start (state, contacts) and tries SAFETY r^(-1/2) of h. Prescribed joints keep their
@@ -475,8 +501,7 @@ def adaptive_euler(m, d, h):
             external[3:] = d.loads.external_torque_O_W
         kick = kick_of(m, d, h, here)
         _euler_update(m, d, h, kick)
-        forces(m, d, h, np.bool_(False))
-        accelerations(m, d)
+        end_forces(m, d, h)
         d.evaluations += 1
         error_rates(m, d, acc[1])
         ratio = euler_error(m, acc[0], acc[1], h)
