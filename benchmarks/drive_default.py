@@ -3,6 +3,7 @@ steps that pass its quiet readings (at most 0.4 ms), at each velocity tolerance.
 
     python benchmarks/drive_default.py [--members 128] [--tols 1e-5,3e-6] [--cases NAME ...]
                                        [--families all one_axis] [--finer NAME:FAMILY ...] [--cache DIR]
+                                       [--kick step|staggered]
 
 For each case and start family (all axes and angles; one axis at a time) and each velocity
 tolerance of TOLS, ensembles of MEMBERS starts (seed 0) of the drive DRIVE with the steps STEPS,
@@ -21,7 +22,9 @@ The 32 members of the drive comparison resolve a peak force's median of member-b
 differences to about ±1 % and a residual median to ±3-7 %, about the targets themselves; this
 benchmark takes four times as many. With --cache, each ensemble's member rows are kept in DIR
 (one pickle per case, family, member count and setting) and reused when run again. Its speed is
-benchmarks/drive_readings.py's to measure (with the machine to itself), not this one's.
+benchmarks/drive_readings.py's to measure (with the machine to itself), not this one's. With
+--kick, the checked setting's velocity updates span that kick (`simulation.integrator.kick`)
+instead of the scenario's own.
 """
 
 from __future__ import annotations
@@ -36,6 +39,7 @@ from speed import ROOT, measured_at
 import spotsim
 from spotsim.studies.accuracy_ensemble import check_rows, period_verdict, reference_verdict
 from spotsim.studies.ensemble import FAMILIES
+from spotsim.tables import KICKS
 
 #: The drive: the motor with back-calculation, its speed loop read every 0.1 ms.
 DRIVE = ["end_effector.motor.anti_windup=back_calculation", "end_effector.motor.speed_loop_period_s=1e-4"]
@@ -70,6 +74,7 @@ def main() -> None:
     ap.add_argument("--finer", nargs="+", default=[], metavar="NAME:FAMILY",
                     help="also check these against the step four times finer than the reference's")
     ap.add_argument("--cache", type=Path, help="keep and reuse each ensemble's member rows here")
+    ap.add_argument("--kick", choices=KICKS, help="the checked setting's kick (default: the scenario's own)")
     args = ap.parse_args()
     if args.cache:
         args.cache.mkdir(parents=True, exist_ok=True)
@@ -82,9 +87,14 @@ def main() -> None:
         shown.append("--families " + " ".join(args.families))
     if args.finer:
         shown.append("--finer " + " ".join(args.finer))
+    kick, tagged = [], ""
+    if args.kick:
+        shown.append(f"--kick {args.kick}")
+        kick, tagged = [f"simulation.integrator.kick={args.kick}"], f",{args.kick}"
     print(f"Measured by `python benchmarks/drive_default.py {' '.join(shown)}` at "
           f"{measured_at()}: {args.members} starts (seed 0) per ensemble; the drive "
-          f"{', '.join(s.split('.')[-1] for s in DRIVE)}; the steps {', '.join(s.split('.')[-1] for s in STEPS)}\n")
+          f"{', '.join(s.split('.')[-1] for s in DRIVE)}; the steps "
+          f"{', '.join(s.split('.')[-1] for s in STEPS + kick)}\n")
     print("| case | starts | velocity tolerance (m/s) | compared | grasp | peak force (N): median, its difference "
           "| member by member | residual e (mm): median, its difference | residual KS p | completion time "
           "| robot centroid displacement | seated [the other's 90 % interval] | verdict |")
@@ -96,9 +106,9 @@ def main() -> None:
             finer = (rows_of(name, family, args.members, "finer", DRIVE + FINER, args.cache)[0]
                      if f"{name}:{family}" in args.finer else None)
             for tol in tols:
-                step = [*STEPS, f"simulation.integrator.velocity_tol_m_s={tol}"]
-                rows = rows_of(name, family, args.members, f"tol{tol}", DRIVE + step, args.cache)[0]
-                tenth = rows_of(name, family, args.members, f"tol{tol},loop1e-5", DRIVE + step + LOOP_TENTH,
+                step = [*STEPS, *kick, f"simulation.integrator.velocity_tol_m_s={tol}"]
+                rows = rows_of(name, family, args.members, f"tol{tol}{tagged}", DRIVE + step, args.cache)[0]
+                tenth = rows_of(name, family, args.members, f"tol{tol}{tagged},loop1e-5", DRIVE + step + LOOP_TENTH,
                                 args.cache)[0]
                 checks = [("against fine (3.125 µs)", check_rows(rows, ref, dual), reference_verdict),
                           ("speed loop 0.1 → 0.01 ms", check_rows(tenth, rows, dual), period_verdict)]

@@ -27,8 +27,8 @@ from speed import ROOT, measured_at, pct
 import spotsim
 from spotsim.studies.ensemble import ALL_AXES, ONE_AXIS
 from spotsim.studies.estimate import read_members
+from spotsim.tables import KICKS
 
-KICKS = ("step", "staggered")
 #: The velocity tolerance's divisors: the default's, a quarter and an eighth of it.
 TOLERANCES = (1, 4, 8)
 

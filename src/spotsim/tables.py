@@ -34,6 +34,8 @@ ADAPTIVE = ("dopri5", "adaptive_euler")
 #: `motor` pushes them with a motor's torque through a gearhead and a lead screw.
 DRIVES = ("kinematic", "relay", "motor")
 KINEMATIC, RELAY, MOTOR = range(len(DRIVES))
+#: adaptive_euler's velocity kicks (`simulation.integrator.kick`).
+KICKS = ("step", "staggered")
 #: The states of a motor drive's transmission (a stick-slip element, as Modelica's
 #: `LossyGear`): stuck; sliding with the power flowing from the motor to the fingers
 #: (forward efficiency); sliding with it flowing back (backward efficiency).
