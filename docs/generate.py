@@ -1845,6 +1845,7 @@ RENDER = {
     "drive-period": lambda r: benchmark_table("drive_period"),
     "onset-guard": lambda r: benchmark_table("onset_guard"),
     "kick": lambda r: benchmark_table("kick"),
+    "impact-peak": lambda r: benchmark_table("impact_peak"),
     "anti-windup": lambda r: benchmark_table("anti_windup"),
     "drive-readings": lambda r: benchmark_table("drive_readings"),
     "drive-default": lambda r: benchmark_table("drive_default"),

@@ -95,7 +95,7 @@ def slab_forces(q, v, h, slab_c, slab_n, plate_c, plate_n, law, s_mem, v_minus_m
             else:
                 v_minus, s_prev = onset_rate(delta_dot, law.floor), (0.0, 0.0, 0.0)
             F_n = normal_force(indentation(phi), delta_dot, v_minus, law.K, law.damping)
-            s, F_f, _, _, _ = bristle(s_prev, v_rel, v_rel, n_c, F_n, h, law.bristle, False)
+            s, F_f, _, _, _ = bristle(s_prev, v_rel, n_c, F_n, h, law.bristle, False)
             touching[i, j], v_minus_mem[i, j] = True, v_minus
             s_mem[i, j, 0], s_mem[i, j, 1], s_mem[i, j, 2] = s[0], s[1], s[2]
             f_x, f_z = -(F_n * g[0] + F_f[0]), -(F_n * g[2] + F_f[2])  # on the slab: minus the master's

@@ -58,7 +58,7 @@ def side_channel_force(model, d, k):
     else:
         v_minus, s_prev = onset_rate(delta_dot, law.floor), (0.0, 0.0, 0.0)
     F_n, dF_ddelta, _ = normal_law(indentation(phi), delta_dot, v_minus, law.K, law.damping)
-    _, F_f, _, _, _ = bristle(s_prev, tuple(v_rel), tuple(v_rel), n_c, F_n, H, law.bristle, False)
+    _, F_f, _, _, _ = bristle(s_prev, tuple(v_rel), n_c, F_n, H, law.bristle, False)
     # how far the force may move with the round-off of the positions (delta = phi / 2)
     tolerance = 0.5 * abs(dF_ddelta) * POSITION_ROUND_OFF_M * (1.0 + law.bristle.mu_s) + \
         FORCE_RTOL * abs(F_n)

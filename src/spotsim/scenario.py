@@ -129,8 +129,8 @@ class Integrator:
     kick: str = key("step", _choice(*KICKS),
                     "adaptive_euler: how long a step's velocity update applies the forces at its start: its own "
                     "step (step), or the mean of the last step and its own (staggered: symplectic Euler's velocities "
-                    "lie half a step behind its positions, so a change of step leaves no velocity error; the forces "
-                    "at a step's end read the velocities brought level with the positions)")
+                    "lie half a step behind its positions, so a change of step leaves no velocity error; the normal "
+                    "damping at a step's end reads the indentation rate level with the positions)")
     drive_readings: str = key("pass_quiet", _choice("pass_quiet", "each"),
                               "adaptive methods: whether each reading of a motor drive's speed loop ends a step "
                               "(each), or a step may pass the readings that leave its current as it is: its "

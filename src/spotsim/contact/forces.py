@@ -139,14 +139,14 @@ def pair_forces(m, d, h, jump):
         v_A = point_velocity(d.vo_W[j1], d.w_W[j1], d.p_W[j1], point)
         v_B = point_velocity(d.vo_W[j2], d.w_W[j2], d.p_W[j2], point)
         v_rel = (v_A[0] - v_B[0], v_A[1] - v_B[1], v_A[2] - v_B[2])
-        v_step = v_rel
-        if d.lead > 0.0:  # the rates lead the state's own velocities, whose kinematics d.now holds
+        v_n = v_rel  # the rate the normal damping reads
+        if d.lead > 0.0:  # ... level with the positions, whose kinematics d.now holds (`integrators.end_forces`)
             u_A = point_velocity(d.now.vo_W[j1], d.now.w_W[j1], d.now.p_W[j1], point)
             u_B = point_velocity(d.now.vo_W[j2], d.now.w_W[j2], d.now.p_W[j2], point)
-            v_step = (u_A[0] - u_B[0], u_A[1] - u_B[1], u_A[2] - u_B[2])
+            v_n = (u_A[0] - u_B[0], u_A[1] - u_B[1], u_A[2] - u_B[2])
         g = force_direction(c1, c2, n_c, phi, m.law.gradient, side)
         # rate of delta = phi / 2, which is linear: the indentation of phi's rate -(v . g)
-        delta_dot = indentation(-(v_rel[0] * g[0] + v_rel[1] * g[1] + v_rel[2] * g[2]))
+        delta_dot = indentation(-(v_n[0] * g[0] + v_n[1] * g[1] + v_n[2] * g[2]))
         key = d.candidates.key[i]
         while pos < n_mem and d.memory.key[pos] < key:
             pos += 1
@@ -157,7 +157,7 @@ def pair_forces(m, d, h, jump):
             v_minus = onset_rate(delta_dot, m.law.floor)
             s_prev = (0.0, 0.0, 0.0)
         F_n, dF_ddelta, dF_drate = normal_law(indentation(phi), delta_dot, v_minus, m.law.K, m.law.damping)
-        s, F_f, state, slack, held = bristle(s_prev, v_rel, v_step, n_c, F_n, h, m.law.bristle, jump)
+        s, F_f, state, slack, held = bristle(s_prev, v_rel, n_c, F_n, h, m.law.bristle, jump)
         out_m[n], out_s[n], out_key[n] = mi, sl, key
         phi_out[n], v_minus_out[n], state_out[n], slack_out[n] = phi, v_minus, state, slack
         for a in range(3):

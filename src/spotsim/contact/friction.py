@@ -33,16 +33,14 @@ def _tangential(x, n):
 
 
 @njit
-def bristle(s_prev, v, v_step, n_c, F_n, dt, p, jump):
+def bristle(s_prev, v, n_c, F_n, dt, p, jump):
     """One step of the bristle law for one pair.
 
     s_prev: deflection carried from the last step (zero at onset), m. v: velocity of A's
-    contact point relative to B's, m/s: the rate the damping and the slip test read. v_step:
-    the rate at which that point moved over dt, which bends the bristle (v, unless the
-    integrator's velocities lead its positions: `integrators.end_forces`). n_c: common
-    normal. (3-vectors.) F_n: normal force magnitude, N. dt: step, s. p: BristleParams. jump:
-    F_n may have jumped since the carried deflection's step (the fingers' rates changed: a
-    controller tick), and dt is the step to come, over which the force will act.
+    contact point relative to B's, m/s. n_c: common normal. (3-vectors.) F_n: normal force
+    magnitude, N. dt: step, s. p: BristleParams. jump: F_n may have jumped since the carried
+    deflection's step (the fingers' rates changed: a controller tick), and dt is the step to
+    come, over which the force will act.
     Returns the deflection s, the friction force on A (N), both 3-tuples, the pair state, the
     bristle's slack, m: s_max less the length it would have without its limit (Eq. 15's first
     branch), and the share of dt it held. The bristle holds while its slack is positive (the
@@ -68,11 +66,10 @@ def bristle(s_prev, v, v_step, n_c, F_n, dt, p, jump):
     slipping = speed > p.v_d
     s_max = (p.mu_k if slipping else p.mu_s) * F_n / p.k_b  # Eq. (16)
     carried = (s0, s1, s2)
-    u_t = _tangential(v_step, n_c)
-    s0, s1, s2 = s0 + u_t[0] * dt, s1 + u_t[1] * dt, s2 + u_t[2] * dt  # Eq. (15), first branch
+    s0, s1, s2 = s0 + v_t[0] * dt, s1 + v_t[1] * dt, s2 + v_t[2] * dt  # Eq. (15), first branch
     slack = s_max - norm3((s0, s1, s2))
     saturated = slack <= 0.0
-    held = 1.0 if not saturated else _held(carried, u_t, norm3(u_t), s_max, dt) if jump else 0.0
+    held = 1.0 if not saturated else _held(carried, v_t, speed, s_max, dt) if jump else 0.0
     if saturated:
         # Eq. (15), second branch: the bristle lies at s_max along the sliding direction
         # (along its own deflection when there is no sliding)

@@ -144,8 +144,8 @@ class DataFields(NamedTuple):
     # the integrator
     h_next: float  # the step an adaptive integrator tries next, s (0: none yet)
     h_last: float  # adaptive Euler's last accepted step, s (0.0: none yet)
-    # s: how far the velocities the forces are being evaluated at lead the state's own (staggered kicks'
-    # `integrators.end_forces`; d.now then holds the state's kinematics), 0.0 otherwise
+    # s: how far the rate the contacts' normal damping reads leads the state's velocities (staggered
+    # kicks' `integrators.end_forces`; d.now then holds the kinematics at that rate), 0.0 otherwise
     lead: float
     kick: float  # how long adaptive Euler's last velocity update applied its forces, s (`kick_of`: its impulse's span)
     fsal: bool  # the last committed evaluation can be the next step's first stage

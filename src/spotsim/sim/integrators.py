@@ -412,24 +412,21 @@ def kick_of(m, d, h, here):
 def end_forces(m, d, h):
     """The forces and accelerations at the end of adaptive Euler's try of h (s), its bristles
     bent over h from the memory (`forces`). With staggered kicks the state's velocities are
-    the try's own, which lie h/2 behind its end (`kick_of`): read there, the contacts' damping
-    lags the motion by h/2, an error of the step's order that the error estimate does not
-    see, and which raises an impact's peak. The forces are evaluated at the velocities
-    brought level with the positions, v + h/2 a (the start's accelerations: to the step's
-    order), for every rate they read; the bristles bend by the try's own motion, v h, as
-    the positions moved (`friction.bristle`, d.lead). The state's velocities are left as
-    they were."""
-    if not m.integrator.staggered:
-        forces(m, d, h, np.bool_(False))
-        accelerations(m, d)
-        return
-    v = d.v.copy()
-    current_frames(m, d)  # the kinematics of the try's own velocities, for the bristles
-    d.lead = 0.5 * h
-    d.v[:] = v + d.lead * d.a
+    the try's own, which lie h/2 behind its end (`kick_of`): read there, the contacts' normal
+    damping lags the indentation by h/2, an error of the step's order that the error
+    estimate does not see, and which raises an impact's peak. Their normal damping reads the
+    indentation rate at the velocities brought level with the positions, v + h/2 a (the
+    start's accelerations: to the step's order), whose kinematics d.now holds while d.lead
+    is set (`pair_forces`); the bristles and the actuators read the state's own velocities
+    (docs/validation.md, the velocity kick)."""
+    if m.integrator.staggered:
+        v = d.v.copy()
+        d.lead = 0.5 * h
+        d.v[:] = v + d.lead * d.a
+        current_frames(m, d)
+        d.v[:] = v
     forces(m, d, h, np.bool_(False))
     accelerations(m, d)
-    d.v[:] = v
     d.lead = 0.0
 
 
