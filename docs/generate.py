@@ -1618,6 +1618,10 @@ def profile(r=None) -> str:
 #: unresolved (docs/validation.md reads it).
 DRIVE_DEFAULT_512 = ("python benchmarks/drive_default.py --members 512 --tols 3e-6 --cases single_arm_case_III "
                      "--families one_axis --finer single_arm_case_III:one_axis")
+#: The commands of the default's checks with staggered kicks (`--kick staggered`).
+DRIVE_STAGGERED = ("python benchmarks/drive_default.py --kick staggered --members 128 --tols 3e-6 --finer "
+                   + " ".join(f"single_arm_case_{c}:{f}" for c in ("I", "II", "III") for f in ("all", "one_axis")))
+DRIVE_STAGGERED_512 = DRIVE_DEFAULT_512 + " --kick staggered"
 
 
 #: The profile of Case I with compliant joints, which docs/performance.md reads.
@@ -1850,6 +1854,8 @@ RENDER = {
     "drive-readings": lambda r: benchmark_table("drive_readings"),
     "drive-default": lambda r: benchmark_table("drive_default"),
     "drive-default-512": lambda r: benchmark_table("drive_default_512", DRIVE_DEFAULT_512),
+    "drive-staggered": lambda r: benchmark_table("drive_staggered", DRIVE_STAGGERED),
+    "drive-staggered-512": lambda r: benchmark_table("drive_staggered_512", DRIVE_STAGGERED_512),
 }
 PAGES = [ROOT / "README.md", DOCS / "usage.md", DOCS / "validation.md", DOCS / "performance.md"]
 
