@@ -1616,8 +1616,9 @@ def profile(r=None) -> str:
 
 #: Case III's one-axis starts over 512 starts, where 128 leave the residual median's target
 #: unresolved (docs/validation.md reads it).
-DRIVE_DEFAULT_512 = ("python benchmarks/drive_default.py --members 512 --tols 3e-6 --cases single_arm_case_III "
-                     "--families one_axis --finer single_arm_case_III:one_axis")
+DRIVE_DEFAULT_512 = ("python benchmarks/drive_default.py --members 512 --tols 3e-6 --cases single_arm_case_I "
+                     "single_arm_case_III --families one_axis --finer single_arm_case_I:one_axis "
+                     "single_arm_case_III:one_axis")
 #: The commands of the default's checks with staggered kicks (`--kick staggered`).
 DRIVE_STAGGERED = ("python benchmarks/drive_default.py --kick staggered --members 128 --tols 3e-6 --finer "
                    + " ".join(f"single_arm_case_{c}:{f}" for c in ("I", "II", "III") for f in ("all", "one_axis")))
