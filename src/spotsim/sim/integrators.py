@@ -417,8 +417,8 @@ def end_forces(m, d, h):
     estimate does not see, and which raises an impact's peak. Their normal damping reads the
     indentation rate at the velocities brought level with the positions, v + h/2 a (the
     start's accelerations: to the step's order), whose kinematics d.now holds while d.lead
-    is set (`pair_forces`); the bristles and the actuators read the state's own velocities
-    (docs/validation.md, the velocity kick)."""
+    is set (`pair_forces`); the bristles, whose deflection grows by the state's own motion,
+    and the actuators read the state's own velocities."""
     if m.integrator.staggered:
         v = d.v.copy()
         d.lead = 0.5 * h
