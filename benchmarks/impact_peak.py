@@ -17,25 +17,27 @@ from __future__ import annotations
 from speed import ROOT, measured_at
 
 import spotsim
+from spotsim.tables import KICKS
 
+#: Case III's shipped scenario.
+CONFIG = ROOT / "config" / "single_arm_case_III.yaml"
 #: Past Case III's first impact, before its second (s).
 END_S = 0.3
 #: Symplectic Euler's substeps of dt_s, coarse to fine; the last is the reference.
 SUBSTEPS = (320, 1280, 5120)
-KICKS = ("step", "staggered")
 #: The velocity tolerances, m/s: the default (3e-6) and around it.
 TOLERANCES = (1e-5, 3e-6, 1e-6, 3e-7, 1e-7)
 
 
 def peak(sets: list[str]) -> tuple[float, int]:
     """Case III's peak force (N) over END_S with the scenario keys `sets`, and its steps."""
-    s = spotsim.load_scenario(ROOT / "config" / "single_arm_case_III.yaml", sets + [f"simulation.duration_s={END_S}"])
+    s = spotsim.load_scenario(CONFIG, sets + [f"simulation.duration_s={END_S}"])
     r = spotsim.simulate(s)
     return r.grasp["peak_force_norm_N"], r.summary["steps"]
 
 
 def main() -> None:
-    dt = spotsim.load_scenario(ROOT / "config" / "single_arm_case_III.yaml").simulation.dt_s
+    dt = spotsim.load_scenario(CONFIG).simulation.dt_s
     fixed = {n: peak(["simulation.integrator.method=symplectic_euler", f"simulation.substeps={n}"]) for n in SUBSTEPS}
     ref = fixed[SUBSTEPS[-1]][0]
     print(f"Measured by `python benchmarks/impact_peak.py` at {measured_at()}: Case III's first impact from its own "

@@ -1614,8 +1614,8 @@ def profile(r=None) -> str:
     return benchmark_table("profile")
 
 
-#: Case III's one-axis starts over 512 starts, where 128 leave the residual median's target
-#: unresolved (docs/validation.md reads it).
+#: Case I's and Case III's one-axis starts over 512 starts, where 128 leave the residual
+#: median's target unresolved (docs/validation.md reads it).
 DRIVE_DEFAULT_512 = ("python benchmarks/drive_default.py --members 512 --tols 3e-6 --cases single_arm_case_I "
                      "single_arm_case_III --families one_axis --finer single_arm_case_I:one_axis "
                      "single_arm_case_III:one_axis")
