@@ -39,8 +39,8 @@ from .dynamics import accelerations
 from .forces import contact_forces, forces
 from .tree import (
     branch_centroid,
-    current_frames,
     frame_of,
+    frames_at,
     joint_motion,
     joint_quat,
     joint_twist,
@@ -420,11 +420,8 @@ def end_forces(m, d, h):
     is set (`pair_forces`); the bristles, whose deflection grows by the state's own motion,
     and the actuators read the state's own velocities."""
     if m.integrator.staggered:
-        v = d.v.copy()
         d.lead = 0.5 * h
-        d.v[:] = v + d.lead * d.a
-        current_frames(m, d)
-        d.v[:] = v
+        frames_at(m, d, d.v + d.lead * d.a)
     forces(m, d, h, np.bool_(False))
     accelerations(m, d)
     d.lead = 0.0

@@ -474,8 +474,14 @@ def kinematics(m, d):
 def current_frames(m, d):
     """Every joint's frame and motion at d's state (q, v) into d.now: the kinematics of the
     state as it is, where d.R_W ... hold those of the last force evaluation."""
+    frames_at(m, d, d.v)
+
+
+@njit
+def frames_at(m, d, v):
+    """Every joint's frame and motion at d's positions q and the velocities v into d.now."""
     for j in range(1, m.tree.parent.shape[0]):
-        frame_of(m.tree, j, d.q, d.v, d.now.R_W, d.now.p_W, d.now.w_W, d.now.vo_W)
+        frame_of(m.tree, j, d.q, v, d.now.R_W, d.now.p_W, d.now.w_W, d.now.vo_W)
 
 
 # ------------------------------------------------------------------------------- centroids
