@@ -21,7 +21,7 @@ checked as the drive comparison checks the default (`studies.accuracy_ensemble.c
 The 32 members of the drive comparison resolve a peak force's median of member-by-member
 differences to about ±1 % and a residual median to ±3-7 %, about the targets themselves; this
 benchmark takes four times as many. With --cache, each ensemble's member rows are kept in DIR
-(one pickle per case, family, member count and setting) and reused when run again. Its speed is
+(one pickle per case, family, member count and setting, the kick named) and reused when run again. Its speed is
 benchmarks/drive_readings.py's to measure (with the machine to itself), not this one's. With
 --kick, the checked setting's velocity updates span that kick (`simulation.integrator.kick`)
 instead of the scenario's own.
@@ -38,6 +38,7 @@ from speed import ROOT, measured_at
 
 import spotsim
 from spotsim.studies.accuracy_ensemble import check_rows, period_verdict, reference_verdict
+from spotsim.scenario import Integrator
 from spotsim.studies.ensemble import FAMILIES
 from spotsim.tables import KICKS
 
@@ -87,10 +88,11 @@ def main() -> None:
         shown.append("--families " + " ".join(args.families))
     if args.finer:
         shown.append("--finer " + " ".join(args.finer))
-    kick, tagged = [], ""
+    kick = []
     if args.kick:
         shown.append(f"--kick {args.kick}")
-        kick, tagged = [f"simulation.integrator.kick={args.kick}"], f",{args.kick}"
+        kick = [f"simulation.integrator.kick={args.kick}"]
+    tagged = f",{args.kick or Integrator().kick}"
     print(f"Measured by `python benchmarks/drive_default.py {' '.join(shown)}` at "
           f"{measured_at()}: {args.members} starts (seed 0) per ensemble; the drive "
           f"{', '.join(s.split('.')[-1] for s in DRIVE)}; the steps "

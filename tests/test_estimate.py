@@ -152,7 +152,7 @@ def test_each_studied_config_finds_its_typical_spread(name):
     assert spread is not None and spread["scenario"] == name
     assert typical_spread(spotsim.replace(scenario, name="renamed", description="other words")) == spread
     assert typical_spread(parse_setting("symplectic_euler:20").apply(scenario)) is None
-    assert typical_spread(spotsim.replace(scenario, simulation={"integrator": {"kick": "staggered"}})) is None
+    assert typical_spread(spotsim.replace(scenario, simulation={"integrator": {"kick": "step"}})) is None
     for by in spread["grasps"].values():
         for column in ("residual_norm_mm", "peak_force_norm_N", "peak_torque_norm_Nm"):
             assert by[column]["count"] == 64 and by[column]["min"] <= by[column]["p10"] <= by[column]["max"]

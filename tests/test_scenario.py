@@ -115,10 +115,10 @@ def test_scenario_round_trips_through_python(case_I):
 def test_replace_changes_only_the_keys_it_names_at_any_depth(case_I):
     """A change to a nested section keeps that section's other keys (here, the integrator's)."""
     tight = spotsim.replace(case_I, simulation={"integrator": {"velocity_tol_m_s": 3e-6, "h_max_s": 4e-4}})
-    staggered = spotsim.replace(tight, simulation={"integrator": {"kick": "staggered"}})
-    i = staggered.simulation.integrator
-    assert (i.kick, i.velocity_tol_m_s, i.h_max_s) == ("staggered", 3e-6, 4e-4)
-    assert staggered.simulation.dt_s == case_I.simulation.dt_s
+    step = spotsim.replace(tight, simulation={"integrator": {"kick": "step"}})
+    i = step.simulation.integrator
+    assert (i.kick, i.velocity_tol_m_s, i.h_max_s) == ("step", 3e-6, 4e-4)
+    assert step.simulation.dt_s == case_I.simulation.dt_s
 
 
 def test_unwritable_results_directory_is_a_clear_error(tmp_path, capsys):

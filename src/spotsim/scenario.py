@@ -126,7 +126,7 @@ class Integrator:
                                 "adaptive_euler: where a bristle that saturates or lets go in a step switches its "
                                 "damping c_b v_t: at the step's end (within_step), or at its own time, the step cut "
                                 "to end just past it (located)")
-    kick: str = key("step", _choice(*KICKS),
+    kick: str = key("staggered", _choice(*KICKS),
                     "adaptive_euler: how long a step's velocity update applies the forces at its start: its own "
                     "step (step), or the mean of the last step and its own (staggered: symplectic Euler's velocities "
                     "lie half a step behind its positions, so a change of step leaves no velocity error; the normal "
