@@ -1396,8 +1396,8 @@ def drives_table(r: Results) -> str:
 #: median by more than `PERIOD_MEDIAN_REL` (peak force, residual, completion time, the robot's
 #: centroid displacement) and no seated share out of the other's 90 % interval; `reference`: the
 #: ensemble accuracy studies' targets (`studies.accuracy_ensemble.compare`).
-MOTOR_CHECKS = ((f"speed loop {LOOP_S * 1e3:g} → {LOOP_TENTH_S * 1e3:g} ms", ("motor", "default"),
-                 ("motor_loop_tenth", "default"), "period"),
+MOTOR_CHECKS = ((f"speed loop {LOOP_S * 1e3:g} → {LOOP_TENTH_S * 1e3:g} ms", ("motor_loop_tenth", "default"),
+                 ("motor", "default"), "period"),
                 ("default against fine (3.125 µs)", ("motor", "default"), ("motor", "fine"), "reference"),
                 ("fine against finer (0.78 µs)", ("motor", "fine"), ("motor", "finer"), "reference"),
                 ("default against finer (0.78 µs)", ("motor", "default"), ("motor", "finer"), "reference"),
