@@ -1622,7 +1622,8 @@ DRIVE_DEFAULT_512 = ("python benchmarks/drive_default.py --members 512 --tols 3e
 #: The default's check over 128 starts, and its commands with step kicks (`--kick step`, the former
 #: default; at 1e-5 m/s too).
 DRIVE_DEFAULT = ("python benchmarks/drive_default.py --members 128 --tols 3e-6 --finer "
-                 + " ".join(f"single_arm_case_{c}:{f}" for c in ("I", "II", "III") for f in ("all", "one_axis")))
+                 + " ".join(f"single_arm_case_{c}:{f}" for c in ("I", "II", "III") for f in ("all", "one_axis"))
+                 + " dual_arm_sequential:one_axis")
 DRIVE_STEP = DRIVE_DEFAULT.replace("--tols 3e-6", "--tols 1e-5,3e-6") + " --kick step"
 DRIVE_STEP_512 = DRIVE_DEFAULT_512 + " --kick step"
 
