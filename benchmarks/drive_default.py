@@ -21,10 +21,10 @@ checked as the drive comparison checks the default (`studies.accuracy_ensemble.c
 The 32 members of the drive comparison resolve a peak force's median of member-by-member
 differences to about ±1 % and a residual median to ±3-7 %, about the targets themselves; this
 benchmark takes four times as many. With --cache, each ensemble's member rows are kept in DIR
-(one pickle per case, family, member count and setting, the kick named) and reused when run again. Its speed is
-benchmarks/drive_readings.py's to measure (with the machine to itself), not this one's. With
---kick, the checked setting's velocity updates span that kick (`simulation.integrator.kick`)
-instead of the scenario's own.
+(one pickle per case, family, member count and setting, the kick named) and reused when run
+again. Its speed is benchmarks/drive_readings.py's to measure (with the machine to itself), not
+this one's. With --kick, the checked setting's velocity updates span that kick
+(`simulation.integrator.kick`) instead of the scenario's own.
 """
 
 from __future__ import annotations
@@ -37,8 +37,8 @@ from against import CASES, ensemble_rows, rel
 from speed import ROOT, measured_at
 
 import spotsim
-from spotsim.studies.accuracy_ensemble import check_rows, period_verdict, reference_verdict
 from spotsim.scenario import Integrator
+from spotsim.studies.accuracy_ensemble import check_rows, period_verdict, reference_verdict
 from spotsim.studies.ensemble import FAMILIES
 from spotsim.tables import KICKS
 

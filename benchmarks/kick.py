@@ -5,13 +5,14 @@ fixed step from the same starts.
 
 Cases I-III and the dual-arm run, each on both families of perturbed starts (`spotsim run
 --perturb`: all axes and angles, and one axis at a time), as ensembles of MEMBERS starts (seed
-0) with each velocity update spanning its own step (`simulation.integrator.kick: step`) and the mean of the last step and its own (`staggered`, the default), each at the default velocity
-tolerance and at a quarter and an eighth of it. Each is compared, by the
-ensemble accuracy study's own comparison (`studies.accuracy_ensemble.compare`), with the drive
-comparison's ensemble at symplectic Euler's 0.78 us from the same starts
+0) with each velocity update spanning its own step (`simulation.integrator.kick: step`) and the
+mean of the last step and its own (`staggered`, the default), each at the default velocity
+tolerance and at a quarter and an eighth of it. Each is compared, by the ensemble accuracy
+study's own comparison (`studies.accuracy_ensemble.compare`), with the drive comparison's
+ensemble at symplectic Euler's 0.78 us from the same starts
 (docs/results/drives/CASE/motor_finer*/members.csv, which `docs/generate.py drives` computes).
-Printed per case, family, kick, tolerance and grasp: the steps and the wall time per member, the peak
-force's and peak torque's member-by-member differences from the reference (with their
+Printed per case, family, kick, tolerance and grasp: the steps and the wall time per member, the
+peak force's and peak torque's member-by-member differences from the reference (with their
 sampling errors), the residual offset's median difference and KS p-value.
 """
 
